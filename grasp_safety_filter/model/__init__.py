@@ -1,0 +1,1 @@
+"""Hand–object–contact model: kinematics, dynamics, rolling contacts, per-tick grasp state."""

@@ -1,0 +1,129 @@
+"""The per-tick grasp state: every model term of one instant, computed once, read-only.
+
+Conventions (used throughout the package):
+
+- ``P`` is the palm frame (inertial), ``O`` the object frame at its centre of mass,
+  ``F_i`` the frame at the centre of fingertip sphere i (z out of the tip), ``C_i`` the
+  contact frame (the fingertip surface's Gauss frame at the contact: z is the outward
+  fingertip normal, pointing into the object).
+- ``R_X_to_Y`` maps coordinates in frame X to coordinates in frame Y (the paper's
+  ``R_yx``); ``p_a_in_X`` is the position of point a in frame X.
+- Twists are ``(v, w)``: linear velocity of the frame origin, then angular velocity, both
+  in palm coordinates (Pinocchio's LOCAL_WORLD_ALIGNED).
+- Contact forces are per contact ``(f_x, f_y, f_n)`` in the contact frame ``C_i``: the
+  force the fingertip applies *on the object*; ``f_n > 0`` pushes into the object.
+- Stacked per-contact vectors are contact-major: ``[c1_x, c1_y, c1_z, c2_x, ...]``.
+- Units: SI (m, rad, kg, s, N, N·m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from grasp_safety_filter.model.affine import AffineMap
+
+
+@dataclass(frozen=True, eq=False)
+class GraspState:
+    """All model terms of the hand–object–contact system at one instant.
+
+    Built by :meth:`grasp_safety_filter.model.grasp_model.GraspModel.state`; constraint
+    families, controllers and the simulator read it and never recompute or mutate it
+    (its arrays are made read-only).
+
+    Attributes:
+        t: Time stamp, s.
+        q: Joint angles, shape (m,), rad, in the model's joint order.
+        dq: Joint velocities, shape (m,), rad/s.
+        p_object_in_palm: Object centre of mass, shape (3,), m.
+        R_object_to_palm: Object orientation, shape (3, 3).
+        twist_object: Object twist ``x_o_dot = (v_o, w_o)`` in palm coordinates, shape (6,).
+        p_fingertip_in_palm: Fingertip sphere centres, shape (n, 3), m.
+        R_fingertip_to_palm: Fingertip frame orientations, shape (n, 3, 3).
+        twist_fingertip: Fingertip frame twists ``(v_f, w_f)``, shape (n, 6).
+        xi_cf: Contact coordinates ``(a, b)`` on each fingertip surface, shape (n, 2), rad.
+        xi_co: Contact coordinates on each object surface, shape (n, 2) (m on a face).
+        psi: Angle between the two surfaces' first tangent axes, shape (n,), rad.
+        xi_cf_dot, xi_co_dot, psi_dot: Their rolling rates, shapes (n, 2), (n, 2), (n,).
+        penetration: Signed normal interpenetration at each contact, shape (n,), m
+            (0 when touching, > 0 when the fingertip sphere is inside the object surface).
+        p_contact_in_palm: Contact points (on the fingertip surface), shape (n, 3), m.
+        R_contact_to_palm: Contact frames ``R_pc``, shape (n, 3, 3).
+        M_h: Hand joint-space inertia, shape (m, m), symmetric positive definite.
+        h_bias: ``C_h dq - tau_e = C_h dq + g(q)``: Coriolis, centrifugal and gravity joint
+            torques, shape (m,), N·m.
+        gravity_torque: ``g(q) = -tau_e``, shape (m,), N·m.
+        J_fingertip: Fingertip frame Jacobians ``J_s`` (LOCAL_WORLD_ALIGNED), (n, 6, m).
+        J_h: Hand Jacobian, shape (3n, m): ``dq ↦`` fingertip material velocity at each
+            contact point, in contact frames.
+        G: Grasp map, shape (6, 3n): contact forces (contact frames) ↦ object wrench at
+            the centre of mass (palm coordinates).
+        Jh_dot_dq: ``J_h_dot @ dq`` (total time derivative along the rolling motion), (3n,).
+        G_dot_T_twist: ``G_dot^T @ x_o_dot``, shape (3n,).
+        M_o: Object inertia in palm coordinates, shape (6, 6).
+        C_o_twist: ``C_o x_o_dot = (0, w × I w)``, shape (6,).
+        w_e: External wrench on the object (gravity), shape (6,), (N, N·m).
+        B_ho: ``J_h M_h^-1 J_h^T + G^T M_o^-1 G``, shape (3n, 3n).
+        contact_force: ``u ↦ f_c``, shape (3n, m), contact frames.
+        joint_acceleration: ``u ↦ ddq``, shape (m, m).
+        object_acceleration: ``u ↦ x_o_ddot = (a_o, alpha_o)``, shape (6, m).
+        xi_cf_ddot: ``u ↦ (a_1_ddot, b_1_ddot, a_2_ddot, ...)``, shape (2n, m).
+    """
+
+    t: float
+    q: np.ndarray
+    dq: np.ndarray
+    p_object_in_palm: np.ndarray
+    R_object_to_palm: np.ndarray
+    twist_object: np.ndarray
+    p_fingertip_in_palm: np.ndarray
+    R_fingertip_to_palm: np.ndarray
+    twist_fingertip: np.ndarray
+    xi_cf: np.ndarray
+    xi_co: np.ndarray
+    psi: np.ndarray
+    xi_cf_dot: np.ndarray
+    xi_co_dot: np.ndarray
+    psi_dot: np.ndarray
+    penetration: np.ndarray
+    p_contact_in_palm: np.ndarray
+    R_contact_to_palm: np.ndarray
+    M_h: np.ndarray
+    h_bias: np.ndarray
+    gravity_torque: np.ndarray
+    J_fingertip: np.ndarray
+    J_h: np.ndarray
+    G: np.ndarray
+    Jh_dot_dq: np.ndarray
+    G_dot_T_twist: np.ndarray
+    M_o: np.ndarray
+    C_o_twist: np.ndarray
+    w_e: np.ndarray
+    B_ho: np.ndarray
+    contact_force: AffineMap
+    joint_acceleration: AffineMap
+    object_acceleration: AffineMap
+    xi_cf_ddot: AffineMap
+
+    @property
+    def n_contacts(self) -> int:
+        """Number of contacts n."""
+        return self.xi_cf.shape[0]
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints m."""
+        return self.q.shape[0]
+
+    def required_friction(self, f_c: np.ndarray) -> np.ndarray:
+        """Required friction ``beta_i = ||f_t,i|| / f_n,i`` per contact, shape (n,).
+
+        ``inf`` where the normal force is not positive (the contact is separating).
+        """
+        forces = np.asarray(f_c, dtype=float).reshape(-1, 3)
+        tangential = np.hypot(forces[:, 0], forces[:, 1])
+        normal = forces[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(normal > 0.0, tangential / np.where(normal > 0, normal, 1.0), np.inf)

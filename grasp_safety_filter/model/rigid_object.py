@@ -1,0 +1,85 @@
+"""The grasped object: a rigid body with Newton–Euler dynamics in the palm frame.
+
+    M_o x_o_ddot + C_o x_o_dot = G f_c + w_e,
+    M_o = blkdiag(m I3, R I_body R^T),   C_o x_o_dot = (0, w × (R I_body R^T) w),
+    w_e = (m g, 0)   (gravity at the centre of mass)
+
+with ``x_o_dot = (v_o, w_o)``: centre-of-mass velocity and angular velocity, palm frame.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grasp_safety_filter.model.surfaces import SphereSurface, Surface, cube_face
+
+
+class RigidObject:
+    """Mass, inertia and contact surfaces of the grasped object.
+
+    Args:
+        mass: kg, > 0.
+        inertia_in_body: Rotational inertia about the centre of mass, body frame, (3, 3),
+            kg·m², symmetric positive definite.
+        gravity: Gravity in the palm frame, (3,), m/s².
+    """
+
+    def __init__(self, mass: float, inertia_in_body: np.ndarray, gravity: np.ndarray) -> None:
+        if not np.isfinite(mass) or mass <= 0.0:
+            raise ValueError(f"model.object.mass: expected a positive mass in kg, got {mass!r}")
+        inertia_in_body = np.asarray(inertia_in_body, dtype=float)
+        if inertia_in_body.shape != (3, 3) or not np.allclose(inertia_in_body, inertia_in_body.T):
+            raise ValueError(f"object inertia: expected a symmetric (3, 3) matrix, got {inertia_in_body!r}")
+        if np.any(np.linalg.eigvalsh(inertia_in_body) <= 0.0):
+            raise ValueError("object inertia: expected positive definite")
+        self.mass = float(mass)
+        self.inertia_in_body = inertia_in_body
+        self.gravity = np.asarray(gravity, dtype=float)
+
+    @classmethod
+    def cube(cls, mass: float, edge_length: float, gravity: np.ndarray) -> RigidObject:
+        """Solid homogeneous cube: I = m a² / 6 I3."""
+        if not np.isfinite(edge_length) or edge_length <= 0.0:
+            raise ValueError(f"model.object.size: expected a positive edge length in m, got {edge_length!r}")
+        return cls(mass, mass * edge_length**2 / 6.0 * np.eye(3), gravity)
+
+    @classmethod
+    def sphere(cls, mass: float, diameter: float, gravity: np.ndarray) -> RigidObject:
+        """Solid homogeneous sphere: I = 2/5 m r² I3."""
+        if not np.isfinite(diameter) or diameter <= 0.0:
+            raise ValueError(f"model.object.size: expected a positive diameter in m, got {diameter!r}")
+        radius = 0.5 * diameter
+        return cls(mass, 0.4 * mass * radius**2 * np.eye(3), gravity)
+
+    def inertia_matrix(self, R_object_to_palm: np.ndarray) -> np.ndarray:
+        """``M_o``, (6, 6)."""
+        M_o = np.zeros((6, 6))
+        M_o[:3, :3] = self.mass * np.eye(3)
+        M_o[3:, 3:] = R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
+        return M_o
+
+    def bias_wrench(self, R_object_to_palm: np.ndarray, twist: np.ndarray) -> np.ndarray:
+        """``C_o x_o_dot = (0, w × I w)``, (6,)."""
+        w = twist[3:]
+        inertia = R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
+        return np.concatenate([np.zeros(3), np.cross(w, inertia @ w)])
+
+    def external_wrench(self) -> np.ndarray:
+        """``w_e``: gravity at the centre of mass, (6,)."""
+        return np.concatenate([self.mass * self.gravity, np.zeros(3)])
+
+    def energy(self, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray, twist: np.ndarray) -> float:
+        """Kinetic plus gravitational potential energy, J."""
+        v, w = twist[:3], twist[3:]
+        inertia = R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
+        kinetic = 0.5 * self.mass * v @ v + 0.5 * w @ inertia @ w
+        return float(kinetic - self.mass * self.gravity @ p_object_in_palm)
+
+
+def object_surface(shape: str, size: float, face: str) -> Surface:
+    """The surface a fingertip touches: a cube face (``face`` = "+x", ...) or the sphere."""
+    if shape == "cube":
+        return cube_face(face, size)
+    if shape == "sphere":
+        return SphereSurface(0.5 * size)
+    raise ValueError(f"model.object.shape: expected 'cube' or 'sphere', got {shape!r}")

@@ -1,0 +1,166 @@
+"""The grasp model against finite differences, invariants and closed forms."""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from grasp_states import Configuration, paper_model, random_configuration
+
+N_STATES = 20
+EPS = 1e-6
+RTOL = 1e-5
+
+
+@pytest.fixture(scope="module")
+def model():
+    return paper_model()
+
+
+@pytest.fixture(scope="module")
+def configurations(model):
+    rng = np.random.default_rng(7)
+    return [random_configuration(model, rng) for _ in range(N_STATES)]
+
+
+def moved(c: Configuration, t: float, ddq: np.ndarray | None = None, x_ddot: np.ndarray | None = None) -> Configuration:
+    """The configuration after time t of the motion (second order when accelerations are given)."""
+    ddq = np.zeros_like(c.dq) if ddq is None else ddq
+    x_ddot = np.zeros(6) if x_ddot is None else x_ddot
+    v, w = c.twist_object[:3], c.twist_object[3:]
+    a, alpha = x_ddot[:3], x_ddot[3:]
+    return Configuration(
+        q=c.q + t * c.dq + 0.5 * t * t * ddq,
+        dq=c.dq + t * ddq,
+        p_object=c.p_object + t * v + 0.5 * t * t * a,
+        R_object=pin.exp3(t * w + 0.5 * t * t * alpha) @ c.R_object,
+        twist_object=c.twist_object + t * x_ddot,
+    )
+
+
+def central(f, c: Configuration, **kwargs) -> np.ndarray:
+    return (np.asarray(f(moved(c, EPS, **kwargs))) - np.asarray(f(moved(c, -EPS, **kwargs)))) / (2 * EPS)
+
+
+def assert_close(actual: np.ndarray, expected: np.ndarray, what: str) -> None:
+    scale = max(np.max(np.abs(expected)), 1e-3)
+    error = np.max(np.abs(actual - expected)) / scale
+    assert error <= RTOL, f"{what}: relative error {error:.2e} > {RTOL:g}\n{actual}\n{expected}"
+
+
+def test_fingertip_jacobians_match_finite_differences(model, configurations):
+    for c in configurations:
+        state = c.state(model)
+        def tips(x):
+            p, _, _ = model.hand.fingertip_placements(x.q)
+            return p
+        v_fd = central(tips, c)
+        R_plus = model.hand.fingertip_placements(moved(c, EPS).q)[1]
+        R_minus = model.hand.fingertip_placements(moved(c, -EPS).q)[1]
+        w_fd = np.array([pin.log3(Rp @ Rm.T) / (2 * EPS) for Rp, Rm in zip(R_plus, R_minus)])
+        for i in range(model.n_contacts):
+            assert_close(state.J_fingertip[i] @ c.dq, np.concatenate([v_fd[i], w_fd[i]]), f"J_s[{i}] dq")
+            assert_close(state.twist_fingertip[i], state.J_fingertip[i] @ c.dq, f"twist_f[{i}]")
+
+
+def test_hand_jacobian_and_grasp_map_match_material_point_velocities(model, configurations):
+    for c in configurations:
+        state = c.state(model)
+        for i in range(model.n_contacts):
+            rows = slice(3 * i, 3 * i + 3)
+            p_c = state.p_contact_in_palm[i]
+            R_cp = state.R_contact_to_palm[i].T
+            # Material point of the fingertip at the contact, carried by the finger's motion.
+            p_fc_in_f = state.R_fingertip_to_palm[i].T @ (p_c - state.p_fingertip_in_palm[i])
+            def finger_point(x, i=i, p_fc_in_f=p_fc_in_f):
+                p, R, _ = model.hand.fingertip_placements(x.q)
+                return p[i] + R[i] @ p_fc_in_f
+            assert_close(state.J_h[rows] @ c.dq, R_cp @ central(finger_point, c), f"J_h contact {i}")
+            # Material point of the object at the contact, carried by the object's motion.
+            p_oc_in_o = c.R_object.T @ (p_c - c.p_object)
+            def object_point(x, p_oc_in_o=p_oc_in_o):
+                return x.p_object + x.R_object @ p_oc_in_o
+            assert_close(state.G[:, rows].T @ c.twist_object, R_cp @ central(object_point, c), f"G contact {i}")
+        # On a rolling motion the two material velocities agree (the no-slip constraint).
+        np.testing.assert_allclose(state.J_h @ c.dq, state.G.T @ c.twist_object, atol=1e-10)
+
+
+def test_jacobian_time_derivatives_match_finite_differences(model, configurations):
+    for c in configurations:
+        state = c.state(model)
+        Jh_dot = central(lambda x: x.state(model).J_h, c)
+        G_dot = central(lambda x: x.state(model).G, c)
+        assert_close(state.Jh_dot_dq, Jh_dot @ c.dq, "J_h_dot dq")
+        assert_close(state.G_dot_T_twist, G_dot.T @ c.twist_object, "G_dot^T x_o_dot")
+
+
+def test_rolling_rates_match_geometric_coordinates(model, configurations):
+    for c in configurations:
+        state = c.state(model)
+        def coordinates(x):
+            geometry = model.contact_geometry(x.q, x.p_object, x.R_object)
+            return np.array([np.concatenate([g.xi_cf, g.xi_co, [g.psi]]) for g in geometry])
+        rates = central(coordinates, c)
+        assert_close(state.xi_cf_dot, rates[:, :2], "xi_cf_dot")
+        assert_close(state.xi_co_dot, rates[:, 2:4], "xi_co_dot")
+        assert_close(state.psi_dot, rates[:, 4], "psi_dot")
+
+
+def test_contact_coordinate_accelerations_match_finite_differences(model, configurations):
+    rng = np.random.default_rng(3)
+    for c in configurations:
+        state = c.state(model)
+        u = rng.normal(0.0, 1.0, model.n_joints)
+        ddq = state.joint_acceleration(u)
+        x_ddot = state.object_acceleration(u)
+        rate = central(lambda x: x.state(model).xi_cf_dot, c, ddq=ddq, x_ddot=x_ddot)
+        assert_close(state.xi_cf_ddot(u).reshape(-1, 2), rate, "xi_cf_ddot")
+
+
+def test_mass_matrices_are_symmetric_positive_definite(model, configurations):
+    for c in configurations:
+        state = c.state(model)
+        for name in ("M_h", "M_o", "B_ho"):
+            matrix = getattr(state, name)
+            np.testing.assert_allclose(matrix, matrix.T, atol=1e-12, err_msg=name)
+            assert np.linalg.eigvalsh(matrix).min() > 0.0, name
+
+
+def test_accelerations_satisfy_the_differentiated_rolling_constraint(model, configurations):
+    rng = np.random.default_rng(11)
+    for c in configurations:
+        state = c.state(model)
+        for _ in range(3):
+            u = rng.normal(0.0, 2.0, model.n_joints)
+            ddq = state.joint_acceleration(u)
+            x_ddot = state.object_acceleration(u)
+            lhs = state.J_h @ ddq + state.Jh_dot_dq
+            rhs = state.G.T @ x_ddot + state.G_dot_T_twist
+            np.testing.assert_allclose(lhs, rhs, atol=1e-9)
+            # And both dynamics hold with the same contact force.
+            f_c = state.contact_force(u)
+            np.testing.assert_allclose(state.M_h @ ddq + state.h_bias, u - state.J_h.T @ f_c, atol=1e-9)
+            np.testing.assert_allclose(state.M_o @ x_ddot + state.C_o_twist, state.G @ f_c + state.w_e, atol=1e-9)
+
+
+def test_joint_accelerations_match_pinocchio_forward_dynamics(model, configurations):
+    """Independent check of ddq(u): Pinocchio's ABA with the contact forces as joint torques."""
+    rng = np.random.default_rng(5)
+    hand = model.hand
+    for c in configurations[:5]:
+        state = c.state(model)
+        u = rng.normal(0.0, 2.0, model.n_joints)
+        tau = u - state.J_h.T @ state.contact_force(u)
+        tau_pin = np.empty(hand.model.nv)
+        tau_pin[hand._idx] = tau
+        q_pin, dq_pin = hand._to_pin(c.q), hand._to_pin(c.dq)
+        ddq_pin = pin.aba(hand.model, hand.data, q_pin, dq_pin, tau_pin)[hand._idx]
+        np.testing.assert_allclose(state.joint_acceleration(u), ddq_pin, atol=1e-9)
+
+
+def test_state_is_read_only(model, configurations):
+    state = configurations[0].state(model)
+    with pytest.raises(ValueError):
+        state.q[0] = 1.0
+    with pytest.raises(ValueError):
+        state.contact_force.matrix[0, 0] = 1.0
