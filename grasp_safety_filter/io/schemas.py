@@ -1,0 +1,660 @@
+"""The parameters of the three nodes, as data.
+
+Sections:
+
+- ``MODEL_PARAMETERS``: the hand, the object and their contacts. Shared by all three nodes
+  and placed under ``/**`` in the parameter files, so that the simulator and the controllers
+  cannot disagree about the plant.
+- ``HAND_SIM_PARAMETERS``, ``NOMINAL_CONTROLLER_PARAMETERS``, ``SAFETY_FILTER_PARAMETERS``:
+  each node's own.
+
+``NODE_SCHEMAS[node]`` is the model section followed by the node's own. Defaults are the
+paper's Section IV scenario (``config/paper_scenario.yaml`` spells each one out, with the
+reason for every value the paper does not give). Checks that need only parameter values
+(e.g. ``a_min < a_max``) live here; checks against the URDF and the object geometry belong
+to the model.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+import math
+from pathlib import Path
+from typing import Any
+
+from grasp_safety_filter.io.parameters import (
+    NodeSchema,
+    ParameterError,
+    ParameterSpec,
+    ParameterType,
+    load_parameter_file,
+    parameters_for_node,
+    resolve_relative_paths,
+    validate_parameters,
+)
+
+BOOL = ParameterType.BOOL
+INTEGER = ParameterType.INTEGER
+DOUBLE = ParameterType.DOUBLE
+STRING = ParameterType.STRING
+DOUBLE_ARRAY = ParameterType.DOUBLE_ARRAY
+STRING_ARRAY = ParameterType.STRING_ARRAY
+
+HALF_PI = math.pi / 2
+
+#: Object faces a fingertip can touch, in the object frame O (outward normal).
+CUBE_FACES = ('+x', '-x', '+y', '-y', '+z', '-z')
+
+#: The paper's hand (config/hand.urdf): three fingers of three revolute joints.
+PAPER_JOINT_NAMES = [f'finger{finger}_joint{joint}' for finger in (1, 2, 3) for joint in (1, 2, 3)]
+
+#: Joint angles of the paper's initial static grasp, per finger (joint1, joint2, joint3) [rad].
+PAPER_FINGER_JOINT_POSITIONS = [3 * math.pi / 4, 0.0, HALF_PI]
+
+#: The fingertip coordinate a is kept this far from +-pi/2, where the sphere's metric
+#: M_cf = diag(R, R cos a) is singular [rad].
+FINGERTIP_WORKSPACE_A_MARGIN = 0.15
+
+MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        'model.urdf_file',
+        STRING,
+        'hand.urdf',
+        "Hand URDF; a relative path resolves against the parameter file's directory",
+        read_only=True,
+        is_path=True,
+    ),
+    ParameterSpec(
+        'model.joint_names',
+        STRING_ARRAY,
+        PAPER_JOINT_NAMES,
+        'Actuated URDF joints, in the order of every joint vector and torque command',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_frames',
+        STRING_ARRAY,
+        ['finger1_tip', 'finger2_tip', 'finger3_tip'],
+        'URDF frames at the fingertip sphere centres, one per contact',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.contact_names',
+        STRING_ARRAY,
+        ['finger1', 'finger2', 'finger3'],
+        'Contact labels, one per fingertip frame (topics, diagnostics, figures)',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_radius',
+        DOUBLE,
+        0.06,
+        'Radius R of the hemispherical fingertips [m]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object.shape',
+        STRING,
+        'cube',
+        'Shape of the grasped object',
+        choices=('cube', 'sphere'),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object.mass',
+        DOUBLE,
+        0.11,
+        'Mass of the object [kg]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object.size',
+        DOUBLE,
+        0.2604,
+        'Cube edge length or sphere diameter [m]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.contact_faces',
+        STRING_ARRAY,
+        ['-x', '+x', '+y'],
+        'Cube face (outward normal in the object frame) touched by each fingertip',
+        choices=CUBE_FACES,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.friction_coefficient',
+        DOUBLE,
+        0.9,
+        'Coulomb friction coefficient mu between fingertips and object [-]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.gravity',
+        DOUBLE_ARRAY,
+        [0.0, 0.0, -9.81],
+        'Gravitational acceleration in the palm frame P (x, y, z) [m/s^2]',
+        length=3,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.a_min',
+        DOUBLE,
+        -HALF_PI + FINGERTIP_WORKSPACE_A_MARGIN,
+        'Lower bound of the fingertip contact coordinate a [rad]',
+        min_value=-HALF_PI,
+        max_value=HALF_PI,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.a_max',
+        DOUBLE,
+        HALF_PI - FINGERTIP_WORKSPACE_A_MARGIN,
+        'Upper bound of the fingertip contact coordinate a [rad]',
+        min_value=-HALF_PI,
+        max_value=HALF_PI,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.b_min',
+        DOUBLE,
+        -math.pi,
+        'Lower bound of the fingertip contact coordinate b [rad]',
+        min_value=-math.pi,
+        max_value=0.0,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.b_max',
+        DOUBLE,
+        0.0,
+        'Upper bound of the fingertip contact coordinate b [rad]',
+        min_value=-math.pi,
+        max_value=0.0,
+        read_only=True,
+    ),
+)
+
+HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        'initial.joint_positions',
+        DOUBLE_ARRAY,
+        PAPER_FINGER_JOINT_POSITIONS * 3,
+        'Joint angles q(0) of the initial static grasp, in model.joint_names order [rad]',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'initial.object_position',
+        DOUBLE_ARRAY,
+        [0.0, 0.0, 0.3],
+        'Object centre p_o(0) in the palm frame P (x, y, z) [m]',
+        length=3,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'initial.object_orientation',
+        DOUBLE_ARRAY,
+        [0.0, 0.0, 0.0, 1.0],
+        'Object orientation R_po(0) as a unit quaternion (x, y, z, w) [-]',
+        length=4,
+        min_value=-1.0,
+        max_value=1.0,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'integrator',
+        STRING,
+        'ode3',
+        "Fixed-step integrator: ode3 (Bogacki-Shampine, the paper's) or rk4",
+        choices=('ode3', 'rk4'),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'time_step',
+        DOUBLE,
+        0.001,
+        'Integration and control period [s]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'duration',
+        DOUBLE,
+        15.0,
+        'Simulated time after which the run ends [s]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'stop_on_slip',
+        BOOL,
+        False,
+        "End the run when a contact's required friction beta exceeds mu",
+    ),
+    ParameterSpec(
+        'stop_on_workspace_exit',
+        BOOL,
+        True,
+        'End the run when a contact point leaves the fingertip workspace',
+    ),
+    ParameterSpec(
+        'stabilization.position_gain',
+        DOUBLE,
+        2500.0,
+        'Baumgarte gain on the contact-constraint position drift [1/s^2]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
+        'stabilization.velocity_gain',
+        DOUBLE,
+        100.0,
+        'Baumgarte gain on the contact-constraint velocity drift [1/s]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
+        'lockstep',
+        BOOL,
+        True,
+        'Integrate to t_k+1 only after the command stamped t_k arrives',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'command_timeout',
+        DOUBLE,
+        1.0,
+        'Lockstep: wall-clock wait for the command stamped t_k before a diagnostic [s]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'publish_clock',
+        BOOL,
+        True,
+        'Publish the simulation time on /clock (for nodes with use_sim_time)',
+        read_only=True,
+    ),
+)
+
+NOMINAL_CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        'gains.kp',
+        DOUBLE,
+        1.0,
+        'Pose-error gain K_p = kp I_6 of the computed-torque law [1/s^2]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'gains.kd',
+        DOUBLE,
+        2.5,
+        'Velocity-error gain K_d = kd I_6 of the computed-torque law [1/s]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'gains.kf',
+        DOUBLE,
+        10.0,
+        'Internal squeeze gain k_f in u_f,i = k_f (p_bar_c - p_c,i) [N/m]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
+        'reference.source',
+        STRING,
+        'paper',
+        'Object pose reference: paper (built-in r(t)) or topic (/object/reference)',
+        choices=('paper', 'topic'),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'reference.amplitude',
+        DOUBLE_ARRAY,
+        [0.0, 0.0, 0.25, 0.0, 0.0, 2.0],
+        'Amplitude A of the built-in r(t) = r0 + A (cos(w t) - 1), r0 the initial pose: '
+        'x y z [m], roll pitch yaw (ZYX Euler) [rad]',
+        length=6,
+    ),
+    ParameterSpec(
+        'reference.frequency',
+        DOUBLE,
+        1.0,
+        'Angular frequency w of the built-in reference (0: hold the initial pose) [rad/s]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
+        'reference.timeout',
+        DOUBLE,
+        0.5,
+        'A topic reference older than this is stale [s]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+)
+
+SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        'no_slip.enabled',
+        BOOL,
+        True,
+        'Keep every contact force inside its friction pyramid',
+    ),
+    ParameterSpec(
+        'no_slip.pyramid_faces',
+        INTEGER,
+        8,
+        'Faces l_s of the friction pyramid inscribed in each cone [-]',
+        min_value=3,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'no_slip.normal_force_margin',
+        DOUBLE,
+        0.05,
+        'Margin eps of the pyramid rows, Lambda(mu) f_c <= -eps [N]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
+        'joint_limits.enabled',
+        BOOL,
+        True,
+        'Keep every joint inside its URDF limits (relative-degree-2 barrier)',
+    ),
+    ParameterSpec(
+        'fingertip_workspace.enabled',
+        BOOL,
+        True,
+        'Keep every contact point inside the fingertip workspace (relative-degree-2 barrier)',
+    ),
+    ParameterSpec(
+        'barrier.alpha1.kind',
+        STRING,
+        'cubic',
+        "Class-K function alpha1: cubic g h^3 (the paper's) or linear g h",
+        choices=('cubic', 'linear'),
+    ),
+    ParameterSpec(
+        'barrier.alpha1.gain',
+        DOUBLE,
+        1.0,
+        'Gain g of alpha1, h in rad [1/(s rad^2) if cubic, 1/s if linear]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'barrier.alpha2.kind',
+        STRING,
+        'cubic',
+        "Class-K function alpha2: cubic g B^3 (the paper's) or linear g B",
+        choices=('cubic', 'linear'),
+    ),
+    ParameterSpec(
+        'barrier.alpha2.gain',
+        DOUBLE,
+        1.0,
+        'Gain g of alpha2, B in rad/s [s/rad^2 if cubic, 1/s if linear]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'relaxation.no_slip_weight',
+        DOUBLE,
+        1.0e6,
+        'Penalty on the squared slack of the no-slip rows when the QP is infeasible [-]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'relaxation.joint_limits_weight',
+        DOUBLE,
+        1.0e5,
+        'Penalty on the squared slack of the joint-limit rows when infeasible [-]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'relaxation.fingertip_workspace_weight',
+        DOUBLE,
+        1.0e4,
+        'Penalty on the squared slack of the fingertip-workspace rows when infeasible [-]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'osqp.eps_abs',
+        DOUBLE,
+        1.0e-8,
+        'OSQP absolute tolerance [-]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'osqp.eps_rel',
+        DOUBLE,
+        1.0e-8,
+        'OSQP relative tolerance [-]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'osqp.max_iter',
+        INTEGER,
+        4000,
+        'OSQP iteration limit per solve [-]',
+        min_value=1,
+    ),
+    ParameterSpec(
+        'osqp.polish',
+        BOOL,
+        True,
+        'Polish the OSQP solution (active-set refinement to high accuracy)',
+    ),
+    ParameterSpec(
+        'input.max_age',
+        DOUBLE,
+        0.05,
+        'State or nominal command older than this is stale and rejected [s]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'input.hold_timeout',
+        DOUBLE,
+        0.1,
+        'After rejected input, hold the last safe command this long, then fall back [s]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'input.fallback',
+        STRING,
+        'gravity_compensation',
+        'Command after the hold timeout: zero torque or gravity_compensation',
+        choices=('zero', 'gravity_compensation'),
+    ),
+)
+
+HAND_SIM_NODE = 'hand_sim_node'
+NOMINAL_CONTROLLER_NODE = 'nominal_controller_node'
+SAFETY_FILTER_NODE = 'safety_filter_node'
+
+NODE_SCHEMAS: dict[str, NodeSchema] = {
+    HAND_SIM_NODE: NodeSchema.from_sections(HAND_SIM_NODE, MODEL_PARAMETERS, HAND_SIM_PARAMETERS),
+    NOMINAL_CONTROLLER_NODE: NodeSchema.from_sections(
+        NOMINAL_CONTROLLER_NODE, MODEL_PARAMETERS, NOMINAL_CONTROLLER_PARAMETERS
+    ),
+    SAFETY_FILTER_NODE: NodeSchema.from_sections(
+        SAFETY_FILTER_NODE, MODEL_PARAMETERS, SAFETY_FILTER_PARAMETERS
+    ),
+}
+
+
+# --------------------------------------------------------------------------------------------
+# Checks across parameters (values only: no URDF, no geometry)
+# --------------------------------------------------------------------------------------------
+
+
+def check_model_parameters(values: Mapping[str, Any], source: str = 'parameters') -> None:
+    """Check the model section for consistency between its own parameters.
+
+    - each workspace interval is non-empty: ``a_min < a_max``, ``b_min < b_max``;
+    - joint names, fingertip frames and contact names are non-empty and unique;
+    - one fingertip frame per contact name and, for a cube, one face per contact.
+
+    Raises:
+        ParameterError: Listing every violation, each naming the parameters and values.
+    """
+    errors: list[str] = []
+    prefix = 'model.fingertip_workspace.'
+    for coordinate in ('a', 'b'):
+        low, high = values[f'{prefix}{coordinate}_min'], values[f'{prefix}{coordinate}_max']
+        if not low < high:
+            errors.append(
+                f"parameters '{prefix}{coordinate}_min' and '{prefix}{coordinate}_max': "
+                f'expected {coordinate}_min < {coordinate}_max, got {low!r} and {high!r}'
+            )
+    for name in ('model.joint_names', 'model.fingertip_frames', 'model.contact_names'):
+        items = list(values[name])
+        duplicates = sorted({item for item in items if items.count(item) > 1})
+        if not items:
+            errors.append(f"parameter '{name}': expected at least one name, got []")
+        elif duplicates:
+            errors.append(f"parameter '{name}': expected unique names, got {duplicates} twice")
+    contacts = len(values['model.contact_names'])
+    lists = ['model.fingertip_frames']
+    if values['model.object.shape'] == 'cube':
+        lists.append('model.contact_faces')
+    for name in lists:
+        if len(values[name]) != contacts:
+            errors.append(
+                f"parameter '{name}': expected one entry per contact in 'model.contact_names' "
+                f'({contacts}), got {len(values[name])}'
+            )
+    _raise(source, errors)
+
+
+def check_hand_sim_parameters(values: Mapping[str, Any], source: str = 'parameters') -> None:
+    """Check the simulator's initial state against the model section.
+
+    - one initial joint angle per joint of ``model.joint_names``;
+    - the initial orientation is a unit quaternion (to 1e-6).
+
+    Raises:
+        ParameterError: Listing every violation.
+    """
+    errors: list[str] = []
+    joints = len(values['model.joint_names'])
+    positions = values['initial.joint_positions']
+    if len(positions) != joints:
+        errors.append(
+            f"parameter 'initial.joint_positions': expected one angle per joint in "
+            f"'model.joint_names' ({joints}), got {len(positions)}"
+        )
+    norm = math.sqrt(sum(x * x for x in values['initial.object_orientation']))
+    if abs(norm - 1.0) > 1e-6:
+        errors.append(
+            "parameter 'initial.object_orientation': expected a unit quaternion (norm 1 to "
+            f'1e-6), got norm {norm!r}'
+        )
+    _raise(source, errors)
+
+
+def _raise(source: str, errors: list[str]) -> None:
+    if len(errors) == 1:
+        raise ParameterError(f'{source}: {errors[0]}', errors)
+    if errors:
+        lines = '\n'.join(f'  - {error}' for error in errors)
+        raise ParameterError(f'{source}: {len(errors)} inconsistent parameters:\n{lines}', errors)
+
+
+_NODE_CHECKS: dict[str, tuple[Callable[[Mapping[str, Any], str], None], ...]] = {
+    HAND_SIM_NODE: (check_model_parameters, check_hand_sim_parameters),
+    NOMINAL_CONTROLLER_NODE: (check_model_parameters,),
+    SAFETY_FILTER_NODE: (check_model_parameters,),
+}
+
+
+def check_node_parameters(
+    node_name: str, values: Mapping[str, Any], source: str = 'parameters'
+) -> None:
+    """Run every cross-parameter check of ``node_name`` on its validated values."""
+    for check in _NODE_CHECKS[node_name]:
+        check(values, source)
+
+
+def load_node_parameters(path: str | Path, node_name: str, namespace: str = '/') -> dict[str, Any]:
+    """Load everything a node gets from a parameter file, as the ROS-free runner needs it.
+
+    Reads the file, merges ``/**`` and the node's section, validates against the node's
+    schema (defaults filled in), runs the cross-parameter checks and resolves relative
+    paths against the file's directory.
+
+    Args:
+        path: A ROS 2 parameter file, e.g. ``config/paper_scenario.yaml``.
+        node_name: A key of :data:`NODE_SCHEMAS`.
+        namespace: The node's namespace (for files that address namespaced nodes).
+
+    Raises:
+        ParameterError: The message names the file, the node and each bad parameter.
+        KeyError: ``node_name`` is not one of the package's nodes.
+    """
+    if node_name not in NODE_SCHEMAS:
+        raise KeyError(f"unknown node '{node_name}': expected one of {sorted(NODE_SCHEMAS)}")
+    schema = NODE_SCHEMAS[node_name]
+    source = f"parameter file '{path}' (node '{node_name}')"
+    values = validate_parameters(
+        schema,
+        parameters_for_node(load_parameter_file(path), node_name, namespace),
+        source,
+        other_schemas=[other for name, other in NODE_SCHEMAS.items() if name != node_name],
+    )
+    check_node_parameters(node_name, values, source)
+    return resolve_relative_paths(schema, values, Path(path).resolve().parent)
+
+
+# --------------------------------------------------------------------------------------------
+# Documentation
+# --------------------------------------------------------------------------------------------
+
+
+def _markdown_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, list):
+        return '[' + ', '.join(_markdown_value(item) for item in value) + ']'
+    if isinstance(value, float):
+        return f'{value:.6g}'
+    if isinstance(value, str):
+        return f'"{value}"'
+    return str(value)
+
+
+def parameter_table_markdown(schema: Iterable[ParameterSpec]) -> str:
+    """Render parameters as a Markdown table: name, type, default, admissible, description.
+
+    Read-only parameters (read once at start-up) are marked with ``(ro)``.
+    """
+    lines = [
+        '| Parameter | Type | Default | Admissible | Description |',
+        '|---|---|---|---|---|',
+    ]
+    for spec in schema:
+        cells = [
+            f'`{spec.name}`' + (' (ro)' if spec.read_only else ''),
+            spec.type.value,
+            f'`{_markdown_value(spec.default)}`',
+            spec.constraint_text() or 'any',
+            spec.description,
+        ]
+        lines.append('| ' + ' | '.join(cell.replace('|', '\\|') for cell in cells) + ' |')
+    return '\n'.join(lines) + '\n'
