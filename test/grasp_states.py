@@ -30,8 +30,8 @@ PAPER_MODEL_PARAMETERS = {
     "model.fingertip_workspace.b_min": -np.pi,
     "model.fingertip_workspace.b_max": 0.0,
 }
-Q_PAPER = np.array([3 * np.pi / 4, 0.0, np.pi / 2] * 3)
-P_OBJECT_PAPER = np.array([0.0, 0.0, 0.3])
+Q_PAPER = np.array([3 * np.pi / 4, 0.75, np.pi / 2 - 0.75] * 3)
+P_OBJECT_PAPER = np.array([0.0, 0.0, 0.3 * np.cos(0.75)])
 
 
 def paper_model(**overrides: object) -> GraspModel:

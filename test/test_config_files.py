@@ -156,9 +156,11 @@ def test_scenario_our_choices(scenario):
     assert model['model.fingertip_workspace.a_max'] == pytest.approx(HALF_PI - margin, abs=1e-15)
     assert model['model.gravity'] == [0.0, 0.0, -9.81]
     assert model['initial.joint_positions'] == pytest.approx(
-        [3 * math.pi / 4, 0.0, HALF_PI] * 3, abs=1e-15
+        [3 * math.pi / 4, 0.75, HALF_PI - 0.75] * 3, abs=1e-15
     )
-    assert model['initial.object_position'] == [0.0, 0.0, 0.3]
+    assert model['initial.object_position'] == pytest.approx(
+        [0.0, 0.0, 0.3 * math.cos(0.75)], abs=1e-15
+    )
     assert model['initial.object_orientation'] == [0.0, 0.0, 0.0, 1.0]
     assert model['model.contact_faces'] == ['-x', '+x', '+y']
 
@@ -185,7 +187,7 @@ def test_scenario_matches_the_urdf(scenario):
         limit = joints[name].find('limit')
         lower, upper = float(limit.get('lower')), float(limit.get('upper'))
         # Inside the joint-limit barrier's safe set with margin.
-        assert lower + 0.5 < q < upper - 0.5, name
+        assert lower + 0.25 < q < upper - 0.25, name
 
 
 def _leaves_with_comments(path: Path) -> dict[str, bool]:
