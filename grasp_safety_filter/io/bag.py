@@ -1,0 +1,373 @@
+"""Writing and reading rosbag2 bags without ROS, with the graph's topics, types and QoS.
+
+:class:`BagRecorder` writes what ``ros2 bag record`` would record from the ROS graph
+(rosbag2 metadata version 9, mcap by default or sqlite3, CDR-serialised messages, each
+topic's offered QoS from :mod:`grasp_safety_filter.io.topics`), and always leaves a
+closed, readable bag: on normal exit, on an exception and on an interrupt.
+
+Interrupts: Python turns SIGINT into ``KeyboardInterrupt`` wherever the program happens to
+be, possibly halfway through appending a record; SIGTERM ends the process without any
+clean-up. Inside :func:`interrupt_on_signals`, both raise :class:`SignalInterrupt` (a
+``KeyboardInterrupt``) instead, and not while the recorder is writing a message or
+closing the bag: there the interrupt waits until the bag is consistent again. A runner
+therefore records as::
+
+    with interrupt_on_signals(), BagRecorder(path) as bag:
+        for ...:
+            bag.write(topic, stamp_ns, msg)
+
+:func:`read_bag` and :func:`iter_bag` read any rosbag2 bag (ours or one from
+``ros2 bag record``) with ``rosbags``' AnyReader.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+import signal
+import threading
+from types import FrameType, TracebackType
+from typing import Any, Literal
+
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection, Qos
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+from grasp_safety_filter.io.topics import TOPICS, TopicSpec
+
+Storage = Literal['mcap', 'sqlite3']
+
+BAG_VERSION = 9
+"""rosbag2 metadata version written (that of ROS 2 Jazzy)."""
+
+_STORAGE_PLUGINS: dict[str, StoragePlugin] = {
+    'mcap': StoragePlugin.MCAP,
+    'sqlite3': StoragePlugin.SQLITE3,
+}
+
+
+# ----------------------------------------------------------------------------------------
+# Interrupts
+
+
+class SignalInterrupt(KeyboardInterrupt):
+    """SIGINT or SIGTERM received inside :func:`interrupt_on_signals`.
+
+    Attributes:
+        signum: The signal number.
+
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(f'interrupted by {signal.Signals(signum).name}')
+        self.signum = signum
+
+
+def signal_name(error: KeyboardInterrupt) -> str:
+    """Return ``"SIGTERM"``/``"SIGINT"`` for a :class:`SignalInterrupt`, else ``"SIGINT"``.
+
+    A plain ``KeyboardInterrupt`` comes from Python's default SIGINT handler.
+    """
+    if isinstance(error, SignalInterrupt):
+        return signal.Signals(error.signum).name
+    return 'SIGINT'
+
+
+class _InterruptState:
+    """Signal bookkeeping of the main thread (handlers run there)."""
+
+    installed = 0
+    critical_depth = 0
+    pending: int | None = None
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def _handle_signal(signum: int, frame: FrameType | None) -> None:
+    if _InterruptState.critical_depth > 0:
+        # Inside a write or close: interrupt once the bag is consistent again.
+        _InterruptState.pending = signum
+        return
+    raise SignalInterrupt(signum)
+
+
+@contextmanager
+def interrupt_on_signals(
+    signals: Sequence[signal.Signals] = (signal.SIGINT, signal.SIGTERM),
+) -> Iterator[None]:
+    """Turn ``signals`` into :class:`SignalInterrupt`, deferred out of bag writes.
+
+    Installs the handlers on entry and restores the previous ones on exit. Must be entered
+    from the main thread (Python delivers signals there only).
+
+    Raises:
+        RuntimeError: Entered from another thread.
+
+    """
+    if not _in_main_thread():
+        raise RuntimeError('interrupt_on_signals: must be entered from the main thread')
+    previous = {s: signal.signal(s, _handle_signal) for s in signals}
+    _InterruptState.installed += 1
+    try:
+        yield
+    finally:
+        _InterruptState.installed -= 1
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if _InterruptState.installed == 0:
+            _InterruptState.pending = None
+
+
+@contextmanager
+def _critical_section(raise_pending: bool = True) -> Iterator[None]:
+    """Defer :func:`interrupt_on_signals` interrupts until the block is done.
+
+    Args:
+        raise_pending: Raise a deferred interrupt after the block (when it completed);
+            else drop it (the caller is already stopping).
+
+    """
+    if not _in_main_thread():
+        yield
+        return
+    _InterruptState.critical_depth += 1
+    try:
+        yield
+    finally:
+        _InterruptState.critical_depth -= 1
+    if _InterruptState.critical_depth == 0 and _InterruptState.pending is not None:
+        signum, _InterruptState.pending = _InterruptState.pending, None
+        if raise_pending:
+            raise SignalInterrupt(signum)
+
+
+# ----------------------------------------------------------------------------------------
+# Writing
+
+
+class BagRecorder:
+    """A rosbag2 bag of the package's topics, closed whatever happens.
+
+    Use as a context manager (or call :meth:`open` and :meth:`close` in ``try/finally``):
+    the bag is closed, with its index and ``metadata.yaml``, also when the block raises
+    (an exception or ``KeyboardInterrupt``), so ``AnyReader`` can read everything written
+    before. ``rosbags.rosbag2.Writer`` on its own would abort the bag on an exception.
+    """
+
+    def __init__(
+        self,
+        path: Path | str,
+        storage: Storage = 'mcap',
+        topics: Iterable[TopicSpec] = TOPICS,
+        typestore: Any = None,
+    ) -> None:
+        """Prepare a bag; nothing is created before :meth:`open`.
+
+        Args:
+            path: Bag directory to create (must not exist).
+            storage: ``"mcap"`` (the Jazzy default) or ``"sqlite3"``.
+            topics: Topics to register, with their types and offered QoS.
+            typestore: rosbags typestore for serialisation (default ROS2_JAZZY).
+
+        """
+        if storage not in _STORAGE_PLUGINS:
+            raise ValueError(
+                f'storage: expected one of {sorted(_STORAGE_PLUGINS)}, got {storage!r}'
+            )
+        self.path = Path(path)
+        self.storage = storage
+        self.topics: dict[str, TopicSpec] = {}
+        for spec in topics:
+            if spec.name in self.topics:
+                raise ValueError(f'topics: {spec.name!r} is listed twice')
+            self.topics[spec.name] = spec
+        self.typestore = get_typestore(Stores.ROS2_JAZZY) if typestore is None else typestore
+        self.counts: dict[str, int] = dict.fromkeys(self.topics, 0)
+        self._writer: Writer | None = None
+        self._connections: dict[str, Connection] = {}
+
+    @property
+    def is_open(self) -> bool:
+        """Whether the bag is open for writing."""
+        return self._writer is not None
+
+    def open(self) -> None:
+        """Create the bag directory and register every topic.
+
+        Raises:
+            rosbags.rosbag2.WriterError: ``path`` exists already.
+
+        """
+        if self._writer is not None:
+            raise RuntimeError(f'bag {self.path} is already open')
+        writer = Writer(
+            self.path, version=BAG_VERSION, storage_plugin=_STORAGE_PLUGINS[self.storage]
+        )
+        with _critical_section():
+            writer.open()
+            try:
+                for spec in self.topics.values():
+                    self._connections[spec.name] = writer.add_connection(
+                        spec.name,
+                        spec.msgtype,
+                        typestore=self.typestore,
+                        serialization_format='cdr',
+                        offered_qos_profiles=[spec.qos.to_rosbags()],
+                    )
+            except BaseException:
+                writer.abort()
+                raise
+            self._writer = writer
+
+    def write(self, topic: str, stamp_ns: int, msg: Any) -> None:
+        """Serialise ``msg`` to CDR and append it to ``topic`` at ``stamp_ns``.
+
+        Args:
+            topic: A registered topic.
+            stamp_ns: Bag timestamp, integer ns >= 0 (the runner uses the header stamp).
+            msg: A message of the topic's type (typestore class).
+
+        Raises:
+            KeyError: Unknown topic.
+            TypeError: ``msg`` is of another type than the topic's.
+            ValueError: Negative or non-integer ``stamp_ns``.
+            RuntimeError: The bag is not open.
+
+        """
+        if self._writer is None:
+            raise RuntimeError(f'bag {self.path} is not open')
+        spec = self.topics.get(topic)
+        if spec is None:
+            raise KeyError(f'topic {topic!r} is not registered; registered: {list(self.topics)}')
+        msgtype = getattr(msg, '__msgtype__', spec.msgtype)
+        if msgtype != spec.msgtype:
+            raise TypeError(f'topic {topic!r} carries {spec.msgtype}, got a {msgtype}')
+        if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int) or stamp_ns < 0:
+            raise ValueError(f'stamp_ns: expected an integer >= 0 ns, got {stamp_ns!r}')
+        data = self.typestore.serialize_cdr(msg, spec.msgtype)
+        with _critical_section():
+            self._writer.write(self._connections[topic], stamp_ns, data)
+            self.counts[topic] += 1
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Store a string in the bag's ``metadata.yaml`` ``custom_data`` (before closing)."""
+        if self._writer is None:
+            raise RuntimeError(f'bag {self.path} is not open')
+        self._writer.set_custom_data(key, value)
+
+    def close(self, raise_pending_interrupt: bool = True) -> None:
+        """Write the index and ``metadata.yaml``; no-op if not open.
+
+        Args:
+            raise_pending_interrupt: Raise an interrupt that arrived while closing, after
+                closing (False when already unwinding from an exception).
+
+        """
+        writer, self._writer = self._writer, None
+        if writer is None:
+            return
+        with _critical_section(raise_pending=raise_pending_interrupt):
+            try:
+                writer.close()
+            except BaseException:
+                writer.abort()
+                raise
+
+    def __enter__(self) -> BagRecorder:
+        self.open()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc_value: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close(raise_pending_interrupt=exc_type is None)
+
+
+# ----------------------------------------------------------------------------------------
+# Reading
+
+
+@dataclass(frozen=True)
+class BagTopic:
+    """A topic as recorded in a bag.
+
+    Attributes:
+        name: Topic name.
+        msgtype: Message type.
+        count: Number of messages.
+        offered_qos: Offered QoS profiles of its connections.
+
+    """
+
+    name: str
+    msgtype: str
+    count: int
+    offered_qos: tuple[Qos, ...]
+
+
+def _reader(path: Path | str) -> AnyReader:
+    return AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+
+
+def bag_topics(path: Path | str) -> dict[str, BagTopic]:
+    """Return the topics of a bag with type, message count and offered QoS."""
+    with _reader(path) as reader:
+        topics: dict[str, BagTopic] = {}
+        for connection in reader.connections:
+            qos = tuple(getattr(connection.ext, 'offered_qos_profiles', ()))
+            known = topics.get(connection.topic)
+            if known is None:
+                topics[connection.topic] = BagTopic(
+                    connection.topic, connection.msgtype, connection.msgcount, qos
+                )
+            else:
+                topics[connection.topic] = BagTopic(
+                    known.name,
+                    known.msgtype,
+                    known.count + connection.msgcount,
+                    known.offered_qos + qos,
+                )
+        return topics
+
+
+def iter_bag(
+    path: Path | str, topics: Iterable[str] | None = None
+) -> Iterator[tuple[str, int, Any]]:
+    """Yield ``(topic, timestamp_ns, message)`` in timestamp order.
+
+    Args:
+        path: Bag directory.
+        topics: Only these topics (all when None).
+
+    """
+    wanted = None if topics is None else set(topics)
+    with _reader(path) as reader:
+        connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        if not connections:
+            return
+        for connection, timestamp, rawdata in reader.messages(connections=connections):
+            yield connection.topic, timestamp, reader.deserialize(rawdata, connection.msgtype)
+
+
+def read_bag(
+    path: Path | str, topics: Iterable[str] | None = None
+) -> dict[str, list[tuple[int, Any]]]:
+    """Read a whole bag: ``{topic: [(timestamp_ns, message), ...]}`` in timestamp order.
+
+    Every topic of the bag (or of ``topics``) is a key, also when it has no messages.
+    """
+    wanted = None if topics is None else set(topics)
+    result: dict[str, list[tuple[int, Any]]] = {
+        name: [] for name in bag_topics(path) if wanted is None or name in wanted
+    }
+    for topic, timestamp, msg in iter_bag(path, wanted):
+        result[topic].append((timestamp, msg))
+    return result

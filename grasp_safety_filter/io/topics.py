@@ -1,0 +1,249 @@
+"""The topic table: every topic of the ROS graph, its type, publisher and QoS.
+
+One table serves both the rclpy nodes (which build an ``rclpy.qos.QoSProfile`` from
+:class:`TopicQos`) and the bag writer (which records the same profile as the topic's
+``offered_qos_profiles`` in ``metadata.yaml``), so a bag written by the ROS-free runner
+and one recorded by ``ros2 bag record`` from the ROS graph describe their topics alike.
+
+QoS choices:
+
+- State, contacts, commands, margins: reliable, volatile, keep last 10. In lockstep mode
+  the simulator waits for the command stamped with its state's stamp, so no sample may be
+  dropped (reliable); a late joiner has no use for old samples (volatile); 10 absorbs a
+  short scheduling hiccup without unbounded memory.
+- ``/object/reference``: the same stream profile. Planners stream references (the
+  controller holds the last pose once they stop, see
+  :class:`grasp_safety_filter.control.reference.TopicReference`), and a volatile
+  subscription matches every reliable publisher, volatile or transient local; requesting
+  transient local would silently drop planners that publish volatile, the
+  ``ros2 topic pub`` default.
+- ``/diagnostics``: the ROS default profile (reliable, volatile, keep last 10), which
+  ``diagnostic_aggregator`` and ``rqt_robot_monitor`` subscribe with.
+- ``/clock``: best effort, volatile, keep last 1, as rclcpp's ``ClockQoS`` and the
+  subscription rclpy's time source creates: only the newest time matters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+
+from grasp_safety_filter.io.schemas import (
+    HAND_SIM_NODE,
+    NOMINAL_CONTROLLER_NODE,
+    SAFETY_FILTER_NODE,
+)
+
+Reliability = Literal['reliable', 'best_effort']
+Durability = Literal['volatile', 'transient_local']
+
+# Topic names, for code that publishes or subscribes one topic.
+JOINT_STATES = '/hand/joint_states'
+OBJECT_ODOM = '/object/odom'
+CONTACTS = '/hand/contacts'
+OBJECT_REFERENCE = '/object/reference'
+EFFORT_NOMINAL = '/hand/effort_nominal'
+EFFORT_COMMAND = '/hand/effort_command'
+DIAGNOSTICS = '/diagnostics'
+MARGINS = '/safety_filter/margins'
+CLOCK = '/clock'
+
+# The planner is whatever the user connects to /object/reference.
+PLANNER = 'planner'
+
+
+@dataclass(frozen=True)
+class TopicQos:
+    """A keep-last QoS profile in plain values.
+
+    The names match rclpy's policy enums after ``upper()``
+    (``ReliabilityPolicy.RELIABLE``, ``DurabilityPolicy.TRANSIENT_LOCAL``) and rosbags'
+    QoS enums alike: :meth:`to_rclpy` gives the nodes' profile, :meth:`to_rosbags` the
+    bag's. Deadline, lifespan and liveliness are left at the ROS defaults (unset,
+    automatic).
+
+    Attributes:
+        reliability: ``"reliable"`` or ``"best_effort"``.
+        durability: ``"volatile"`` or ``"transient_local"``.
+        depth: History depth (keep last), >= 1.
+
+    """
+
+    reliability: Reliability
+    durability: Durability
+    depth: int
+
+    def __post_init__(self) -> None:
+        if self.reliability not in ('reliable', 'best_effort'):
+            raise ValueError(
+                f"QoS reliability: expected 'reliable' or 'best_effort', got {self.reliability!r}"
+            )
+        if self.durability not in ('volatile', 'transient_local'):
+            raise ValueError(
+                f"QoS durability: expected 'volatile' or 'transient_local', got "
+                f'{self.durability!r}'
+            )
+        if isinstance(self.depth, bool) or not isinstance(self.depth, int) or self.depth < 1:
+            raise ValueError(f'QoS depth: expected an integer >= 1, got {self.depth!r}')
+
+    @property
+    def text(self) -> str:
+        """Return the profile in words, e.g. ``"reliable, volatile, keep last 10"``."""
+        return f'{self.reliability}, {self.durability}, keep last {self.depth}'
+
+    def to_rclpy(self) -> Any:
+        """Return this profile as an ``rclpy.qos.QoSProfile`` (needs a ROS 2 install)."""
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST,
+            depth=self.depth,
+            reliability=ReliabilityPolicy[self.reliability.upper()],
+            durability=DurabilityPolicy[self.durability.upper()],
+        )
+
+    def to_rosbags(self) -> Qos:
+        """Return this profile as a rosbags ``Qos`` (an ``offered_qos_profiles`` entry)."""
+        unset = QosTime(sec=0, nsec=0)
+        return Qos(
+            history=QosHistory.KEEP_LAST,
+            depth=self.depth,
+            reliability=QosReliability[self.reliability.upper()],
+            durability=QosDurability[self.durability.upper()],
+            deadline=unset,
+            lifespan=unset,
+            liveliness=QosLiveliness.AUTOMATIC,
+            liveliness_lease_duration=unset,
+            avoid_ros_namespace_conventions=False,
+        )
+
+
+STREAM_QOS = TopicQos(reliability='reliable', durability='volatile', depth=10)
+DIAGNOSTICS_QOS = TopicQos(reliability='reliable', durability='volatile', depth=10)
+CLOCK_QOS = TopicQos(reliability='best_effort', durability='volatile', depth=1)
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One topic of the graph.
+
+    Attributes:
+        name: Absolute topic name.
+        msgtype: ROS 2 message type, ``"pkg/msg/Type"``.
+        publishers: Nodes that publish it.
+        qos: The QoS profile publishers offer and subscribers request.
+        description: What it carries, with frames and units.
+
+    """
+
+    name: str
+    msgtype: str
+    publishers: tuple[str, ...]
+    qos: TopicQos
+    description: str
+
+
+TOPICS: tuple[TopicSpec, ...] = (
+    TopicSpec(
+        JOINT_STATES,
+        'sensor_msgs/msg/JointState',
+        (HAND_SIM_NODE,),
+        STREAM_QOS,
+        'Hand joints by name: position (rad), velocity (rad/s), applied effort (N·m).',
+    ),
+    TopicSpec(
+        OBJECT_ODOM,
+        'nav_msgs/msg/Odometry',
+        (HAND_SIM_NODE,),
+        STREAM_QOS,
+        'Object pose in the palm frame; twist in the object frame (REP 105).',
+    ),
+    TopicSpec(
+        CONTACTS,
+        'sensor_msgs/msg/JointState',
+        (HAND_SIM_NODE,),
+        STREAM_QOS,
+        'Contact coordinates, rates, forces, required friction and penetration as '
+        "'<contact>/<quantity>' entries (layout: messages.contacts_to_msg).",
+    ),
+    TopicSpec(
+        OBJECT_REFERENCE,
+        'trajectory_msgs/msg/MultiDOFJointTrajectory',
+        (PLANNER,),
+        STREAM_QOS,
+        "Desired object pose, twist and acceleration in the palm frame, joint 'object'.",
+    ),
+    TopicSpec(
+        EFFORT_NOMINAL,
+        'sensor_msgs/msg/JointState',
+        (NOMINAL_CONTROLLER_NODE,),
+        STREAM_QOS,
+        'Nominal joint torques by name, effort only (N·m).',
+    ),
+    TopicSpec(
+        EFFORT_COMMAND,
+        'sensor_msgs/msg/JointState',
+        (SAFETY_FILTER_NODE,),
+        STREAM_QOS,
+        'Filtered joint torques u* by name, effort only (N·m).',
+    ),
+    TopicSpec(
+        DIAGNOSTICS,
+        'diagnostic_msgs/msg/DiagnosticArray',
+        (SAFETY_FILTER_NODE, HAND_SIM_NODE),
+        DIAGNOSTICS_QOS,
+        'QP status, solve time, relaxation, smallest margins, input hold mode; '
+        'simulator lockstep timeouts.',
+    ),
+    TopicSpec(
+        MARGINS,
+        'sensor_msgs/msg/JointState',
+        (SAFETY_FILTER_NODE,),
+        STREAM_QOS,
+        'Barrier values by row name: position = h, velocity = dh/dt where defined else 0.',
+    ),
+    TopicSpec(
+        CLOCK,
+        'rosgraph_msgs/msg/Clock',
+        (HAND_SIM_NODE,),
+        CLOCK_QOS,
+        'Simulation time, published when use_sim_time is set.',
+    ),
+)
+
+
+def topic_spec(name: str) -> TopicSpec:
+    """Return the table entry of topic ``name``.
+
+    Raises:
+        KeyError: ``name`` is not in :data:`TOPICS` (the message lists the known topics).
+
+    """
+    for spec in TOPICS:
+        if spec.name == name:
+            return spec
+    raise KeyError(f'unknown topic {name!r}; known topics: {[s.name for s in TOPICS]}')
+
+
+def topic_table_markdown(specs: tuple[TopicSpec, ...] = TOPICS) -> str:
+    """Return a Markdown table of topics: name, type, publishers, QoS, description."""
+    lines = [
+        '| Topic | Type | Published by | QoS | Content |',
+        '| --- | --- | --- | --- | --- |',
+    ]
+    for spec in specs:
+        publishers = ', '.join(f'`{p}`' for p in spec.publishers)
+        lines.append(
+            f'| `{spec.name}` | `{spec.msgtype}` | {publishers} | {spec.qos.text} | '
+            f'{spec.description} |'
+        )
+    return '\n'.join(lines) + '\n'
