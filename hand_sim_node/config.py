@@ -1,0 +1,144 @@
+"""Simulator configuration: the validated ``hand_sim_node`` parameters as one value.
+
+The parameters and their defaults are declared once, in
+:data:`grasp_safety_filter.io.schemas.HAND_SIM_PARAMETERS` (the rclpy node declares them from
+there); the ROS-free runner builds a :class:`SimConfig` from the same parameter file with
+:meth:`SimConfig.from_parameters`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.io.parameters import ParameterError
+from grasp_safety_filter.io.schemas import HAND_SIM_PARAMETERS
+
+_SPECS = {spec.name: spec for spec in HAND_SIM_PARAMETERS}
+
+
+def flatten_parameters(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Flatten nested parameter dictionaries to dotted ROS names (``{"a": {"b": 1}}``: ``a.b``)."""
+    flat: dict[str, Any] = {}
+    for key, value in params.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(flatten_parameters(value, prefix=f'{name}.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+_ARRAY_FIELDS: dict[str, str] = {
+    'initial_joint_positions': 'initial.joint_positions',
+    'initial_object_position': 'initial.object_position',
+    'initial_object_orientation': 'initial.object_orientation',
+}
+_SCALAR_FIELDS: dict[str, str] = {
+    'integrator': 'integrator',
+    'time_step': 'time_step',
+    'duration': 'duration',
+    'stop_on_slip': 'stop_on_slip',
+    'stop_on_workspace_exit': 'stop_on_workspace_exit',
+    'position_gain': 'stabilization.position_gain',
+    'velocity_gain': 'stabilization.velocity_gain',
+    'lockstep': 'lockstep',
+    'command_timeout': 'command_timeout',
+    'publish_clock': 'publish_clock',
+}
+"""SimConfig field -> ROS parameter name."""
+
+
+def _default(field_name: str) -> Any:
+    return _SPECS[_SCALAR_FIELDS[field_name]].default
+
+
+@dataclass(frozen=True, eq=False)
+class SimConfig:
+    """Validated simulator configuration (defaults: ``HAND_SIM_PARAMETERS``).
+
+    Attributes:
+        initial_joint_positions: Initial joint angles, shape (m,), rad (model joint order).
+        initial_object_position: Initial object centre of mass in the palm frame, (3,), m.
+        initial_object_orientation: Initial unit quaternion ``(x, y, z, w)`` of
+            ``R_object_to_palm``, shape (4,).
+        integrator: ``"ode3"`` or ``"rk4"``.
+        time_step: Integration step, s; the torque is held constant over a step.
+        duration: Simulated duration of a run, s.
+        stop_on_slip: Whether slip (beta_i > mu) stops the run.
+        stop_on_workspace_exit: Whether a contact leaving its fingertip workspace stops it.
+        position_gain: Baumgarte gain ``K_p`` on the normal interpenetration, 1/s².
+        velocity_gain: Baumgarte gain ``K_v`` on the contact velocity residual, 1/s.
+        lockstep: Node only: wait for the command stamped t_k before integrating.
+        command_timeout: Node only: lockstep wait before a diagnostic, s.
+        publish_clock: Node only: publish /clock.
+
+    Raises:
+        ParameterError: Naming the parameter, what was expected and what was received.
+
+    """
+
+    initial_joint_positions: np.ndarray | tuple[float, ...]
+    initial_object_position: np.ndarray | tuple[float, ...]
+    initial_object_orientation: np.ndarray | tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
+    integrator: str = _default('integrator')
+    time_step: float = _default('time_step')
+    duration: float = _default('duration')
+    stop_on_slip: bool = _default('stop_on_slip')
+    stop_on_workspace_exit: bool = _default('stop_on_workspace_exit')
+    position_gain: float = _default('position_gain')
+    velocity_gain: float = _default('velocity_gain')
+    lockstep: bool = _default('lockstep')
+    command_timeout: float = _default('command_timeout')
+    publish_clock: bool = _default('publish_clock')
+
+    def __post_init__(self) -> None:
+        for field_name, name in _ARRAY_FIELDS.items():
+            value = np.array(_SPECS[name].validate(getattr(self, field_name)), dtype=float)
+            if value.size == 0:
+                raise ParameterError(f"parameter '{name}': expected a non-empty list, got []")
+            value.setflags(write=False)
+            object.__setattr__(self, field_name, value)
+        for field_name, name in _SCALAR_FIELDS.items():
+            object.__setattr__(self, field_name, _SPECS[name].validate(getattr(self, field_name)))
+        quaternion = self.initial_object_orientation
+        norm = float(np.linalg.norm(quaternion))
+        if abs(norm - 1.0) > 1e-6:
+            raise ParameterError(
+                "parameter 'initial.object_orientation': expected a unit quaternion (x, y, z, "
+                f"w), got {quaternion.tolist()} (norm {norm:.9g})"
+            )
+        unit = quaternion / norm
+        unit.setflags(write=False)
+        object.__setattr__(self, 'initial_object_orientation', unit)
+        if self.time_step > self.duration:
+            raise ParameterError(
+                f"parameter 'time_step': expected <= duration ({self.duration} s), got "
+                f"{self.time_step}"
+            )
+
+    @property
+    def n_steps(self) -> int:
+        """Number of steps of a full run, ``round(duration / time_step)``."""
+        return max(1, round(self.duration / self.time_step))
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any]) -> SimConfig:
+        """Build from a node's parameters (dotted names or nested dictionaries).
+
+        Parameters that are not the simulator's (the model's, for instance) are ignored;
+        missing ones take their defaults from ``HAND_SIM_PARAMETERS``.
+
+        Raises:
+            ParameterError: A parameter is of the wrong type or out of range.
+
+        """
+        flat = flatten_parameters(params)
+        names = {**_ARRAY_FIELDS, **_SCALAR_FIELDS}
+        return cls(**{
+            field_name: flat[name] if name in flat else _SPECS[name].default
+            for field_name, name in names.items()
+        })
