@@ -1,0 +1,1 @@
+"""Control: nominal controller, constraint families, QP, safety filter, hold policy."""

@@ -23,12 +23,12 @@ from pathlib import Path
 from typing import Any
 
 from grasp_safety_filter.io.parameters import (
+    load_parameter_file,
     NodeSchema,
     ParameterError,
+    parameters_for_node,
     ParameterSpec,
     ParameterType,
-    load_parameter_file,
-    parameters_for_node,
     resolve_relative_paths,
     validate_parameters,
 )
@@ -342,7 +342,7 @@ NOMINAL_CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ),
 )
 
-SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
+SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'no_slip.enabled',
         BOOL,
@@ -360,7 +360,7 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'no_slip.normal_force_margin',
         DOUBLE,
-        0.05,
+        0.01,
         'Margin eps of the pyramid rows, Lambda(mu) f_c <= -eps [N]',
         min_value=0.0,
     ),
@@ -417,7 +417,7 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'relaxation.joint_limits_weight',
         DOUBLE,
-        1.0e5,
+        1.0e6,
         'Penalty on the squared slack of the joint-limit rows when infeasible [-]',
         min_value=0.0,
         exclusive_min=True,
@@ -425,7 +425,7 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'relaxation.fingertip_workspace_weight',
         DOUBLE,
-        1.0e4,
+        1.0e3,
         'Penalty on the squared slack of the fingertip-workspace rows when infeasible [-]',
         min_value=0.0,
         exclusive_min=True,
@@ -433,7 +433,7 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'osqp.eps_abs',
         DOUBLE,
-        1.0e-8,
+        1.0e-4,
         'OSQP absolute tolerance [-]',
         min_value=0.0,
         exclusive_min=True,
@@ -441,7 +441,7 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'osqp.eps_rel',
         DOUBLE,
-        1.0e-8,
+        1.0e-4,
         'OSQP relative tolerance [-]',
         min_value=0.0,
         exclusive_min=True,
@@ -449,7 +449,7 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'osqp.max_iter',
         INTEGER,
-        4000,
+        200,
         'OSQP iteration limit per solve [-]',
         min_value=1,
     ),
@@ -459,6 +459,10 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
         True,
         'Polish the OSQP solution (active-set refinement to high accuracy)',
     ),
+)
+"""The safety filter's own parameters (read by ``SafetyFilterConfig``)."""
+
+SAFETY_FILTER_INPUT_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'input.max_age',
         DOUBLE,
@@ -482,6 +486,19 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
         'Command after the hold timeout: zero torque or gravity_compensation',
         choices=('zero', 'gravity_compensation'),
     ),
+)
+"""How the safety filter node treats stale or invalid input (``InputPolicyConfig``)."""
+
+SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        'enabled',
+        BOOL,
+        True,
+        'Filter on; false passes u_nom through unchanged (still validated), e.g. for the '
+        "paper's nominal run",
+    ),
+    *SAFETY_FILTER_QP_PARAMETERS,
+    *SAFETY_FILTER_INPUT_PARAMETERS,
 )
 
 HAND_SIM_NODE = 'hand_sim_node'

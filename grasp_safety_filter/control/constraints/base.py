@@ -1,0 +1,236 @@
+"""The common form of every constraint family: named rows ``A u >= lower`` on the torque.
+
+Each family turns one grasp constraint into rows that are affine in the joint torque u
+(shape (m,), N·m) and reports its barrier values h (its margins, > 0 inside the safe set).
+Two families of relative degree two (joint limits, fingertip workspace) share the zeroing
+control barrier function (ZCBF) construction of the paper's Section III, implemented once in
+:class:`BoxBarrier`: for a coordinate x with ``h = sign (x - bound)``,
+
+    B = h_dot + alpha_1(h)
+    h_ddot(u) + alpha_1'(h) h_dot + alpha_2(B) >= 0
+
+which keeps ``B >= 0`` and hence ``h >= 0`` forward invariant (paper, Theorem 1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import math
+from typing import NamedTuple, Protocol, runtime_checkable
+
+import numpy as np
+
+from grasp_safety_filter.control.class_k import ClassKFunction
+from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.grasp_state import GraspState
+
+
+class ConstraintRows(NamedTuple):
+    """Rows ``A u >= lower`` of one constraint family (or of a stack of them).
+
+    Attributes:
+        A: Shape (k, m): row sensitivities to the joint torque u.
+        lower: Shape (k,): lower bounds (in each row's own unit).
+        names: k row names, ``"<family>/<joint or contact>/<row>"``.
+    """
+
+    A: np.ndarray
+    lower: np.ndarray
+    names: tuple[str, ...]
+
+    def residual(self, u: np.ndarray) -> np.ndarray:
+        """Return ``A u - lower``, shape (k,): >= 0 where the row holds."""
+        return self.A @ u - self.lower
+
+
+class BarrierValues(NamedTuple):
+    """Barrier values h (margins) of one family, one per row, > 0 inside the safe set.
+
+    Attributes:
+        h: Shape (k,), in the unit of the constrained quantity (rad, N, N·m).
+        names: The k row names, the same as the family's constraint rows.
+    """
+
+    h: np.ndarray
+    names: tuple[str, ...]
+
+
+@runtime_checkable
+class ConstraintFamily(Protocol):
+    """What the safety filter needs from a constraint family.
+
+    Attributes:
+        family: Family name, the first component of every row name (e.g. ``"no_slip"``).
+        names: Row names, fixed at construction.
+        state_fields: The :class:`GraspState` fields the rows read (for error reports).
+    """
+
+    family: str
+    names: tuple[str, ...]
+    state_fields: tuple[str, ...]
+
+    def rows(self, state: GraspState) -> ConstraintRows:
+        """Return the family's rows ``A u >= lower`` at this state."""
+        ...
+
+    def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
+        """Barrier values h at this state (and torque u where h depends on it)."""
+        ...
+
+
+def validate_names(names: Sequence[str], parameter: str) -> tuple[str, ...]:
+    """Check that ``names`` is a non-empty sequence of distinct non-empty strings.
+
+    Raises:
+        ValueError: Naming ``parameter``, what was expected and what was received.
+    """
+    if isinstance(names, str) or not isinstance(names, Sequence):
+        raise ValueError(f"'{parameter}': expected a sequence of names, got {names!r}")
+    result = tuple(names)
+    if not result:
+        raise ValueError(f"'{parameter}': expected at least one name, got none")
+    for name in result:
+        if not isinstance(name, str) or not name or '/' in name:
+            raise ValueError(
+                f"'{parameter}': expected non-empty strings without '/', got {name!r}"
+            )
+    if len(set(result)) != len(result):
+        raise ValueError(f"'{parameter}': expected distinct names, got {list(result)}")
+    return result
+
+
+def finite_vector(value: object, length: int, parameter: str) -> np.ndarray:
+    """``value`` as a finite float vector of the given length (a scalar is broadcast).
+
+    Raises:
+        ValueError: Naming ``parameter``, the expected length and what was received.
+    """
+    try:
+        array = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"'{parameter}': expected numbers, got {value!r}") from None
+    if array.ndim == 0:
+        array = np.full(length, float(array))
+    if array.shape != (length,):
+        raise ValueError(
+            f"'{parameter}': expected a scalar or {length} values, got shape {array.shape}"
+        )
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"'{parameter}': expected finite values, got {array.tolist()}")
+    array.setflags(write=False)
+    return array
+
+
+def finite_scalar(
+    value: object, parameter: str, minimum: float | None = None, inclusive: bool = True
+) -> float:
+    """``value`` as a finite float, ``>= minimum`` (``> minimum`` unless ``inclusive``).
+
+    Raises:
+        ValueError: Naming ``parameter``, the bound and what was received.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise ValueError(f"'{parameter}': expected a number, got {value!r}")
+    number = float(value)
+    if minimum is None:
+        if not math.isfinite(number):
+            raise ValueError(f"'{parameter}': expected a finite number, got {value!r}")
+        return number
+    ok = number >= minimum if inclusive else number > minimum
+    if not (math.isfinite(number) and ok):
+        relation = '>=' if inclusive else '>'
+        raise ValueError(
+            f"'{parameter}': expected a finite number {relation} {minimum}, got {value!r}"
+        )
+    return number
+
+
+def check_rows(state_value: np.ndarray, rows: int, field: str) -> None:
+    """Raise ValueError if a state array does not have ``rows`` leading entries."""
+    if state_value.shape[0] != rows:
+        raise ValueError(
+            f"state.{field}: expected {rows} rows for this filter's joints/contacts, "
+            f'got shape {state_value.shape}'
+        )
+
+
+class BoxBarrier:
+    """Relative-degree-two ZCBF rows keeping selected coordinates inside bounds.
+
+    Row r selects coordinate ``x[index[r]]`` with sign ``s_r = +1`` (lower bound) or
+    ``-1`` (upper bound) and bound ``c_r``; its barrier and constraint are::
+
+        h_r = s_r (x[index[r]] - c_r)          h_dot_r = s_r x_dot[index[r]]
+        B_r = h_dot_r + alpha_1(h_r)
+        s_r x_ddot[index[r]](u) + alpha_1'(h_r) h_dot_r + alpha_2(B_r) >= 0
+
+    Subclasses say which coordinates (:meth:`coordinates`) and name the rows.
+
+    Attributes:
+        family: Family name (first component of the row names).
+        names: Row names.
+        alpha1, alpha2: The extended class-K functions.
+    """
+
+    family: str = ''
+    state_fields: tuple[str, ...] = ()
+
+    def __init__(
+        self,
+        index: np.ndarray,
+        sign: np.ndarray,
+        bound: np.ndarray,
+        names: tuple[str, ...],
+        alpha1: ClassKFunction,
+        alpha2: ClassKFunction,
+    ) -> None:
+        for parameter, alpha in (('alpha1', alpha1), ('alpha2', alpha2)):
+            if not isinstance(alpha, ClassKFunction):
+                raise ValueError(
+                    f"'{parameter}': expected a ClassKFunction, got {type(alpha).__name__}"
+                )
+        self.alpha1 = alpha1
+        self.alpha2 = alpha2
+        self.names = names
+        index = np.asarray(index, dtype=np.intp)
+        sign = np.asarray(sign, dtype=float)
+        # Signed selection S (S[r, index[r]] = s_r): h = S x + h_offset, h_dot = S x_dot,
+        # h_ddot(u) = S x_ddot(u); one small product each instead of gathers and scalings.
+        self._selection = np.zeros((index.size, int(index.max(initial=-1)) + 1))
+        self._selection[np.arange(index.size), index] = sign
+        self._h_offset = -sign * np.asarray(bound, dtype=float)
+        self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
+
+    def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
+        """Return the constrained coordinates x, their rates x_dot and ``u ↦ x_ddot``."""
+        raise NotImplementedError
+
+    def barrier(self, state: GraspState) -> tuple[np.ndarray, np.ndarray]:
+        """``(h, h_dot)`` per row, shape (k,) each."""
+        x, x_dot, _ = self.coordinates(state)
+        return self._selection @ x + self._h_offset, self._selection @ x_dot
+
+    def rows(self, state: GraspState) -> ConstraintRows:
+        """Rows ``s x_ddot(u) + alpha_1'(h) h_dot + alpha_2(h_dot + alpha_1(h)) >= 0``.
+
+        In the common form: ``A = s * x_ddot.matrix[index]`` and
+        ``lower = -(s * x_ddot.offset[index] + alpha_1'(h) h_dot + alpha_2(B))``.
+        """
+        x, x_dot, acceleration = self.coordinates(state)
+        S = self._selection
+        h = S @ x + self._h_offset
+        h_dot = S @ x_dot
+        B = h_dot + self.alpha1.value(h)
+        lower = -(
+            S @ acceleration.offset + self.alpha1.derivative(h) * h_dot + self.alpha2.value(B)
+        )
+        self._last_h = (state, h)
+        return ConstraintRows(S @ acceleration.matrix, lower, self.names)
+
+    def values(self, state: GraspState, u: np.ndarray | None = None) -> BarrierValues:
+        """Barrier values ``h`` per row (independent of u: relative degree two)."""
+        last_state, h = self._last_h
+        if state is not last_state:  # states are immutable: reuse h of the last rows() call
+            x, _, _ = self.coordinates(state)
+            h = self._selection @ x + self._h_offset
+        return BarrierValues(h, self.names)

@@ -1,0 +1,113 @@
+"""Fingertip workspace: rolling contacts stay on the fingertip surface (paper eq. 12, 22–26)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from grasp_safety_filter.control.class_k import ClassKFunction
+from grasp_safety_filter.control.constraints.base import (
+    BoxBarrier,
+    check_rows,
+    finite_scalar,
+    validate_names,
+)
+from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.grasp_state import GraspState
+
+#: Row labels per contact, in row order.
+WORKSPACE_ROWS: tuple[str, ...] = ('a_min', 'a_max', 'b_min', 'b_max')
+
+
+class FingertipWorkspaceBarrier(BoxBarrier):
+    """Keep each contact's fingertip coordinates ``(a_i, b_i)`` inside a box.
+
+    Four barriers per contact i (rows in this order, contact-major)::
+
+        a_min: h = a_i - a_min     h_dot =  a_i_dot     h_ddot(u) =  a_i_ddot(u)
+        a_max: h = a_max - a_i     h_dot = -a_i_dot     h_ddot(u) = -a_i_ddot(u)
+        b_min: h = b_i - b_min     h_dot =  b_i_dot     h_ddot(u) =  b_i_ddot(u)
+        b_max: h = b_max - b_i     h_dot = -b_i_dot     h_ddot(u) = -b_i_ddot(u)
+
+    each with ``B = h_dot + alpha_1(h)`` and the constraint::
+
+        h_ddot(u) + alpha_1'(h) h_dot + alpha_2(B) >= 0
+
+    with ``(a_i, b_i) = state.xi_cf[i]``, rates ``state.xi_cf_dot[i]`` and
+    ``u ↦ (a_1_ddot, b_1_ddot, a_2_ddot, ...)`` = ``state.xi_cf_ddot`` (the differentiated
+    rolling equations). Units: h in rad, rows in rad/s². For the paper's hemispherical
+    fingertip the box is ``-pi/2 < a < pi/2, -pi < b < 0``; keep a away from ``+-pi/2``,
+    where the surface parameterisation is singular. Row names:
+    ``"fingertip_workspace/<contact>/a_min"`` (``a_max``, ``b_min``, ``b_max``).
+    """
+
+    family = 'fingertip_workspace'
+    state_fields = ('xi_cf', 'xi_cf_dot', 'xi_cf_ddot')
+
+    def __init__(
+        self,
+        contact_names: Sequence[str],
+        a_min: float,
+        a_max: float,
+        b_min: float,
+        b_max: float,
+        alpha1: ClassKFunction | None = None,
+        alpha2: ClassKFunction | None = None,
+    ) -> None:
+        """Build the barrier rows of every contact.
+
+        Args:
+            contact_names: The n contact (finger) names, in the model's contact order.
+            a_min: Lower bound on the first fingertip coordinate a, rad.
+            a_max: Upper bound on a, rad, > a_min.
+            b_min: Lower bound on the second fingertip coordinate b, rad.
+            b_max: Upper bound on b, rad, > b_min.
+            alpha1: Extended class-K function of h (default cubic, gain 1).
+            alpha2: Extended class-K function of B (default cubic, gain 1).
+
+        Raises:
+            ValueError: An argument is malformed; the message names it.
+        """
+        self.contact_names = validate_names(contact_names, 'contact_names')
+        bounds = {
+            name: finite_scalar(value, name)
+            for name, value in (
+                ('a_min', a_min),
+                ('a_max', a_max),
+                ('b_min', b_min),
+                ('b_max', b_max),
+            )
+        }
+        for low, high in (('a_min', 'a_max'), ('b_min', 'b_max')):
+            if not bounds[low] < bounds[high]:
+                raise ValueError(
+                    f"'{high}': expected {high} > {low}, got {low} = {bounds[low]!r} and "
+                    f'{high} = {bounds[high]!r}'
+                )
+        self.a_min, self.a_max = bounds['a_min'], bounds['a_max']
+        self.b_min, self.b_max = bounds['b_min'], bounds['b_max']
+        n = len(self.contact_names)
+        names = tuple(
+            f'{self.family}/{contact}/{row}'
+            for contact in self.contact_names
+            for row in WORKSPACE_ROWS
+        )
+        # xi_cf flattened contact-major: a_i at 2 i, b_i at 2 i + 1.
+        first = 2 * np.arange(n)
+        super().__init__(
+            index=np.column_stack((first, first, first + 1, first + 1)).ravel(),
+            sign=np.tile([1.0, -1.0, 1.0, -1.0], n),
+            bound=np.tile([self.a_min, self.a_max, self.b_min, self.b_max], n),
+            names=names,
+            alpha1=alpha1 if alpha1 is not None else ClassKFunction(),
+            alpha2=alpha2 if alpha2 is not None else ClassKFunction(),
+        )
+
+    def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
+        """``(xi_cf, xi_cf_dot)`` flattened contact-major, and ``u ↦ xi_cf_ddot``."""
+        n = len(self.contact_names)
+        check_rows(state.xi_cf, n, 'xi_cf')
+        check_rows(state.xi_cf_dot, n, 'xi_cf_dot')
+        check_rows(state.xi_cf_ddot.offset, 2 * n, 'xi_cf_ddot')
+        return state.xi_cf.reshape(-1), state.xi_cf_dot.reshape(-1), state.xi_cf_ddot

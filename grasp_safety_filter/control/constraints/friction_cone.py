@@ -1,0 +1,106 @@
+"""No slip: contact forces inside friction pyramids inscribed in the friction cones (eq. 9, 14)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+import math
+
+import numpy as np
+
+from grasp_safety_filter.control.constraints.base import (
+    BarrierValues,
+    check_rows,
+    ConstraintRows,
+    finite_scalar,
+    finite_vector,
+    validate_names,
+)
+from grasp_safety_filter.model.grasp_state import GraspState
+
+
+class FrictionPyramid:
+    """Keep every contact force inside an l_s-face pyramid inscribed in its friction cone.
+
+    With ``f_c(u) = state.contact_force(u)``, per contact ``(f_x, f_y, f_n)`` in the contact
+    frame (the force on the object, ``f_n > 0`` pushing), for each contact i and face
+    ``j = 0 .. l_s - 1``, ``th_j = 2 pi j / l_s``::
+
+        cos(th_j) f_x,i(u) + sin(th_j) f_y,i(u) - mu_i cos(pi / l_s) f_n,i(u) <= -eps
+
+    The pyramid's faces touch the cone ``||f_t|| <= mu f_n`` along their centre lines (its
+    apothem is ``mu cos(pi / l_s) f_n``), so every force satisfying all faces lies inside the
+    cone: no slip is guaranteed, at the price of ``1 - cos(pi / l_s)`` of the friction
+    (7.6 % for l_s = 8). ``eps >= 0`` (N) keeps the force away from the pyramid's boundary
+    and hence ``f_n >= eps / (mu cos(pi / l_s)) > 0`` when ``eps > 0``: the contact is
+    neither slipping nor separating. This is a relative-degree-zero constraint: the rows
+    act on the force directly, no barrier dynamics.
+
+    The margin per row is ``h_ij(u) = mu_i cos(pi / l_s) f_n,i - cos(th_j) f_x,i
+    - sin(th_j) f_y,i`` (N, > 0 inside the pyramid); the row is ``h_ij(u) >= eps``.
+    Row names: ``"no_slip/<contact>/face<j>"``.
+    """
+
+    family = 'no_slip'
+    state_fields = ('contact_force',)
+
+    def __init__(
+        self,
+        contact_names: Sequence[str],
+        mu: float | Sequence[float] | np.ndarray,
+        faces: int = 8,
+        normal_force_margin: float = 0.0,
+    ) -> None:
+        """Build the pyramid faces of every contact.
+
+        Args:
+            contact_names: The n contact (finger) names, in the model's contact order.
+            mu: Friction coefficient, > 0: one for all contacts or one per contact.
+            faces: Number of pyramid faces l_s, an integer >= 3.
+            normal_force_margin: The margin eps >= 0, N.
+
+        Raises:
+            ValueError: An argument is malformed; the message names it.
+        """
+        self.contact_names = validate_names(contact_names, 'contact_names')
+        n = len(self.contact_names)
+        if isinstance(faces, bool) or not isinstance(faces, int | np.integer) or faces < 3:
+            raise ValueError(f"'faces': expected an integer >= 3, got {faces!r}")
+        self.faces = int(faces)
+        self.mu = finite_vector(mu, n, 'mu')
+        if np.any(self.mu <= 0.0):
+            raise ValueError(f"'mu': expected friction coefficients > 0, got {self.mu.tolist()}")
+        self.normal_force_margin = finite_scalar(normal_force_margin, 'normal_force_margin', 0.0)
+        theta = 2.0 * np.pi * np.arange(self.faces) / self.faces
+        # Face normals per contact, shape (n, l_s, 3): rows [cos th, sin th, -mu cos(pi/l_s)];
+        # face j holds when  face_j . f <= -eps.
+        face = np.empty((n, self.faces, 3))
+        face[:, :, 0] = np.cos(theta)
+        face[:, :, 1] = np.sin(theta)
+        face[:, :, 2] = -(self.mu * math.cos(math.pi / self.faces))[:, np.newaxis]
+        self._negative_faces = -face
+        self.names = tuple(
+            f'{self.family}/{contact}/face{j}'
+            for contact in self.contact_names
+            for j in range(self.faces)
+        )
+
+    def rows(self, state: GraspState) -> ConstraintRows:
+        """Rows ``h_ij(u) >= eps`` as ``A u >= lower``.
+
+        With ``f_c(u) = F u + f_0`` and ``Lambda`` the face normals:
+        ``A = -Lambda F`` and ``lower = eps + Lambda f_0``.
+        """
+        n = len(self.contact_names)
+        contact_force = state.contact_force
+        check_rows(contact_force.offset, 3 * n, 'contact_force')
+        F = contact_force.matrix.reshape(n, 3, -1)
+        f0 = contact_force.offset.reshape(n, 3, 1)
+        A = np.matmul(self._negative_faces, F).reshape(n * self.faces, -1)
+        lower = self.normal_force_margin - np.matmul(self._negative_faces, f0).reshape(-1)
+        return ConstraintRows(A, lower, self.names)
+
+    def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
+        """Margins ``h_ij`` (N) at the contact forces ``f_c(u)`` the torque u produces."""
+        n = len(self.contact_names)
+        forces = state.contact_force(u).reshape(n, 3, 1)
+        return BarrierValues(np.matmul(self._negative_faces, forces).reshape(-1), self.names)

@@ -1,0 +1,99 @@
+"""The exact least-distance QP (dual active-set method) against an independent solver."""
+
+import daqp
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from grasp_safety_filter.control.least_distance import (
+    LeastDistanceStatus,
+    solve_least_distance,
+)
+
+
+def reference(u0, C, b):
+    """Solve min 1/2 ||u - u0||^2 s.t. C u >= b with daqp: (exitflag, u)."""
+    m = u0.size
+    x, _, flag, _ = daqp.solve(np.eye(m), -u0, C, np.full(b.size, 1e30), b)
+    return flag, x
+
+
+def feasible_by_lp(C, b):
+    result = linprog(np.zeros(C.shape[1]), A_ub=-C, b_ub=-b, bounds=(None, None), method='highs')
+    return result.status == 0
+
+
+def random_problem(rng, m=9, k=40, dependent=0):
+    C = rng.normal(size=(k, m)) * rng.uniform(0.1, 100.0, size=(k, 1))
+    if dependent:
+        # Rows inside a low-dimensional span: the filter's barrier rows live in the
+        # 6-dimensional image of the object's motion.
+        basis = rng.normal(size=(dependent, m))
+        C[: k // 2] = rng.normal(size=(k // 2, dependent)) @ basis
+    centre = rng.normal(size=m)
+    b = C @ centre - rng.uniform(0.0, 2.0, size=k) * np.linalg.norm(C, axis=1)
+    return rng.normal(scale=5.0, size=m), C, b
+
+
+@pytest.mark.parametrize('dependent', [0, 3, 6])
+def test_optimum_matches_an_independent_solver(dependent):
+    rng = np.random.default_rng(dependent)
+    for _ in range(60):
+        u0, C, b = random_problem(rng, dependent=dependent)
+        solution = solve_least_distance(u0, C, b)
+        flag, x = reference(u0, C, b)
+        assert flag == 1
+        assert solution.status is LeastDistanceStatus.OPTIMAL
+        assert np.abs(solution.u - x).max() < 1e-7
+        assert (C @ solution.u - b).min() >= -1e-7 * np.linalg.norm(C, axis=1).max()
+        # KKT: u - u0 = C_W^T lambda with lambda >= 0 and the working rows held.
+        rows = list(solution.active)
+        assert np.all(solution.multipliers >= 0.0)
+        assert np.allclose(u0 + C[rows].T @ solution.multipliers, solution.u, atol=1e-8)
+        assert np.allclose(C[rows] @ solution.u, b[rows], rtol=1e-9, atol=1e-7)
+
+
+def test_infeasibility_agrees_with_a_linear_program():
+    rng = np.random.default_rng(3)
+    verdicts = {True: 0, False: 0}
+    for _ in range(80):
+        m, k = 4, 12
+        C = rng.normal(size=(k, m))
+        b = rng.normal(scale=1.5, size=k) + 0.8
+        solution = solve_least_distance(np.zeros(m), C, b)
+        feasible = feasible_by_lp(C, b)
+        verdicts[feasible] += 1
+        assert (solution.status is LeastDistanceStatus.OPTIMAL) == feasible
+    assert verdicts[True] > 5 and verdicts[False] > 5
+
+
+def test_a_correct_guess_is_certified_without_a_step_and_a_wrong_one_is_repaired():
+    rng = np.random.default_rng(4)
+    for _ in range(30):
+        u0, C, b = random_problem(rng)
+        cold = solve_least_distance(u0, C, b)
+        warm = solve_least_distance(u0, C, b, working_set=cold.active)
+        assert warm.iterations == 0
+        assert np.allclose(warm.u, cold.u, atol=1e-9)
+        wrong = tuple(rng.choice(C.shape[0], size=5, replace=False))
+        repaired = solve_least_distance(u0, C, b, working_set=wrong)
+        assert repaired.status is LeastDistanceStatus.OPTIMAL
+        assert np.allclose(repaired.u, cold.u, atol=1e-7)
+
+
+def test_degenerate_rows_and_zero_rows():
+    # The same row three times and its negative shifted: a slab of width 1, with u0 outside.
+    C = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 0.0]])
+    b = np.array([1.0, 1.0, 1.0, -2.0, -1.0])
+    solution = solve_least_distance(np.array([5.0, 3.0]), C, b)
+    assert solution.status is LeastDistanceStatus.OPTIMAL
+    assert np.allclose(solution.u, [2.0, 3.0])
+    # A zero row with a positive bound can never hold.
+    b[4] = 1.0
+    assert solve_least_distance(np.zeros(2), C, b).status is LeastDistanceStatus.INFEASIBLE
+
+
+def test_no_rows_returns_the_start():
+    solution = solve_least_distance(np.array([1.0, 2.0]), np.zeros((0, 2)), np.zeros(0))
+    assert solution.status is LeastDistanceStatus.OPTIMAL
+    assert np.array_equal(solution.u, [1.0, 2.0])
