@@ -43,13 +43,12 @@ from grasp_safety_filter.io.schemas import NOMINAL_CONTROLLER_PARAMETERS
 from grasp_safety_filter.model.grasp_state import GraspState
 
 
-
-def _flatten(params: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+def _flatten(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
     flat: dict[str, Any] = {}
     for key, value in params.items():
-        name = f"{prefix}{key}"
+        name = f'{prefix}{key}'
         if isinstance(value, Mapping):
-            flat.update(_flatten(value, f"{name}."))
+            flat.update(_flatten(value, f'{name}.'))
         else:
             flat[name] = value
     return flat
@@ -73,24 +72,24 @@ class NominalConfig:
     kp: float = 1.0
     kd: float = 2.5
     kf: float = 10.0
-    reference_source: str = "paper"
+    reference_source: str = 'paper'
     amplitude: tuple[float, ...] = PAPER_AMPLITUDE
     frequency: float = PAPER_FREQUENCY
     timeout: float = 0.5
 
     def __post_init__(self) -> None:
         values = {
-            "gains.kp": self.kp,
-            "gains.kd": self.kd,
-            "gains.kf": self.kf,
-            "reference.source": self.reference_source,
-            "reference.amplitude": list(self.amplitude),
-            "reference.frequency": self.frequency,
-            "reference.timeout": self.timeout,
+            'gains.kp': self.kp,
+            'gains.kd': self.kd,
+            'gains.kf': self.kf,
+            'reference.source': self.reference_source,
+            'reference.amplitude': list(self.amplitude),
+            'reference.frequency': self.frequency,
+            'reference.timeout': self.timeout,
         }
         for spec in NOMINAL_CONTROLLER_PARAMETERS:
             spec.validate(values[spec.name])
-        object.__setattr__(self, "amplitude", tuple(float(a) for a in self.amplitude))
+        object.__setattr__(self, 'amplitude', tuple(float(a) for a in self.amplitude))
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> NominalConfig:
@@ -111,24 +110,24 @@ class NominalConfig:
             for spec in NOMINAL_CONTROLLER_PARAMETERS
         }
         return cls(
-            kp=float(values["gains.kp"]),
-            kd=float(values["gains.kd"]),
-            kf=float(values["gains.kf"]),
-            reference_source=values["reference.source"],
-            amplitude=tuple(values["reference.amplitude"]),
-            frequency=float(values["reference.frequency"]),
-            timeout=float(values["reference.timeout"]),
+            kp=float(values['gains.kp']),
+            kd=float(values['gains.kd']),
+            kf=float(values['gains.kf']),
+            reference_source=values['reference.source'],
+            amplitude=tuple(values['reference.amplitude']),
+            frequency=float(values['reference.frequency']),
+            timeout=float(values['reference.timeout']),
         )
 
     def make_reference(self, initial_pose: Pose, t0: float = 0.0) -> ReferenceSource:
         """Build the configured reference source, starting at the initial object pose at t0."""
-        if self.reference_source == "paper":
+        if self.reference_source == 'paper':
             return PaperReference(initial_pose, self.amplitude, self.frequency, t0)
-        if self.reference_source == "topic":
+        if self.reference_source == 'topic':
             return TopicReference(initial_pose, self.timeout)
         raise ParameterError(
             f"parameter 'reference.source': expected 'paper' or 'topic', got "
-            f"{self.reference_source!r}"
+            f'{self.reference_source!r}'
         )
 
 
@@ -181,9 +180,11 @@ class NominalController:
         = k_f (p_bar_c - p_o) × sum_i (p_bar_c - p_c,i) = 0``: it lies in null(G).
         """
         p_contact = state.p_contact_in_palm
-        f_palm = self.config.kf * (p_contact.mean(axis=0) - p_contact)
-        # G acts on contact-frame forces: express each in C_i (R_pc^T f).
-        return np.einsum("nji,nj->ni", state.R_contact_to_palm, f_palm).reshape(-1)
+        # The centroid as a sum (ndarray.mean costs several µs of bookkeeping at this size).
+        p_centroid = p_contact.sum(axis=0) / p_contact.shape[0]
+        f_palm = self.config.kf * (p_centroid - p_contact)
+        # G acts on contact-frame forces: express each in C_i, R_pc^T f = (f^T R_pc)^T.
+        return (f_palm[:, None, :] @ state.R_contact_to_palm).reshape(-1)
 
     def desired_object_acceleration(
         self, state: GraspState, reference: ReferenceSample
@@ -207,9 +208,7 @@ class NominalController:
         phi_dot = r_object_dot[3:]
         E = euler_rate_jacobian(phi_object)
         E_dot = euler_rate_jacobian_dot(phi_object, phi_dot)
-        x_ddot = np.concatenate(
-            (r_object_ddot[:3], E @ r_object_ddot[3:] + E_dot @ phi_dot)
-        )
+        x_ddot = np.concatenate((r_object_ddot[:3], E @ r_object_ddot[3:] + E_dot @ phi_dot))
         return x_ddot, e, e_dot
 
     def compute(self, state: GraspState, reference: ReferenceSample) -> NominalOutput:
@@ -223,29 +222,36 @@ class NominalController:
         J_h = state.J_h
         if J_h.shape[0] != J_h.shape[1]:
             raise ValueError(
-                f"NominalController: expected a square hand Jacobian (m = 3n), got J_h of "
-                f"shape {J_h.shape}"
+                f'NominalController: expected a square hand Jacobian (m = 3n), got J_h of '
+                f'shape {J_h.shape}'
             )
         G = state.G
         M_h = state.M_h
         x_ddot_des, e, e_dot = self.desired_object_acceleration(state, reference)
 
+        m = J_h.shape[1]
         # A = J_h^-1 G^T maps the object twist to joint rates on the constraint, so
         # G J_h^-T = A^T and M_ho = M_o + A^T M_h A.
-        A = np.linalg.solve(J_h, G.T)
-        M_ho = state.M_o + A.T @ M_h @ A
         # Differentiating J_h dq = G^T x_dot: ddq = J_h^-1 (G^T x_ddot + G_dot^T x_dot
         # - J_h_dot dq); the velocity part of M_h ddq + C_h dq, pulled back through
         # G J_h^-T, is the C_ho x_dot term. Using the measured C_h dq and J_h_dot dq
         # (rather than C_h J_h^-1 G^T x_dot) keeps it exact even off the velocity
         # constraint, so only the acceleration-level rolling constraint is assumed.
+        # One solve with J_h for both:
+        #   [A | ddq_velocity] = J_h^-1 [G^T | G_dot^T x_dot - J_h_dot dq].
+        rhs = np.empty((m, 7))
+        rhs[:, :6] = G.T
+        rhs[:, 6] = state.G_dot_T_twist - state.Jh_dot_dq
+        solution = np.linalg.solve(J_h, rhs)
+        A, ddq_velocity = solution[:, :6], solution[:, 6]
+        M_ho = state.M_o + A.T @ M_h @ A
         C_h_dq = state.h_bias - state.gravity_torque
-        ddq_velocity = np.linalg.solve(J_h, state.G_dot_T_twist - state.Jh_dot_dq)
         C_ho_x_dot = state.C_o_twist + A.T @ (C_h_dq + M_h @ ddq_velocity)
         u_m = M_ho @ x_ddot_des + C_ho_x_dot - state.w_e
 
-        # G has full row rank: lstsq returns the minimum-norm solution G^+ u_m.
-        f_manipulation = np.linalg.lstsq(G, u_m, rcond=None)[0]
+        # G has full row rank: its minimum-norm right inverse is G^+ = G^T (G G^T)^-1
+        # (np.linalg.lstsq would take an SVD for the same 6 × 3n system).
+        f_manipulation = G.T @ np.linalg.solve(G @ G.T, u_m)
         u_f = self.internal_force(state)
         # -tau_e = g(q): gravity compensation of the fingers.
         u = J_h.T @ (f_manipulation + u_f) + state.gravity_torque

@@ -22,8 +22,8 @@ class AffineMap:
     def __post_init__(self) -> None:
         if self.matrix.ndim != 2 or self.offset.shape != (self.matrix.shape[0],):
             raise ValueError(
-                f"AffineMap: expected matrix (k, m) and offset (k,), got {self.matrix.shape} "
-                f"and {self.offset.shape}"
+                f'AffineMap: expected matrix (k, m) and offset (k,), got {self.matrix.shape} '
+                f'and {self.offset.shape}'
             )
 
     def __call__(self, u: np.ndarray) -> np.ndarray:
@@ -31,5 +31,5 @@ class AffineMap:
         return self.matrix @ u + self.offset
 
     def rows(self, index: np.ndarray | slice | list[int]) -> AffineMap:
-        """The affine map of a subset of the outputs."""
+        """Return the affine map of a subset of the outputs."""
         return AffineMap(self.matrix[index], self.offset[index])

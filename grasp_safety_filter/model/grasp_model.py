@@ -32,8 +32,8 @@ import numpy as np
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
-from grasp_safety_filter.model.rigid_object import RigidObject, object_surface
-from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
+from grasp_safety_filter.model.rigid_object import object_surface, RigidObject
+from grasp_safety_filter.model.rolling import contact_stack, ContactGeometry, ContactPair
 from grasp_safety_filter.model.surfaces import SphereSurface
 
 
@@ -43,7 +43,7 @@ class GraspConfigError(ValueError):
 
 @dataclass(frozen=True)
 class FingertipWorkspace:
-    """The box of admissible fingertip coordinates ``a_min ≤ a ≤ a_max, b_min ≤ b ≤ b_max``, rad."""
+    """Admissible fingertip coordinates ``a_min ≤ a ≤ a_max, b_min ≤ b ≤ b_max``, rad."""
 
     a_min: float
     a_max: float
@@ -53,13 +53,13 @@ class FingertipWorkspace:
     def __post_init__(self) -> None:
         if not -np.pi / 2 <= self.a_min < self.a_max <= np.pi / 2:
             raise GraspConfigError(
-                "model.fingertip_workspace: expected -pi/2 <= a_min < a_max <= pi/2, got "
-                f"a_min={self.a_min}, a_max={self.a_max}"
+                'model.fingertip_workspace: expected -pi/2 <= a_min < a_max <= pi/2, got '
+                f'a_min={self.a_min}, a_max={self.a_max}'
             )
         if not self.b_min < self.b_max:
             raise GraspConfigError(
-                "model.fingertip_workspace: expected b_min < b_max, got "
-                f"b_min={self.b_min}, b_max={self.b_max}"
+                'model.fingertip_workspace: expected b_min < b_max, got '
+                f'b_min={self.b_min}, b_max={self.b_max}'
             )
 
     def __iter__(self):  # noqa: ANN204 - tuple-like unpacking: a_min, a_max, b_min, b_max
@@ -72,17 +72,37 @@ class FingertipWorkspace:
         return np.column_stack([a - self.a_min, self.a_max - a, b - self.b_min, self.b_max - b])
 
 
+# skew(v)_ij = -eps_ijk v_k: the Levi-Civita tensor as a (9, 3) matrix builds stacked skew
+# matrices in one matmul.
+_LEVI_CIVITA = np.zeros((3, 3, 3))
+_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
+_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
+_SKEW_FROM_VECTOR = -_LEVI_CIVITA.reshape(9, 3)
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    """Cross-product matrices ``v× = [[0, -v_z, v_y], [v_z, 0, -v_x], [-v_y, v_x, 0]]``.
+
+    A vector (3,) gives (3, 3); stacked vectors (k, 3) give (k, 3, 3).
+    """
+    return (v @ _SKEW_FROM_VECTOR.T).reshape(*v.shape[:-1], 3, 3)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    # np.cross costs ~15 µs of axis bookkeeping per call; this is the hot path.
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    """Row-wise cross products ``a × b`` of vectors (3,) or stacked (k, 3), broadcast.
+
+    Written as ``(a×) b``: np.cross costs ~20 µs of axis handling per call here.
+    """
+    return _matvec(_skew(a), b)
+
+
+def _matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A[k] @ x[k]`` for stacked matrices (k, r, c) and vectors (k, c) (a batched matmul)."""
+    return (A @ x[..., None])[..., 0]
 
 
 def _frozen(array: np.ndarray) -> np.ndarray:
-    array.flags.writeable = False
+    array.setflags(write=False)
     return array
 
 
@@ -111,88 +131,95 @@ class GraspModel:
         n = len(contacts)
         if len(hand.frame_ids) != n or len(contact_names) != n:
             raise GraspConfigError(
-                f"model: expected one fingertip frame and one name per contact ({n} contacts), got "
-                f"{len(hand.frame_ids)} frames and {len(contact_names)} names"
+                f'model: expected one fingertip frame and one name per contact ({n} contacts), '
+                f'got {len(hand.frame_ids)} frames and {len(contact_names)} names'
             )
         if hand.n_joints < 3 * n:
             raise GraspConfigError(
-                f"model.joint_names: a hand with n = {n} contacts needs at least 3n = {3 * n} "
+                f'model.joint_names: a hand with n = {n} contacts needs at least 3n = {3 * n} '
                 f"joints (the paper's Assumption 1), got {hand.n_joints}"
             )
         if not np.isfinite(friction_coefficient) or friction_coefficient <= 0.0:
             raise GraspConfigError(
-                f"model.friction_coefficient: expected mu > 0, got {friction_coefficient!r}"
+                f'model.friction_coefficient: expected mu > 0, got {friction_coefficient!r}'
             )
         self.hand = hand
         self.object = rigid_object
         self.contacts = list(contacts)
+        self._contact_stack = contact_stack(self.contacts)
+        # [I | 0], (m, m + 1): the joint torque u as an affine map of (u, 1).
+        self._unit_torque = np.eye(hand.n_joints, hand.n_joints + 1)
         self.contact_names = list(contact_names)
         self.friction_coefficient = float(friction_coefficient)
         self.fingertip_workspace = fingertip_workspace
 
     # ----------------------------------------------------------------------------- loading
     @classmethod
-    def from_parameters(cls, params: Mapping[str, Any], base_dir: Path | str = ".") -> GraspModel:
+    def from_parameters(cls, params: Mapping[str, Any], base_dir: Path | str = '.') -> GraspModel:
         """Build from validated ``model.*`` parameters (dotted names, see io/schemas.py).
 
         Relative ``model.urdf_file`` paths resolve against ``base_dir`` (the directory of
         the parameter file).
         """
+
         def get(name: str) -> Any:
             if name not in params:
                 raise GraspConfigError(f"parameter '{name}' is missing")
             return params[name]
 
-        urdf = Path(get("model.urdf_file"))
+        urdf = Path(get('model.urdf_file'))
         if not urdf.is_absolute():
             urdf = Path(base_dir) / urdf
-        gravity = np.asarray(get("model.gravity"), dtype=float)
+        gravity = np.asarray(get('model.gravity'), dtype=float)
         if gravity.shape != (3,):
-            raise GraspConfigError(f"model.gravity: expected 3 elements, got {len(gravity)}")
-        frames = list(get("model.fingertip_frames"))
-        names = list(get("model.contact_names"))
-        faces = list(get("model.contact_faces"))
-        shape = get("model.object.shape")
+            raise GraspConfigError(f'model.gravity: expected 3 elements, got {len(gravity)}')
+        frames = list(get('model.fingertip_frames'))
+        names = list(get('model.contact_names'))
+        faces = list(get('model.contact_faces'))
+        shape = get('model.object.shape')
         if len(names) != len(frames):
             raise GraspConfigError(
-                f"model.contact_names: expected one name per fingertip frame ({len(frames)}), "
-                f"got {len(names)}"
+                f'model.contact_names: expected one name per fingertip frame ({len(frames)}), '
+                f'got {len(names)}'
             )
-        if shape == "cube" and len(faces) != len(frames):
+        if shape == 'cube' and len(faces) != len(frames):
             raise GraspConfigError(
-                f"model.contact_faces: expected one cube face per fingertip ({len(frames)}), got "
-                f"{len(faces)}"
+                f'model.contact_faces: expected one cube face per fingertip ({len(frames)}), got '
+                f'{len(faces)}'
             )
-        if shape == "sphere":
-            faces = [""] * len(frames)
-        hand = HandModel(urdf, list(get("model.joint_names")), frames, gravity)
-        size, mass = float(get("model.object.size")), float(get("model.object.mass"))
-        if shape == "cube":
+        if shape == 'sphere':
+            faces = [''] * len(frames)
+        hand = HandModel(urdf, list(get('model.joint_names')), frames, gravity)
+        size, mass = float(get('model.object.size')), float(get('model.object.mass'))
+        if shape == 'cube':
             rigid_object = RigidObject.cube(mass, size, gravity)
-        elif shape == "sphere":
+        elif shape == 'sphere':
             rigid_object = RigidObject.sphere(mass, size, gravity)
         else:
-            raise GraspConfigError(f"model.object.shape: expected 'cube' or 'sphere', got {shape!r}")
-        fingertip = SphereSurface(float(get("model.fingertip_radius")))
+            raise GraspConfigError(
+                f"model.object.shape: expected 'cube' or 'sphere', got {shape!r}"
+            )
+        fingertip = SphereSurface(float(get('model.fingertip_radius')))
         contacts = []
         for name, face in zip(names, faces, strict=True):
             try:
                 contacts.append(ContactPair(fingertip, object_surface(shape, size, face)))
             except ValueError as error:
-                raise GraspConfigError(f"model.contact_faces: contact {name!r}: {error}") from None
+                raise GraspConfigError(f'model.contact_faces: contact {name!r}: {error}') from None
         workspace = FingertipWorkspace(
-            float(get("model.fingertip_workspace.a_min")),
-            float(get("model.fingertip_workspace.a_max")),
-            float(get("model.fingertip_workspace.b_min")),
-            float(get("model.fingertip_workspace.b_max")),
+            float(get('model.fingertip_workspace.a_min')),
+            float(get('model.fingertip_workspace.a_max')),
+            float(get('model.fingertip_workspace.b_min')),
+            float(get('model.fingertip_workspace.b_max')),
         )
-        return cls(hand, rigid_object, contacts, names, float(get("model.friction_coefficient")), workspace)
+        friction = float(get('model.friction_coefficient'))
+        return cls(hand, rigid_object, contacts, names, friction, workspace)
 
     @classmethod
     def from_parameter_file(
-        cls, path: Path | str, node_name: str = "hand_sim_node"
+        cls, path: Path | str, node_name: str = 'hand_sim_node'
     ) -> tuple[GraspModel, dict[str, Any]]:
-        """Load a ROS 2 parameter file, validate it against ``node_name``'s schema, build the model.
+        """Load a ROS 2 parameter file, validate it against a node's schema, build the model.
 
         Returns:
             The model and the node's validated parameters (defaults filled in).
@@ -272,8 +299,8 @@ class GraspModel:
                 return q
             q -= np.linalg.lstsq(jacobian, delta, rcond=None)[0]
         raise GraspConfigError(
-            f"cannot bring every fingertip onto the object: penetrations {delta} m after "
-            f"{max_iterations} iterations"
+            f'cannot bring every fingertip onto the object: penetrations {delta} m after '
+            f'{max_iterations} iterations'
         )
 
     def check_grasp(
@@ -282,36 +309,41 @@ class GraspModel:
         p_object_in_palm: np.ndarray,
         R_object_to_palm: np.ndarray,
         tolerance: float = 1e-4,
-        parameter: str = "initial.joint_positions",
+        parameter: str = 'initial.joint_positions',
     ) -> None:
-        """Raise GraspConfigError unless every fingertip touches its surface within ``tolerance`` m,
-        inside the fingertip workspace, and every joint is inside its limits.
+        """Raise GraspConfigError unless the grasp is valid.
+
+        Valid: every fingertip touches its surface within ``tolerance`` m, inside the
+        fingertip workspace, and every joint is inside its limits.
         """
         q = np.asarray(q, dtype=float)
         if q.shape != (self.n_joints,):
             raise GraspConfigError(
-                f"{parameter}: expected {self.n_joints} joint angles ({self.joint_names}), got {q.size}"
+                f'{parameter}: expected {self.n_joints} joint angles ({self.joint_names}), '
+                f'got {q.size}'
             )
         for name, value, lo, hi in zip(
             self.joint_names, q, self.joint_lower_limits, self.joint_upper_limits, strict=True
         ):
             if not lo < value < hi:
                 raise GraspConfigError(
-                    f"{parameter}: joint {name!r} = {value:.6g} rad is outside its limits [{lo:.6g}, {hi:.6g}]"
+                    f'{parameter}: joint {name!r} = {value:.6g} rad is outside its limits '
+                    f'[{lo:.6g}, {hi:.6g}]'
                 )
-        for name, geometry in zip(self.contact_names, self.contact_geometry(q, p_object_in_palm, R_object_to_palm), strict=True):
+        geometries = self.contact_geometry(q, p_object_in_palm, R_object_to_palm)
+        for name, geometry in zip(self.contact_names, geometries, strict=True):
             if abs(geometry.penetration) > tolerance:
-                state = "is separated from" if geometry.penetration < 0 else "penetrates"
+                state = 'is separated from' if geometry.penetration < 0 else 'penetrates'
                 raise GraspConfigError(
-                    f"{parameter}: fingertip of contact {name!r} {state} the object by "
-                    f"{abs(geometry.penetration):.3g} m (expected touching within {tolerance:g} m)"
+                    f'{parameter}: fingertip of contact {name!r} {state} the object by '
+                    f'{abs(geometry.penetration):.3g} m (expected touching within {tolerance:g} m)'
                 )
             margins = self.fingertip_workspace.margins(geometry.xi_cf)[0]
             if np.any(margins <= 0.0):
                 raise GraspConfigError(
-                    f"{parameter}: contact {name!r} at fingertip coordinates (a, b) = "
-                    f"({geometry.xi_cf[0]:.4g}, {geometry.xi_cf[1]:.4g}) rad is outside the "
-                    "fingertip workspace"
+                    f'{parameter}: contact {name!r} at fingertip coordinates (a, b) = '
+                    f'({geometry.xi_cf[0]:.4g}, {geometry.xi_cf[1]:.4g}) rad is outside the '
+                    'fingertip workspace'
                 )
 
     def rolling_joint_velocity(
@@ -321,10 +353,15 @@ class GraspModel:
         R_object_to_palm: np.ndarray,
         twist_object: np.ndarray,
     ) -> np.ndarray:
-        """Joint velocity that rolls the fingertips with the object: ``J_h dq = G^T x_o_dot``
-        (least-norm when m > 3n)."""
-        state = self.state(0.0, q, np.zeros(self.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6))
-        return np.linalg.lstsq(state.J_h, state.G.T @ np.asarray(twist_object, dtype=float), rcond=None)[0]
+        """Joint velocity that rolls the fingertips with the object.
+
+        Solves ``J_h dq = G^T x_o_dot`` (least-norm when m > 3n).
+        """
+        state = self.state(
+            0.0, q, np.zeros(self.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
+        )
+        rhs = state.G.T @ np.asarray(twist_object, dtype=float)
+        return np.linalg.lstsq(state.J_h, rhs, rcond=None)[0]
 
     def total_energy(self, state: GraspState) -> float:
         """Kinetic plus gravitational potential energy of hand and object, J."""
@@ -342,7 +379,12 @@ class GraspModel:
         R_object_to_palm: np.ndarray,
         twist_object: np.ndarray,
     ) -> GraspState:
-        """Every model term at one instant (see :class:`GraspState`)."""
+        """Every model term at one instant (see :class:`GraspState`).
+
+        All contacts are evaluated together (arrays with a leading contact axis), and the
+        torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
+        so that each formula is one numpy call whatever the number of contacts.
+        """
         n, m = self.n_contacts, self.n_joints
         q = np.array(q, dtype=float)
         dq = np.array(dq, dtype=float)
@@ -351,106 +393,121 @@ class GraspModel:
         twist_o = np.array(twist_object, dtype=float)
         v_o, w_o = twist_o[:3], twist_o[3:]
         hand = self.hand.terms(q, dq)
+        p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
+        v_f, w_f = hand.twist_fingertip[:, :3], hand.twist_fingertip[:, 3:]
+        a_f0, alpha_f0 = hand.J_fingertip_dot_dq[:, :3], hand.J_fingertip_dot_dq[:, 3:]
+        J_w = J_s[:, 3:]
 
-        J_h = np.empty((3 * n, m))
-        G = np.empty((6, 3 * n))
-        Jh_dot_dq = np.empty(3 * n)
-        G_dot_T_twist = np.empty(3 * n)
-        xi_cf, xi_co = np.empty((n, 2)), np.empty((n, 2))
-        xi_cf_dot, xi_co_dot = np.empty((n, 2)), np.empty((n, 2))
-        psi, psi_dot, penetration = np.empty(n), np.empty(n), np.empty(n)
-        p_c = np.empty((n, 3))
-        R_pc_all = np.empty((n, 3, 3))
-        # Pieces of the contact-coordinate acceleration, finished once ddq(u) is known.
-        roll_terms = []
-        for i, contact in enumerate(self.contacts):
-            rows = slice(3 * i, 3 * i + 3)
-            p_f, R_pf = hand.p_fingertip_in_palm[i], hand.R_fingertip_to_palm[i]
-            J_s = hand.J_fingertip[i]
-            v_f, w_f = hand.twist_fingertip[i, :3], hand.twist_fingertip[i, 3:]
-            a_f0, alpha_f0 = hand.J_fingertip_dot_dq[i, :3], hand.J_fingertip_dot_dq[i, 3:]
+        # ---- contact geometry and rolling rates, (n, ...) arrays.
+        geometry = self._contact_stack.geometry(p_f, R_pf, p_o, R_o)
+        R_pc = geometry.R_contact_to_palm
+        R_cp = R_pc.transpose(0, 2, 1)
+        w_relative = w_f - w_o
+        w_relative_in_contact = _matvec(R_cp, w_relative)
+        rates = self._contact_stack.rolling_rates(geometry, w_relative_in_contact)
 
-            geometry = contact.geometry(p_f, R_pf, p_o, R_o)
-            R_pc = geometry.R_contact_to_palm
-            R_cp = R_pc.T
-            w_relative = w_f - w_o
-            rates = contact.rolling_rates(geometry, R_cp @ w_relative)
+        # ---- J_h,i = R_cp,i [I, -(p_fc,i)×] J_s,i  and  G_i = [R_pc,i; (p_oc,i)× R_pc,i].
+        p_c = geometry.p_contact_in_palm
+        p_fc = p_c - p_f
+        p_oc = p_c - p_o
+        skew_fc, skew_oc = _skew(p_fc), _skew(p_oc)
+        J_h = (R_cp @ (J_s[:, :3] - skew_fc @ J_w)).reshape(3 * n, m)
+        # (n, 6, 3) blocks G_i, laid side by side: G[r, 3i + c] = G_i[r, c].
+        G = np.concatenate((R_pc, skew_oc @ R_pc), axis=1).transpose(1, 0, 2).reshape(6, 3 * n)
 
-            p_fc = geometry.p_contact_in_palm - p_f
-            p_oc = geometry.p_contact_in_palm - p_o
-            J_h[rows] = R_cp @ (J_s[:3] - _skew(p_fc) @ J_s[3:])
-            G[:3, rows] = R_pc
-            G[3:, rows] = _skew(p_oc) @ R_pc
+        # ---- Total time derivatives along the rolling motion. The contact point slides over
+        # the fingertip (sliding velocity along rho1, rho2) and the contact frame turns at
+        # w_c = w_f + R_pc Omega, so R_pc_dot = (w_c×) R_pc and R_cp_dot x = -R_cp (w_c × x):
+        #   J_h_dot dq = R_cp (a_f0 + alpha_f0 × p_fc + w_f × (p_c_dot - v_f) - w_c × v_cf)
+        #   G_dot^T x_o_dot = R_cp (w_o × (p_c_dot - v_o) - w_c × v_co)
+        # with v_cf = v_f + w_f × p_fc and v_co = v_o + w_o × p_oc the velocities of the
+        # finger's and the object's material points at the contact.
+        skew_contact = _skew(w_f + _matvec(R_pc, rates.frame_angular_velocity))
+        v_cf = v_f - _matvec(skew_fc, w_f)
+        v_co = v_o - skew_oc @ w_o
+        p_c_dot = v_cf + _matvec(R_pc[:, :, :2], rates.sliding_velocity)
+        Jh_dot_dq = _matvec(
+            R_cp,
+            a_f0
+            - _matvec(skew_fc, alpha_f0)
+            + _cross(w_f, p_c_dot - v_f)
+            - _matvec(skew_contact, v_cf),
+        ).reshape(3 * n)
+        G_dot_T_twist = _matvec(
+            R_cp, _cross(w_o, p_c_dot - v_o) - _matvec(skew_contact, v_co)
+        ).reshape(3 * n)
 
-            # Total time derivatives: the contact point slides over the fingertip at
-            # R_pf c_xi xi_cf_dot and the contact frame turns with the fingertip and along it.
-            v_rolling = R_pf @ contact.fingertip.tangents(geometry.xi_cf) @ rates.xi_cf_dot
-            v_material_f = v_f + _cross(w_f, p_fc)
-            p_c_dot = v_material_f + v_rolling
-            R_pc_dot = _skew(w_f) @ R_pc + R_pf @ contact.fingertip.frame_rate(geometry.xi_cf, rates.xi_cf_dot)
-            R_cp_dot = R_pc_dot.T
-            Jh_dot_dq[rows] = R_cp_dot @ v_material_f + R_cp @ (
-                a_f0 + _cross(alpha_f0, p_fc) + _cross(w_f, p_c_dot - v_f)
-            )
-            G_dot_T_twist[rows] = R_cp_dot @ (v_o + _cross(w_o, p_oc)) + R_cp @ _cross(w_o, p_c_dot - v_o)
-
-            H_cf_dot = contact.H_cf_rate(geometry, rates)
-            # xi_cf_ddot = H_dot w + H (R_cp_dot (w_f - w_o) + R_cp (alpha_f - alpha_o)).
-            roll_terms.append((rates.H_cf @ R_cp, H_cf_dot @ (R_cp @ w_relative) + rates.H_cf @ (R_cp_dot @ w_relative), J_s[3:], alpha_f0))
-
-            xi_cf[i], xi_co[i], psi[i], penetration[i] = geometry.xi_cf, geometry.xi_co, geometry.psi, geometry.penetration
-            xi_cf_dot[i], xi_co_dot[i], psi_dot[i] = rates.xi_cf_dot, rates.xi_co_dot, rates.psi_dot
-            p_c[i] = geometry.p_contact_in_palm
-            R_pc_all[i] = R_pc
-
+        # ---- object
         M_o = self.object.inertia_matrix(R_o)
-        M_o_inv = np.zeros((6, 6))
-        M_o_inv[:3, :3] = np.eye(3) / self.object.mass
-        M_o_inv[3:, 3:] = R_o @ np.linalg.inv(self.object.inertia_in_body) @ R_o.T
+        M_o_inv = self.object.inverse_inertia_matrix(R_o)
         C_o_twist = self.object.bias_wrench(R_o, twist_o)
         w_e = self.object.external_wrench()
+        # Object acceleration from gravity and the bias wrench alone: M_o^-1 (w_e - C_o x_o_dot).
+        x_ddot_free = M_o_inv @ (w_e - C_o_twist)
 
-        M_h = hand.M_h
-        chol = np.linalg.cholesky(M_h)
-        M_h_inv = np.linalg.inv(chol).T @ np.linalg.inv(chol)
+        # ---- Torque-affine terms, as (k, m + 1) matrices [matrix | offset] acting on (u, 1).
+        M_h_inv = hand.M_h_inverse
+        # Joint acceleration without contact forces: M_h^-1 (u - h) = M_h^-1 [I | -h] (u, 1).
+        torque = self._unit_torque.copy()
+        torque[:, m] = -hand.h_bias
+        ddq_free = M_h_inv @ torque
+        # B_ho f_c = J_h M_h^-1 (u - h) + J_h_dot dq - G_dot^T x_o_dot
+        #            - G^T M_o^-1 (w_e - C_o x_o_dot)
         M_h_inv_J_hT = M_h_inv @ J_h.T
-        B_ho = J_h @ M_h_inv_J_hT + G.T @ M_o_inv @ G
-        # f_c(u) = F u + f0.
-        F = np.linalg.solve(B_ho, M_h_inv_J_hT.T)
-        f0 = np.linalg.solve(
-            B_ho,
-            -M_h_inv_J_hT.T @ hand.h_bias + Jh_dot_dq - G_dot_T_twist + G.T @ M_o_inv @ (C_o_twist - w_e),
-        )
-        ddq_matrix = M_h_inv - M_h_inv_J_hT @ F
-        ddq_offset = -M_h_inv @ hand.h_bias - M_h_inv_J_hT @ f0
-        x_ddot_matrix = M_o_inv @ G @ F
-        x_ddot_offset = M_o_inv @ (G @ f0 + w_e - C_o_twist)
+        M_o_inv_G = M_o_inv @ G
+        B_ho = J_h @ M_h_inv_J_hT + G.T @ M_o_inv_G
+        force_rhs = J_h @ ddq_free
+        force_rhs[:, m] += Jh_dot_dq - G_dot_T_twist - G.T @ x_ddot_free
+        force = np.linalg.solve(B_ho, force_rhs)
+        # ddq = M_h^-1 (u - h - J_h^T f_c),  x_o_ddot = M_o^-1 (G f_c + w_e - C_o x_o_dot).
+        ddq = ddq_free - M_h_inv_J_hT @ force
+        x_ddot = M_o_inv_G @ force
+        x_ddot[:, m] += x_ddot_free
+        # xi_cf_ddot = H_cf_dot w + H_cf (R_cp_dot (w_f - w_o) + R_cp (alpha_f - alpha_o))
+        #            = H_cf_dot w + H_cf R_cp (alpha_f - alpha_o - w_c × (w_f - w_o)),
+        # with alpha_f = J_w ddq + alpha_f0 per contact.
+        alpha_relative = J_w @ ddq - x_ddot[3:]
+        alpha_relative[:, :, m] += alpha_f0 - _matvec(skew_contact, w_relative)
+        xi_ddot = (rates.H_cf @ R_cp) @ alpha_relative
+        xi_ddot[:, :, m] += rates.H_cf_dot_w
+        xi_ddot = xi_ddot.reshape(2 * n, m + 1)
 
-        xi_ddot_matrix = np.empty((2 * n, m))
-        xi_ddot_offset = np.empty(2 * n)
-        for i, (H_R, drift, J_w, alpha_f0) in enumerate(roll_terms):
-            rows = slice(2 * i, 2 * i + 2)
-            xi_ddot_matrix[rows] = H_R @ (J_w @ ddq_matrix - x_ddot_matrix[3:])
-            xi_ddot_offset[rows] = drift + H_R @ (J_w @ ddq_offset + alpha_f0 - x_ddot_offset[3:])
-
-        arrays = dict(
-            q=q, dq=dq, p_object_in_palm=p_o, R_object_to_palm=R_o, twist_object=twist_o,
-            p_fingertip_in_palm=hand.p_fingertip_in_palm, R_fingertip_to_palm=hand.R_fingertip_to_palm,
-            twist_fingertip=hand.twist_fingertip, xi_cf=xi_cf, xi_co=xi_co, psi=psi,
-            xi_cf_dot=xi_cf_dot, xi_co_dot=xi_co_dot, psi_dot=psi_dot, penetration=penetration,
-            p_contact_in_palm=p_c, R_contact_to_palm=R_pc_all, M_h=M_h, h_bias=hand.h_bias,
-            gravity_torque=hand.gravity_torque, J_fingertip=hand.J_fingertip, J_h=J_h, G=G,
-            Jh_dot_dq=Jh_dot_dq, G_dot_T_twist=G_dot_T_twist, M_o=M_o, C_o_twist=C_o_twist,
-            w_e=w_e, B_ho=B_ho,
-        )
-        maps = dict(
-            contact_force=(F, f0),
-            joint_acceleration=(ddq_matrix, ddq_offset),
-            object_acceleration=(x_ddot_matrix, x_ddot_offset),
-            xi_cf_ddot=(xi_ddot_matrix, xi_ddot_offset),
-        )
+        # Freeze the augmented matrices first: their column views are then read-only too.
+        for augmented in (force, ddq, x_ddot, xi_ddot):
+            augmented.setflags(write=False)
         return GraspState(
             t=float(t),
-            **{name: _frozen(value) for name, value in arrays.items()},
-            **{name: AffineMap(_frozen(a), _frozen(b)) for name, (a, b) in maps.items()},
+            q=_frozen(q),
+            dq=_frozen(dq),
+            p_object_in_palm=_frozen(p_o),
+            R_object_to_palm=_frozen(R_o),
+            twist_object=_frozen(twist_o),
+            p_fingertip_in_palm=_frozen(p_f),
+            R_fingertip_to_palm=_frozen(R_pf),
+            twist_fingertip=_frozen(hand.twist_fingertip),
+            xi_cf=_frozen(geometry.xi_cf),
+            xi_co=_frozen(geometry.xi_co),
+            psi=_frozen(geometry.psi),
+            xi_cf_dot=_frozen(rates.xi_cf_dot),
+            xi_co_dot=_frozen(rates.xi_co_dot),
+            psi_dot=_frozen(rates.psi_dot),
+            penetration=_frozen(geometry.penetration),
+            p_contact_in_palm=_frozen(p_c),
+            R_contact_to_palm=_frozen(R_pc),
+            M_h=_frozen(hand.M_h),
+            h_bias=_frozen(hand.h_bias),
+            gravity_torque=_frozen(hand.gravity_torque),
+            J_fingertip=_frozen(J_s),
+            J_h=_frozen(J_h),
+            G=_frozen(G),
+            Jh_dot_dq=_frozen(Jh_dot_dq),
+            G_dot_T_twist=_frozen(G_dot_T_twist),
+            M_o=_frozen(M_o),
+            C_o_twist=_frozen(C_o_twist),
+            w_e=_frozen(w_e),
+            B_ho=_frozen(B_ho),
+            contact_force=AffineMap(force[:, :m], force[:, m]),
+            joint_acceleration=AffineMap(ddq[:, :m], ddq[:, m]),
+            object_acceleration=AffineMap(x_ddot[:, :m], x_ddot[:, m]),
+            xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
         )

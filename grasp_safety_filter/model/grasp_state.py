@@ -118,13 +118,12 @@ class GraspState:
         return self.q.shape[0]
 
     def required_friction(self, f_c: np.ndarray) -> np.ndarray:
-        """Required friction per contact for the stacked contact forces ``f_c`` (3n,); see
-        :func:`required_friction`."""
+        """Return the required friction per contact for ``f_c`` (see :func:`required_friction`)."""
         return required_friction(f_c)
 
 
 def required_friction(f_c: np.ndarray) -> np.ndarray:
-    """Required friction ``beta_i = ||f_t,i|| / f_n,i`` per contact, shape (n,).
+    """Return the required friction ``beta_i = ||f_t,i|| / f_n,i`` per contact, shape (n,).
 
     ``f_c`` stacks ``(f_x, f_y, f_n)`` per contact in contact frames. ``inf`` where the
     normal force is not positive (the contact is separating); NaN where it is unknown.
@@ -132,7 +131,7 @@ def required_friction(f_c: np.ndarray) -> np.ndarray:
     forces = np.asarray(f_c, dtype=float).reshape(-1, 3)
     tangential = np.hypot(forces[:, 0], forces[:, 1])
     normal = forces[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide='ignore', invalid='ignore'):
         beta = np.where(normal > 0.0, tangential / np.where(normal > 0.0, normal, 1.0), np.inf)
     beta[np.isnan(normal)] = np.nan
     return beta

@@ -30,6 +30,7 @@ class HandTerms:
         J_fingertip: Frame Jacobians in LOCAL_WORLD_ALIGNED, (n, 6, m): ``dq ↦ (v_f, w_f)``.
         twist_fingertip: ``(v_f, w_f)``, (n, 6).
         J_fingertip_dot_dq: ``J_s_dot dq``: the frames' classical acceleration at ddq = 0, (n, 6).
+        M_h_inverse: ``M_h^-1``, (m, m), from the sparse (tree) Cholesky factor of M_h.
     """
 
     M_h: np.ndarray
@@ -40,6 +41,7 @@ class HandTerms:
     J_fingertip: np.ndarray
     twist_fingertip: np.ndarray
     J_fingertip_dot_dq: np.ndarray
+    M_h_inverse: np.ndarray
 
 
 class HandModel:
@@ -65,34 +67,37 @@ class HandModel:
     ) -> None:
         urdf_path = Path(urdf_path)
         if not urdf_path.is_file():
-            raise HandModelError(f"model.urdf_file: no such file {str(urdf_path)!r}")
+            raise HandModelError(f'model.urdf_file: no such file {str(urdf_path)!r}')
         try:
             self.model = pin.buildModelFromUrdf(str(urdf_path))
         except (RuntimeError, ValueError) as error:
-            raise HandModelError(f"model.urdf_file: cannot parse {str(urdf_path)!r}: {error}") from None
+            raise HandModelError(
+                f'model.urdf_file: cannot parse {str(urdf_path)!r}: {error}'
+            ) from None
         urdf_joints = [self.model.names[j] for j in range(1, self.model.njoints)]
         if len(set(joint_names)) != len(joint_names):
-            raise HandModelError(f"model.joint_names: duplicate names in {joint_names}")
+            raise HandModelError(f'model.joint_names: duplicate names in {joint_names}')
         for name in joint_names:
             if name not in urdf_joints:
                 raise HandModelError(
-                    f"model.joint_names: joint {name!r} is not a movable joint of "
-                    f"{urdf_path.name} (it has {urdf_joints})"
+                    f'model.joint_names: joint {name!r} is not a movable joint of '
+                    f'{urdf_path.name} (it has {urdf_joints})'
                 )
         missing = [name for name in urdf_joints if name not in joint_names]
         if missing:
             raise HandModelError(
                 f"model.joint_names: the URDF's movable joints {missing} are not listed; every "
-                "joint must be commanded"
+                'joint must be commanded'
             )
         self.joint_names = list(joint_names)
         # idx[k]: Pinocchio index of the caller's joint k.
         idx = []
         for name in joint_names:
             joint = self.model.joints[self.model.getJointId(name)]
-            if joint.nq != 1 or joint.nv != 1 or not joint.shortname().startswith(("JointModelR", "JointModelRevolute")):
+            revolute = joint.shortname().startswith(('JointModelR', 'JointModelRevolute'))
+            if joint.nq != 1 or joint.nv != 1 or not revolute:
                 raise HandModelError(
-                    f"model.joint_names: joint {name!r} is {joint.shortname()}, expected revolute"
+                    f'model.joint_names: joint {name!r} is {joint.shortname()}, expected revolute'
                 )
             idx.append(joint.idx_q)
         self._idx = np.array(idx)
@@ -102,12 +107,12 @@ class HandModel:
         for name, lo, hi, tau in zip(joint_names, lower, upper, effort, strict=True):
             if not lo < hi:
                 raise HandModelError(
-                    f"{urdf_path.name}: joint {name!r} needs lower < upper limit, got "
-                    f"lower={lo}, upper={hi}"
+                    f'{urdf_path.name}: joint {name!r} needs lower < upper limit, got '
+                    f'lower={lo}, upper={hi}'
                 )
             if not tau > 0.0:
                 raise HandModelError(
-                    f"{urdf_path.name}: joint {name!r} needs a positive effort limit, got {tau}"
+                    f'{urdf_path.name}: joint {name!r} needs a positive effort limit, got {tau}'
                 )
         self.joint_lower_limits = lower.copy()
         self.joint_upper_limits = upper.copy()
@@ -116,13 +121,17 @@ class HandModel:
         for frame in fingertip_frames:
             if not self.model.existFrame(frame):
                 raise HandModelError(
-                    f"model.fingertip_frames: frame {frame!r} is not in {urdf_path.name}"
+                    f'model.fingertip_frames: frame {frame!r} is not in {urdf_path.name}'
                 )
             self.frame_ids.append(self.model.getFrameId(frame))
         gravity = np.asarray(gravity, dtype=float)
         self.model.gravity = pin.Motion(gravity, np.zeros(3))
         self.data = self.model.createData()
-        self._zero = np.zeros(self.model.nv)
+        # The caller's joint order is usually the URDF's: then no reordering copies are needed.
+        self._in_pin_order = bool(np.array_equal(self._idx, np.arange(self.model.nv)))
+        self._idx_square = np.ix_(self._idx, self._idx)
+        # Pinocchio's crba fills the upper triangle of M only.
+        self._upper = np.triu(np.ones((self.model.nv, self.model.nv), dtype=bool))
 
     @property
     def n_joints(self) -> int:
@@ -130,46 +139,54 @@ class HandModel:
         return len(self.joint_names)
 
     def _to_pin(self, x: np.ndarray) -> np.ndarray:
+        if self._in_pin_order:
+            return x
         out = np.empty(self.model.nq)
         out[self._idx] = x
         return out
 
+    def _from_pin(self, x: np.ndarray) -> np.ndarray:
+        """``x`` with its last (joint) axis in the caller's joint order (``x`` itself if equal)."""
+        return x if self._in_pin_order else x[..., self._idx]
+
     def terms(self, q: np.ndarray, dq: np.ndarray) -> HandTerms:
         """Everything the grasp model needs from the hand at ``(q, dq)``."""
-        model, data, idx = self.model, self.data, self._idx
+        model, data = self.model, self.data
         q_pin, dq_pin = self._to_pin(q), self._to_pin(dq)
-        # Kinematics with ddq = 0: frame accelerations are then J_s_dot dq.
-        pin.forwardKinematics(model, data, q_pin, dq_pin, self._zero)
-        pin.computeJointJacobians(model, data, q_pin)
+        # One recursive pass gives M (upper triangle), C dq + g, g, the joint Jacobians and
+        # the kinematics with ddq = 0, whose frame accelerations are then J_s_dot dq.
+        pin.computeAllTerms(model, data, q_pin, dq_pin)
         pin.updateFramePlacements(model, data)
-        n = len(self.frame_ids)
-        p = np.empty((n, 3))
-        R = np.empty((n, 3, 3))
-        J = np.empty((n, 6, len(idx)))
-        twist = np.empty((n, 6))
-        J_dot_dq = np.empty((n, 6))
-        for i, fid in enumerate(self.frame_ids):
-            placement = data.oMf[fid]
-            p[i] = placement.translation
-            R[i] = placement.rotation
-            J[i] = pin.getFrameJacobian(model, data, fid, pin.LOCAL_WORLD_ALIGNED)[:, idx]
-            twist[i] = pin.getFrameVelocity(model, data, fid, pin.LOCAL_WORLD_ALIGNED).vector
-            J_dot_dq[i] = pin.getFrameClassicalAcceleration(
-                model, data, fid, pin.LOCAL_WORLD_ALIGNED
-            ).vector
-        M = pin.crba(model, data, q_pin)
-        M = np.triu(M) + np.triu(M, 1).T  # crba fills the upper triangle only
-        h_bias = pin.nonLinearEffects(model, data, q_pin, dq_pin)[idx]
-        gravity_torque = pin.computeGeneralizedGravity(model, data, q_pin)[idx]
+        frames, world_aligned = self.frame_ids, pin.LOCAL_WORLD_ALIGNED
+        placements = np.array([data.oMf[f].homogeneous for f in frames])
+        J = self._from_pin(
+            np.array([pin.getFrameJacobian(model, data, f, world_aligned) for f in frames])
+        )
+        J_dot_dq = np.array(
+            [
+                pin.getFrameClassicalAcceleration(model, data, f, world_aligned).vector
+                for f in frames
+            ]
+        )
+        # M^-1 from Pinocchio's Cholesky factor of M, which follows the kinematic tree
+        # (computeMinv returns a new, full symmetric array; data.M, data.nle and data.g are
+        # views of Pinocchio's buffers, hence the copies).
+        pin.cholesky.decompose(model, data)
+        M_inv = pin.cholesky.computeMinv(model, data)
+        M = np.where(self._upper, data.M, data.M.T)
+        if not self._in_pin_order:
+            M, M_inv = M[self._idx_square], M_inv[self._idx_square]
         return HandTerms(
-            M_h=M[np.ix_(idx, idx)],
-            h_bias=h_bias,
-            gravity_torque=gravity_torque,
-            p_fingertip_in_palm=p,
-            R_fingertip_to_palm=R,
+            M_h=M,
+            h_bias=self._from_pin(data.nle.copy()),
+            gravity_torque=self._from_pin(data.g.copy()),
+            p_fingertip_in_palm=placements[:, :3, 3],
+            R_fingertip_to_palm=placements[:, :3, :3],
             J_fingertip=J,
-            twist_fingertip=twist,
+            # The frame twists are J_s dq (the same as Pinocchio's frame velocities).
+            twist_fingertip=J @ dq,
             J_fingertip_dot_dq=J_dot_dq,
+            M_h_inverse=M_inv,
         )
 
     def fingertip_placements(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -181,10 +198,10 @@ class HandModel:
         R = np.array([self.data.oMf[f].rotation for f in self.frame_ids])
         J = np.array(
             [
-                pin.getFrameJacobian(self.model, self.data, f, pin.LOCAL_WORLD_ALIGNED)[:, self._idx]
+                pin.getFrameJacobian(self.model, self.data, f, pin.LOCAL_WORLD_ALIGNED)
                 for f in self.frame_ids
             ]
-        )
+        )[:, :, self._idx]
         return p, R, J
 
     def energy(self, q: np.ndarray, dq: np.ndarray) -> float:

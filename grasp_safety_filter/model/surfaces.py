@@ -14,11 +14,16 @@ parameters
 
 which drive the rolling equations (see :mod:`grasp_safety_filter.model.rolling`).
 Every surface here gives them in closed form, with their rates along ``xi_dot``.
+
+:class:`SurfaceStack` evaluates the same closed forms for k surfaces of one kind at once
+(coordinates stacked as (k, 2)): the per-tick model runs at 1 kHz, and one numpy call per
+term for all contacts costs a fraction of one call per term and contact.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -89,21 +94,26 @@ class SphereSurface(Surface):
 
     def __init__(self, radius: float) -> None:
         if not np.isfinite(radius) or radius <= 0.0:
-            raise ValueError(f"SphereSurface: radius must be a positive finite length, got {radius!r}")
+            raise ValueError(
+                f'SphereSurface: radius must be a positive finite length, got {radius!r}'
+            )
         self.radius = float(radius)
 
     def point(self, xi: np.ndarray) -> np.ndarray:
+        """``c = R (-cos a cos b, sin a, -cos a sin b)``."""
         a, b = xi
         r = self.radius
         return np.array([-r * np.cos(a) * np.cos(b), r * np.sin(a), -r * np.cos(a) * np.sin(b)])
 
     def tangents(self, xi: np.ndarray) -> np.ndarray:
+        """``c_a = R (sin a cos b, cos a, sin a sin b)``, ``c_b = R cos a (sin b, 0, -cos b)``."""
         a, b = xi
         r = self.radius
         sa, ca, sb, cb = np.sin(a), np.cos(a), np.sin(b), np.cos(b)
         return r * np.array([[sa * cb, ca * sb], [ca, 0.0], [sa * sb, -ca * cb]])
 
     def frame(self, xi: np.ndarray) -> np.ndarray:
+        """``rho1 = c_a / R``, ``rho2 = (sin b, 0, -cos b)``, ``n = c / R``."""
         a, b = xi
         sa, ca, sb, cb = np.sin(a), np.cos(a), np.sin(b), np.cos(b)
         rho1 = [sa * cb, ca, sa * sb]
@@ -112,6 +122,7 @@ class SphereSurface(Surface):
         return np.array([rho1, rho2, normal]).T
 
     def frame_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Differentiate :meth:`frame` along ``xi_dot`` (entrywise chain rule)."""
         a, b = xi
         da, db = xi_dot
         sa, ca, sb, cb = np.sin(a), np.cos(a), np.sin(b), np.cos(b)
@@ -121,18 +132,23 @@ class SphereSurface(Surface):
         return np.array([rho1_dot, rho2_dot, normal_dot]).T
 
     def metric(self, xi: np.ndarray) -> np.ndarray:
+        """``M = diag(R, R cos a)``."""
         return np.diag([self.radius, self.radius * np.cos(xi[0])])
 
     def metric_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """``M_dot = diag(0, -R sin(a) a_dot)``."""
         return np.diag([0.0, -self.radius * np.sin(xi[0]) * xi_dot[0]])
 
     def curvature(self, xi: np.ndarray) -> np.ndarray:
+        """``K = I / R``."""
         return np.eye(2) / self.radius
 
     def curvature_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """``K_dot = 0``."""
         return np.zeros((2, 2))
 
     def torsion(self, xi: np.ndarray) -> np.ndarray:
+        """``T = (0, -tan(a) / R)``."""
         return np.array([0.0, -np.tan(xi[0]) / self.radius])
 
     def coordinates_of_normal(self, normal: np.ndarray) -> np.ndarray:
@@ -145,6 +161,7 @@ class SphereSurface(Surface):
         return np.array([a, b])
 
     def closest_point(self, p_in_body: np.ndarray) -> tuple[np.ndarray, float]:
+        """Radial projection: ``xi`` of the point's direction, distance ``|p| - R``."""
         distance_to_centre = float(np.linalg.norm(p_in_body))
         if distance_to_centre == 0.0:
             raise ValueError("SphereSurface.closest_point: the point is the sphere's centre")
@@ -155,18 +172,18 @@ class SphereSurface(Surface):
 class FlatSurface(Surface):
     """A plane through ``origin`` spanned by orthonormal ``e1, e2``, outward normal ``e1 × e2``.
 
-        c(u, v) = origin + u e1 + v e2,   M = I,  K = 0,  T = 0   (u, v in m)
+    c(u, v) = origin + u e1 + v e2,   M = I,  K = 0,  T = 0   (u, v in m)
     """
 
     def __init__(self, origin: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> None:
         origin, e1, e2 = (np.asarray(x, dtype=float) for x in (origin, e1, e2))
-        for name, vec in (("origin", origin), ("e1", e1), ("e2", e2)):
+        for name, vec in (('origin', origin), ('e1', e1), ('e2', e2)):
             if vec.shape != (3,) or not np.all(np.isfinite(vec)):
-                raise ValueError(f"FlatSurface: {name} must be a finite 3-vector, got {vec!r}")
+                raise ValueError(f'FlatSurface: {name} must be a finite 3-vector, got {vec!r}')
         if abs(np.linalg.norm(e1) - 1) > 1e-12 or abs(np.linalg.norm(e2) - 1) > 1e-12:
-            raise ValueError(f"FlatSurface: e1, e2 must be unit vectors, got {e1}, {e2}")
+            raise ValueError(f'FlatSurface: e1, e2 must be unit vectors, got {e1}, {e2}')
         if abs(e1 @ e2) > 1e-12:
-            raise ValueError(f"FlatSurface: e1, e2 must be orthogonal, got e1·e2 = {e1 @ e2}")
+            raise ValueError(f'FlatSurface: e1, e2 must be orthogonal, got e1·e2 = {e1 @ e2}')
         self.origin = origin
         self._frame = np.column_stack([e1, e2, np.cross(e1, e2)])
 
@@ -176,52 +193,67 @@ class FlatSurface(Surface):
         return self._frame[:, 2]
 
     def point(self, xi: np.ndarray) -> np.ndarray:
+        """``c = origin + u e1 + v e2``."""
         return self.origin + self._frame[:, :2] @ xi
 
     def tangents(self, xi: np.ndarray) -> np.ndarray:
+        """``[e1, e2]``."""
         return self._frame[:, :2].copy()
 
     def frame(self, xi: np.ndarray) -> np.ndarray:
+        """``[e1, e2, e1 × e2]``, constant."""
         return self._frame.copy()
 
     def frame_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Zero: the frame is constant."""
         return np.zeros((3, 3))
 
     def metric(self, xi: np.ndarray) -> np.ndarray:
+        """``M = I``."""
         return np.eye(2)
 
     def metric_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Zero."""
         return np.zeros((2, 2))
 
     def curvature(self, xi: np.ndarray) -> np.ndarray:
+        """``K = 0``."""
         return np.zeros((2, 2))
 
     def curvature_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Zero."""
         return np.zeros((2, 2))
 
     def torsion(self, xi: np.ndarray) -> np.ndarray:
+        """``T = 0``."""
         return np.zeros(2)
 
     def closest_point(self, p_in_body: np.ndarray) -> tuple[np.ndarray, float]:
+        """Orthogonal projection: ``xi = (e1, e2) · (p - o)``, distance ``n · (p - o)``."""
         offset = np.asarray(p_in_body, dtype=float) - self.origin
         return self._frame[:, :2].T @ offset, float(self.normal @ offset)
 
 
 CUBE_FACE_AXES: dict[str, tuple[int, float]] = {
-    "+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0),
+    '+x': (0, 1.0),
+    '-x': (0, -1.0),
+    '+y': (1, 1.0),
+    '-y': (1, -1.0),
+    '+z': (2, 1.0),
+    '-z': (2, -1.0),
 }
 
 
 def cube_face(label: str, edge_length: float) -> FlatSurface:
-    """The face ``label`` (``"+x"``, ``"-y"``, ...) of a cube centred at the body origin.
+    """Return the face ``label`` (``"+x"``, ``"-y"``, ...) of a cube centred at the origin.
 
     Chart axes follow the cyclic order so that ``e1 × e2`` is the outward normal, and
     ``(u, v) = (0, 0)`` is the face centre.
     """
     if label not in CUBE_FACE_AXES:
-        raise ValueError(f"cube face: expected one of {list(CUBE_FACE_AXES)}, got {label!r}")
+        raise ValueError(f'cube face: expected one of {list(CUBE_FACE_AXES)}, got {label!r}')
     if not np.isfinite(edge_length) or edge_length <= 0.0:
-        raise ValueError(f"cube face: edge length must be positive, got {edge_length!r}")
+        raise ValueError(f'cube face: edge length must be positive, got {edge_length!r}')
     axis, sign = CUBE_FACE_AXES[label]
     basis = np.eye(3)
     normal = sign * basis[axis]
@@ -229,3 +261,220 @@ def cube_face(label: str, edge_length: float) -> FlatSurface:
     if sign < 0:
         e1, e2 = e2, e1
     return FlatSurface(0.5 * edge_length * normal, e1, e2)
+
+
+# ------------------------------------------------------------------------- stacked surfaces
+def _sin_cos(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(sin a, cos a, sin b, cos b)`` of stacked coordinates ``xi`` (k, 2), each (k,)."""
+    s, c = np.sin(xi), np.cos(xi)
+    return s[:, 0], c[:, 0], s[:, 1], c[:, 1]
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+class SurfaceStack(ABC):
+    """k surfaces of one kind, evaluated together at stacked coordinates ``xi``, shape (k, 2).
+
+    Row j of every result is the corresponding :class:`Surface` method of surface j at
+    ``xi[j]``, with the same closed forms. Charts are orthogonal, so metrics are returned as
+    their diagonals ``(|c_a|, |c_b|)``, shape (k, 2). Results may be shared read-only arrays.
+
+    Attributes:
+        flat: Every surface is a plane (``K = 0``, ``T = 0`` everywhere), so callers can drop
+            the curvature and torsion terms.
+    """
+
+    flat: bool = False
+
+    @abstractmethod
+    def frame(self, xi: np.ndarray) -> np.ndarray:
+        """Gauss frames ``[rho1, rho2, n]``, (k, 3, 3)."""
+
+    @abstractmethod
+    def metric(self, xi: np.ndarray) -> np.ndarray:
+        """Metric diagonals ``(|c_a|, |c_b|)``, (k, 2)."""
+
+    @abstractmethod
+    def metric_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Time derivatives of the metric diagonals, (k, 2)."""
+
+    @abstractmethod
+    def curvature(self, xi: np.ndarray) -> np.ndarray:
+        """Curvature tensors, (k, 2, 2)."""
+
+    @abstractmethod
+    def curvature_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Time derivatives of the curvature tensors, (k, 2, 2)."""
+
+    @abstractmethod
+    def torsion(self, xi: np.ndarray) -> np.ndarray:
+        """Torsion rows, (k, 2)."""
+
+    @abstractmethod
+    def closest_point(self, p_in_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Nearest surface points to ``p_in_body`` (k, 3).
+
+        Returns:
+            Their coordinates (k, 2) and signed distances (k,), m (positive outside).
+        """
+
+
+class SphereStack(SurfaceStack):
+    """Spheres of radii ``R_j`` in the chart of :class:`SphereSurface` (same closed forms)."""
+
+    def __init__(self, spheres: Sequence[SphereSurface]) -> None:
+        self.radius = np.array([sphere.radius for sphere in spheres])
+        k = self.radius.size
+        self._zero = _read_only(np.zeros(k))
+        self._curvature = _read_only(np.eye(2) / self.radius[:, None, None])
+        self._zeros = _read_only(np.zeros((k, 2, 2)))
+
+    def frame(self, xi: np.ndarray) -> np.ndarray:
+        """Compute :meth:`SphereSurface.frame` of each sphere."""
+        sa, ca, sb, cb = _sin_cos(xi)
+        # Built column by column ([rho1, rho2, n], each (3, k)), then moved to (k, row, column).
+        columns = np.array(
+            [[sa * cb, ca, sa * sb], [sb, self._zero, -cb], [-ca * cb, sa, -ca * sb]]
+        )
+        return columns.transpose(2, 1, 0)
+
+    def metric(self, xi: np.ndarray) -> np.ndarray:
+        """``(R, R cos a)``."""
+        return np.array([self.radius, self.radius * np.cos(xi[:, 0])]).T
+
+    def metric_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """``(0, -R sin(a) a_dot)``."""
+        return np.array([self._zero, -self.radius * np.sin(xi[:, 0]) * xi_dot[:, 0]]).T
+
+    def curvature(self, xi: np.ndarray) -> np.ndarray:
+        """``I / R`` (constant)."""
+        return self._curvature
+
+    def curvature_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Zero."""
+        return self._zeros
+
+    def torsion(self, xi: np.ndarray) -> np.ndarray:
+        """``(0, -tan(a) / R)``."""
+        return np.array([self._zero, -np.tan(xi[:, 0]) / self.radius]).T
+
+    def coordinates_of_normal(self, normal: np.ndarray) -> np.ndarray:
+        """Invert the Gauss map of unit normals (k, 3), as ``SphereSurface`` does."""
+        a = np.arcsin(np.clip(normal[:, 1], -1.0, 1.0))
+        b = np.arctan2(-normal[:, 2], -normal[:, 0])
+        return np.array([a, b]).T
+
+    def closest_point(self, p_in_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Radial projections, as :meth:`SphereSurface.closest_point`."""
+        distance_to_centre = np.sqrt(np.einsum('ki,ki->k', p_in_body, p_in_body))
+        if not np.all(distance_to_centre > 0.0):
+            raise ValueError("SphereStack.closest_point: a point is its sphere's centre")
+        xi = self.coordinates_of_normal(p_in_body / distance_to_centre[:, None])
+        return xi, distance_to_centre - self.radius
+
+
+class FlatStack(SurfaceStack):
+    """Planes as in :class:`FlatSurface`: ``c = origin + u e1 + v e2``, M = I, K = 0, T = 0."""
+
+    flat = True
+
+    def __init__(self, planes: Sequence[FlatSurface]) -> None:
+        self.origin = np.array([plane.origin for plane in planes])
+        self._frame = _read_only(np.array([plane.frame(np.zeros(2)) for plane in planes]))
+        k = len(planes)
+        self._ones = _read_only(np.ones((k, 2)))
+        self._zeros_2 = _read_only(np.zeros((k, 2)))
+        self._zeros_22 = _read_only(np.zeros((k, 2, 2)))
+
+    def frame(self, xi: np.ndarray) -> np.ndarray:
+        """Return the constant ``[e1, e2, n]`` of each plane."""
+        return self._frame
+
+    def metric(self, xi: np.ndarray) -> np.ndarray:
+        """``(1, 1)``."""
+        return self._ones
+
+    def metric_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Zero."""
+        return self._zeros_2
+
+    def curvature(self, xi: np.ndarray) -> np.ndarray:
+        """Zero."""
+        return self._zeros_22
+
+    def curvature_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Zero."""
+        return self._zeros_22
+
+    def torsion(self, xi: np.ndarray) -> np.ndarray:
+        """Zero."""
+        return self._zeros_2
+
+    def closest_point(self, p_in_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Orthogonal projections, as :meth:`FlatSurface.closest_point`."""
+        # [e1, e2, n]^T (p - origin) per plane: in-plane coordinates, then the distance.
+        local = ((p_in_body - self.origin)[:, None, :] @ self._frame)[:, 0, :]
+        return local[:, :2], local[:, 2]
+
+
+class SurfaceList(SurfaceStack):
+    """Any surfaces, evaluated one by one through the :class:`Surface` interface."""
+
+    def __init__(self, surfaces: Sequence[Surface]) -> None:
+        self.surfaces = list(surfaces)
+
+    def _each(self, method: str, *args: np.ndarray) -> np.ndarray:
+        return np.array(
+            [
+                getattr(surface, method)(*(x[j] for x in args))
+                for j, surface in enumerate(self.surfaces)
+            ]
+        )
+
+    def frame(self, xi: np.ndarray) -> np.ndarray:
+        """Each surface's :meth:`Surface.frame`."""
+        return self._each('frame', xi)
+
+    def metric(self, xi: np.ndarray) -> np.ndarray:
+        """Diagonals of each surface's :meth:`Surface.metric`."""
+        return np.diagonal(self._each('metric', xi), axis1=1, axis2=2).copy()
+
+    def metric_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Diagonals of each surface's :meth:`Surface.metric_rate`."""
+        return np.diagonal(self._each('metric_rate', xi, xi_dot), axis1=1, axis2=2).copy()
+
+    def curvature(self, xi: np.ndarray) -> np.ndarray:
+        """Each surface's :meth:`Surface.curvature`."""
+        return self._each('curvature', xi)
+
+    def curvature_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
+        """Each surface's :meth:`Surface.curvature_rate`."""
+        return self._each('curvature_rate', xi, xi_dot)
+
+    def torsion(self, xi: np.ndarray) -> np.ndarray:
+        """Each surface's :meth:`Surface.torsion`."""
+        return self._each('torsion', xi)
+
+    def closest_point(self, p_in_body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Each surface's :meth:`Surface.closest_point`."""
+        results = [
+            surface.closest_point(p) for surface, p in zip(self.surfaces, p_in_body, strict=True)
+        ]
+        return np.array([xi for xi, _ in results]), np.array([distance for _, distance in results])
+
+
+def stack_surfaces(surfaces: Sequence[Surface]) -> SurfaceStack:
+    """Stack ``surfaces`` for batched evaluation.
+
+    Closed forms when all are spheres or all planes (:class:`SphereStack`,
+    :class:`FlatStack`), otherwise one by one (:class:`SurfaceList`).
+    """
+    kinds = {type(surface) for surface in surfaces}
+    if kinds == {SphereSurface}:
+        return SphereStack(surfaces)
+    if kinds == {FlatSurface}:
+        return FlatStack(surfaces)
+    return SurfaceList(surfaces)
