@@ -14,19 +14,19 @@ import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability, QosHistory, QosReliability
 from rosbags.rosbag2 import WriterError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import get_typestore, Stores
 import yaml
 
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import (
-    BagRecorder,
-    SignalInterrupt,
     bag_topics,
+    BagRecorder,
     interrupt_on_signals,
     iter_bag,
     read_bag,
     signal_name,
+    SignalInterrupt,
 )
 from grasp_safety_filter.io.messages import ContactData, DiagnosticReport, ObjectReference
 
@@ -53,7 +53,9 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
         rng.normal(size=n),
     )
     reference = ObjectReference(np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6))
-    return [
+    # The scenario is latched: published once, at the start of the run.
+    scenario = recorder.typestore.types['std_msgs/msg/String'](data='{}')
+    return [(topics.SCENARIO, scenario)] * (k == 0) + [
         (topics.CLOCK, m.clock_to_msg(msgs, t)),
         (topics.JOINT_STATES, m.joint_state_to_msg(msgs, t, JOINTS, *rng.normal(size=(3, 9)))),
         (topics.OBJECT_ODOM, m.odometry_to_msg(msgs, t, np.ones(3), np.eye(3), np.ones(6))),
@@ -74,7 +76,13 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
 def stamp_ns(msg) -> int:
     if hasattr(msg, 'header'):
         return m.header_stamp_ns(msg)
-    return m.time_msg_to_nanoseconds(msg.clock)
+    if hasattr(msg, 'clock'):
+        return m.time_msg_to_nanoseconds(msg.clock)
+    return 0  # the scenario, stamped at the run start
+
+
+def expected_count(topic: str, steps: int = STEPS) -> int:
+    return 1 if topic == topics.SCENARIO else steps
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
@@ -89,12 +97,12 @@ def test_written_bag_is_read_back_with_topics_types_counts_and_qos(tmp_path, sto
                 if topic == topics.EFFORT_COMMAND:
                     sent_efforts.append(np.array(msg.effort))
         recorder.set_custom_data('run', 'paper_demo')
-    assert recorder.counts == {spec.name: STEPS for spec in topics.TOPICS}
+    assert recorder.counts == {spec.name: expected_count(spec.name) for spec in topics.TOPICS}
 
     metadata = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
     assert metadata['version'] == 9
     assert metadata['storage_identifier'] == storage
-    assert metadata['message_count'] == STEPS * len(topics.TOPICS)
+    assert metadata['message_count'] == sum(expected_count(s.name) for s in topics.TOPICS)
     assert metadata['custom_data'] == {'run': 'paper_demo'}
 
     with AnyReader([path]) as reader:
@@ -103,7 +111,7 @@ def test_written_bag_is_read_back_with_topics_types_counts_and_qos(tmp_path, sto
         for spec in topics.TOPICS:
             connection = recorded[spec.name]
             assert connection.msgtype == spec.msgtype
-            assert connection.msgcount == STEPS
+            assert connection.msgcount == expected_count(spec.name)
             assert connection.ext.serialization_format == 'cdr'
             (qos,) = connection.ext.offered_qos_profiles
             assert qos.history is QosHistory.KEEP_LAST
@@ -118,7 +126,7 @@ def test_written_bag_is_read_back_with_topics_types_counts_and_qos(tmp_path, sto
     bag = read_bag(path)
     for topic, entries in bag.items():
         stamps = [stamp for stamp, _ in entries]
-        assert stamps == [round(k * DT * 1e9) for k in range(STEPS)], topic
+        assert stamps == [round(k * DT * 1e9) for k in range(expected_count(topic))], topic
         assert [stamp_ns(msg) for _, msg in entries] == stamps
     received = [m.effort_from_msg(msg, JOINTS).effort for _, msg in bag[topics.EFFORT_COMMAND]]
     for got, sent in zip(received, sent_efforts, strict=True):
@@ -139,7 +147,7 @@ def test_read_bag_and_iter_bag_select_topics(tmp_path):
     assert list(iter_bag(path, topics=['/not/recorded'])) == []
     timestamps = [stamp for _, stamp, _ in iter_bag(path)]
     assert timestamps == sorted(timestamps)
-    assert len(timestamps) == 3 * len(topics.TOPICS)
+    assert len(timestamps) == sum(expected_count(spec.name, 3) for spec in topics.TOPICS)
 
 
 def test_topics_without_messages_are_still_in_the_bag(tmp_path):
@@ -164,7 +172,9 @@ def test_bag_is_closed_and_readable_after_an_exception(tmp_path, storage, error)
             raise error
     assert not recorder.is_open
     info = bag_topics(path)
-    assert {name: topic.count for name, topic in info.items()} == dict.fromkeys(info, 5)
+    assert {name: topic.count for name, topic in info.items()} == {
+        name: expected_count(name, 5) for name in info
+    }
     metadata = yaml.safe_load((path / 'metadata.yaml').read_text())
     assert metadata['rosbag2_bagfile_information']['custom_data'] == {'interrupted': 'true'}
 
@@ -325,6 +335,7 @@ def test_every_node_and_conversion_type_is_in_the_table():
         'trajectory_msgs/msg/MultiDOFJointTrajectory',
         'diagnostic_msgs/msg/DiagnosticArray',
         'rosgraph_msgs/msg/Clock',
+        'std_msgs/msg/String',
     }
     assert {spec.msgtype for spec in topics.TOPICS} == expected_types
 

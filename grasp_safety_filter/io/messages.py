@@ -86,6 +86,7 @@ _MESSAGE_TYPES: dict[str, str] = {
     'DiagnosticStatus': 'diagnostic_msgs/msg/DiagnosticStatus',
     'KeyValue': 'diagnostic_msgs/msg/KeyValue',
     'Clock': 'rosgraph_msgs/msg/Clock',
+    'String': 'std_msgs/msg/String',
 }
 
 
@@ -111,7 +112,7 @@ class MessageNamespace:
         Time, Duration, Header, Point, Quaternion, Vector3, Pose, Twist, Transform,
         PoseWithCovariance, TwistWithCovariance, JointState, Odometry,
         MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint, DiagnosticArray,
-        DiagnosticStatus, KeyValue, Clock: The message classes.
+        DiagnosticStatus, KeyValue, Clock, String: The message classes.
         sequences_as_lists: Float arrays are Python lists (rclpy), else float64 numpy
             arrays (rosbags).
         byte_as_bytes: ``byte`` fields are ``bytes`` of length 1 (rclpy), else ``int``.
@@ -137,6 +138,7 @@ class MessageNamespace:
     DiagnosticStatus: Any
     KeyValue: Any
     Clock: Any
+    String: Any
     sequences_as_lists: bool
     byte_as_bytes: bool
 
@@ -144,7 +146,7 @@ class MessageNamespace:
     def from_typestore(cls, typestore: Any = None) -> MessageNamespace:
         """Classes of a rosbags typestore (default: ``Stores.ROS2_JAZZY``)."""
         if typestore is None:
-            from rosbags.typesys import Stores, get_typestore
+            from rosbags.typesys import get_typestore, Stores
 
             typestore = get_typestore(Stores.ROS2_JAZZY)
         classes = {name: typestore.types[msgtype] for name, msgtype in _MESSAGE_TYPES.items()}

@@ -21,6 +21,9 @@ QoS choices:
   ``diagnostic_aggregator`` and ``rqt_robot_monitor`` subscribe with.
 - ``/clock``: best effort, volatile, keep last 1, as rclcpp's ``ClockQoS`` and the
   subscription rclpy's time source creates: only the newest time matters.
+- ``/grasp/scenario``: reliable, transient local, keep last 1 (a latched topic). It is
+  published once at start-up; a late joiner (``ros2 bag record`` started after the
+  simulator, an analysis tool) still receives it.
 """
 
 from __future__ import annotations
@@ -56,6 +59,7 @@ EFFORT_COMMAND = '/hand/effort_command'
 DIAGNOSTICS = '/diagnostics'
 MARGINS = '/safety_filter/margins'
 CLOCK = '/clock'
+SCENARIO = '/grasp/scenario'
 
 # The planner is whatever the user connects to /object/reference.
 PLANNER = 'planner'
@@ -130,6 +134,7 @@ class TopicQos:
 STREAM_QOS = TopicQos(reliability='reliable', durability='volatile', depth=10)
 DIAGNOSTICS_QOS = TopicQos(reliability='reliable', durability='volatile', depth=10)
 CLOCK_QOS = TopicQos(reliability='best_effort', durability='volatile', depth=1)
+LATCHED_QOS = TopicQos(reliability='reliable', durability='transient_local', depth=1)
 
 
 @dataclass(frozen=True)
@@ -153,6 +158,14 @@ class TopicSpec:
 
 
 TOPICS: tuple[TopicSpec, ...] = (
+    TopicSpec(
+        SCENARIO,
+        'std_msgs/msg/String',
+        (HAND_SIM_NODE,),
+        LATCHED_QOS,
+        'JSON, once at start-up: joint names and limits, contact names, friction coefficient, '
+        'fingertip workspace, time step, duration, integrator (layout: nodes.scenario).',
+    ),
     TopicSpec(
         JOINT_STATES,
         'sensor_msgs/msg/JointState',

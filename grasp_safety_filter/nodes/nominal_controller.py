@@ -1,0 +1,246 @@
+"""The nominal controller's message-level endpoint: state in, ``/hand/effort_nominal`` out.
+
+Pure Python, shared by the rclpy node (:mod:`grasp_safety_filter.nodes.nominal_controller_node`)
+and the ROS-free runner. A tick runs when a joint state and an object odometry with the
+same stamp t are in hand::
+
+    /hand/joint_states (t) + /object/odom (t)
+        ──▶ GraspModel.state ──▶ reference sample r(t) ──▶ NominalController.compute
+        ──▶ /hand/effort_nominal stamped t (u_nom by joint name, N·m)
+
+The reference is the paper's ``r(t)`` around the first object pose received
+(``reference.source: paper``), or the planner's ``/object/reference``
+(``reference.source: topic``, a ``MultiDOFJointTrajectory`` of the joint ``object``, its
+points held piecewise constant; older than ``reference.timeout``, or before the first one,
+the last pose is held with zero feed-forward and a WARN ``nominal_controller`` status goes
+to ``/diagnostics`` on that tick).
+
+An input that does not parse (non-finite values, wrong lengths, unknown or missing joint
+names, a non-unit quaternion, a wrong frame) yields a WARN status naming the problem and no
+command: the safety filter then holds its last safe command.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.control.nominal import NominalConfig, NominalController, NominalOutput
+from grasp_safety_filter.control.reference import (
+    Pose,
+    ReferenceSample,
+    ReferenceSource,
+    TopicReference,
+)
+from grasp_safety_filter.io.messages import (
+    DiagnosticLevel,
+    DiagnosticReport,
+    diagnostics_to_msg,
+    effort_to_msg,
+    joint_state_from_msg,
+    JointStateData,
+    MessageError,
+    MessageNamespace,
+    nanoseconds_to_seconds,
+    ObjectStateData,
+    odometry_from_msg,
+    reference_from_msg,
+    ReferenceTrajectory,
+    seconds_to_nanoseconds,
+)
+from grasp_safety_filter.io.topics import (
+    DIAGNOSTICS,
+    EFFORT_NOMINAL,
+    JOINT_STATES,
+    OBJECT_ODOM,
+    OBJECT_REFERENCE,
+)
+from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+
+#: Name of the nominal controller's ``DiagnosticStatus``.
+DIAGNOSTIC_NAME = 'nominal_controller'
+
+#: Unpaired inputs kept waiting for their partner (older ones are dropped).
+MAX_PENDING = 64
+
+
+class NominalControllerEndpoint:
+    """Computed-torque nominal control over messages (module docstring).
+
+    Args:
+        model: The ``GraspModel`` (``joint_names``, ``state(...)``).
+        nominal_config: Gains and reference choice.
+        msgs: Message classes to build (rclpy or rosbags).
+
+    Attributes:
+        controller: The nominal controller core.
+        reference: The reference source, built at the first tick (None before).
+        last_output: The last tick's :class:`NominalOutput` (None before the first).
+
+    """
+
+    def __init__(self, model: Any, nominal_config: NominalConfig, msgs: MessageNamespace) -> None:
+        self.model = model
+        self.msgs = msgs
+        self.config = nominal_config
+        self.controller = NominalController(nominal_config)
+        self.reference: ReferenceSource | None = None
+        self.last_output: NominalOutput | None = None
+        self._joint_names = list(model.joint_names)
+        self._initial_pose: Pose | None = None
+        self._t0: float | None = None
+        self._trajectory: ReferenceTrajectory | None = None
+        self._joint_states: dict[int, JointStateData] = {}
+        self._odometry: dict[int, ObjectStateData] = {}
+        self._last_tick_ns: int | None = None
+
+    # -------------------------------------------------------------------------- inputs
+    def on_joint_states(self, msg: Any) -> list[Outgoing]:
+        """Handle ``/hand/joint_states``; tick if the odometry of its stamp is in hand."""
+        try:
+            data = joint_state_from_msg(msg, self._joint_names, source=JOINT_STATES)
+        except MessageError as error:
+            return self._rejected(error)
+        stamp = seconds_to_nanoseconds(data.t)
+        self._joint_states[stamp] = data
+        return self._tick_if_complete(stamp)
+
+    def on_odom(self, msg: Any) -> list[Outgoing]:
+        """Handle ``/object/odom``; tick if the joint state of its stamp is in hand."""
+        try:
+            data = odometry_from_msg(msg, source=OBJECT_ODOM)
+        except MessageError as error:
+            return self._rejected(error)
+        stamp = seconds_to_nanoseconds(data.t)
+        self._odometry[stamp] = data
+        return self._tick_if_complete(stamp)
+
+    def on_reference(self, msg: Any) -> list[Outgoing]:
+        """Handle ``/object/reference``: keep it for the ticks to come (topic source only).
+
+        Returns:
+            Nothing, or a WARN status if the message is rejected (the previous reference
+            stays in force).
+
+        """
+        try:
+            self._trajectory = reference_from_msg(msg, source=OBJECT_REFERENCE)
+        except MessageError as error:
+            return self._rejected(error)
+        return []
+
+    def update_config(self, nominal_config: NominalConfig) -> None:
+        """Apply new gains, paper reference shape or topic timeout from the next tick on.
+
+        Raises:
+            ValueError: ``reference.source`` differs (it is read-only).
+
+        """
+        if nominal_config.reference_source != self.config.reference_source:
+            raise ValueError(
+                "parameter 'reference.source' is read-only: it stays "
+                f'{self.config.reference_source!r}'
+            )
+        self.config = nominal_config
+        self.controller = NominalController(nominal_config)
+        if self._initial_pose is not None and self._t0 is not None:
+            previous = self.reference
+            self.reference = nominal_config.make_reference(self._initial_pose, self._t0)
+            if isinstance(previous, TopicReference) and previous.stamp is not None:
+                # Keep the planner's last sample; only the timeout changes.
+                self.reference.update(previous.sample(previous.stamp), previous.stamp)
+
+    # ------------------------------------------------------------------------- the tick
+    def _tick_if_complete(self, stamp: int) -> list[Outgoing]:
+        if stamp not in self._joint_states or stamp not in self._odometry:
+            self._prune()
+            return []
+        joints = self._joint_states.pop(stamp)
+        odometry = self._odometry.pop(stamp)
+        # Anything older than this tick can no longer be paired in order.
+        for pending in (self._joint_states, self._odometry):
+            for old in [s for s in pending if s < stamp]:
+                del pending[old]
+        self._last_tick_ns = stamp
+        t = joints.t
+        try:
+            state = self.model.state(
+                t,
+                joints.position,
+                joints.velocity,
+                odometry.p_object_in_palm,
+                odometry.R_object_to_palm,
+                odometry.twist_object,
+            )
+            sample = self._reference_sample(t, odometry)
+            output = self.controller.compute(state, sample)
+        except (ValueError, np.linalg.LinAlgError) as error:
+            return self._rejected(error, t)
+        if not np.all(np.isfinite(output.u)):
+            return self._rejected(MessageError(f'u_nom is not finite: {output.u.tolist()}'), t)
+        self.last_output = output
+        outgoing = [
+            stamped(EFFORT_NOMINAL, effort_to_msg(self.msgs, t, self._joint_names, output.u))
+        ]
+        if output.reference_stale:
+            outgoing.append(self._stale_reference_status(t))
+        return outgoing
+
+    def _reference_sample(self, t: float, odometry: ObjectStateData) -> ReferenceSample:
+        if self.reference is None:
+            self._initial_pose = Pose(odometry.p_object_in_palm, odometry.R_object_to_palm)
+            self._t0 = t
+            self.reference = self.config.make_reference(self._initial_pose, t)
+        if isinstance(self.reference, TopicReference) and self._trajectory is not None:
+            trajectory = self._trajectory
+            k = max(
+                int(np.searchsorted(trajectory.time_from_start, t - trajectory.t, 'right')) - 1, 0
+            )
+            point = trajectory.points[k]
+            sample = ReferenceSample.from_pose(
+                Pose(point.p_object_in_palm, point.R_object_to_palm),
+                point.twist_object,
+                point.acceleration_object,
+            )
+            # A point is as fresh as the time it became active.
+            self.reference.update(sample, trajectory.t + float(trajectory.time_from_start[k]))
+        return self.reference.sample(t)
+
+    def _stale_reference_status(self, t: float) -> Outgoing:
+        reference = self.reference
+        age = reference.age(t) if isinstance(reference, TopicReference) else math.inf
+        text = (
+            'no /object/reference received yet: holding the initial object pose'
+            if math.isinf(age)
+            else f'/object/reference is {age:.3f} s old (timeout {self.config.timeout} s): '
+            'holding its last pose'
+        )
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            DiagnosticLevel.WARN,
+            text,
+            {
+                'reference.stale': True,
+                'reference.age': age,
+                'reference.timeout': self.config.timeout,
+            },
+        )
+        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))
+
+    def _rejected(self, error: Exception, t: float | None = None) -> list[Outgoing]:
+        if t is None:
+            t = 0.0 if self._last_tick_ns is None else nanoseconds_to_seconds(self._last_tick_ns)
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            DiagnosticLevel.WARN,
+            f'input rejected, no command: {error}',
+            {'input.rejected': True},
+        )
+        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))]
+
+    def _prune(self) -> None:
+        for pending in (self._joint_states, self._odometry):
+            while len(pending) > MAX_PENDING:
+                del pending[min(pending)]

@@ -1,0 +1,65 @@
+"""``nominal_controller_node``: the paper's nominal controller as a ROS 2 node (rclpy shell).
+
+Run: ``ros2 run grasp_safety_filter nominal_controller_node --ros-args --params-file
+config/paper_scenario.yaml -p use_sim_time:=true``.
+
+Subscribes to ``/hand/joint_states``, ``/object/odom`` and, with ``reference.source:
+topic``, ``/object/reference`` (a planner's ``trajectory_msgs/MultiDOFJointTrajectory`` of
+the joint ``object``, palm frame); publishes ``/hand/effort_nominal`` and ``/diagnostics``.
+Everything else is
+:class:`grasp_safety_filter.nodes.nominal_controller.NominalControllerEndpoint`.
+
+Live parameters: ``gains.kp``, ``gains.kd``, ``gains.kf``, ``reference.amplitude``,
+``reference.frequency`` and ``reference.timeout`` apply from the next tick;
+``reference.source`` and the model are read-only (read at start-up).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from grasp_safety_filter.control.nominal import NominalConfig
+from grasp_safety_filter.io.schemas import NOMINAL_CONTROLLER_NODE
+from grasp_safety_filter.io.topics import (
+    DIAGNOSTICS,
+    EFFORT_NOMINAL,
+    JOINT_STATES,
+    OBJECT_ODOM,
+    OBJECT_REFERENCE,
+)
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
+
+
+class NominalControllerNode(EndpointNode):
+    """The nominal controller node (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(
+            NOMINAL_CONTROLLER_NODE, publishes=(EFFORT_NOMINAL, DIAGNOSTICS), **kwargs
+        )
+        model = GraspModel.from_parameters(self.parameters, self.config_directory)
+        config = NominalConfig.from_parameters(self.parameters)
+        self.endpoint = NominalControllerEndpoint(model, config, self.msgs)
+        self.subscribe(JOINT_STATES, lambda msg: self.publish(self.endpoint.on_joint_states(msg)))
+        self.subscribe(OBJECT_ODOM, lambda msg: self.publish(self.endpoint.on_odom(msg)))
+        if config.reference_source == 'topic':
+            self.subscribe(
+                OBJECT_REFERENCE, lambda msg: self.publish(self.endpoint.on_reference(msg))
+            )
+        self.get_logger().info(f'nominal controller ready, reference: {config.reference_source}')
+
+    def apply_parameters(self, changed: Mapping[str, Any]) -> None:
+        """Apply new gains, paper reference shape or topic reference timeout."""
+        self.endpoint.update_config(NominalConfig.from_parameters(self.parameters))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run ``nominal_controller_node`` until Ctrl-C or shutdown."""
+    spin_node(NominalControllerNode, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,436 @@
+"""The safety filter's message-level endpoint: state and u_nom in, u* out.
+
+Pure Python, shared by the rclpy node (:mod:`grasp_safety_filter.nodes.safety_filter_node`)
+and the ROS-free runner. A tick runs when the three inputs of one stamp t are in hand and
+valid::
+
+    /hand/joint_states (t) + /object/odom (t) + /hand/effort_nominal (t)
+        ──▶ GraspModel.state ──▶ SafetyFilter.solve(state, u_nom) ──▶ HoldPolicy.accept
+        ──▶ /hand/effort_command stamped t (u* by joint name, N·m)
+            /safety_filter/margins stamped t (barrier value h per row name)
+            /diagnostics: status ``safety_filter`` (below)
+
+Inputs are parsed by joint name and checked by a :class:`StampGuard` per topic (older than
+``input.max_age`` behind ``now``: stale; older than the topic's last stamp: out of
+order). A rejected input yields no computed command: :meth:`HoldPolicy.reject` gives the
+last safe command (``holding``, WARN) or, after ``input.hold_timeout``, the fallback
+(``fallback``, ERROR: zero torque or gravity compensation ``g(q)`` at the last accepted
+joint positions, clipped to the actuator limits). That command is published stamped with
+the rejected message's stamp when it is readable and current (a lockstep simulator waiting
+for that stamp goes on), else with ``now``; the tick of that stamp is then closed. A
+complete, valid set arriving again for the last tick's stamp (a simulator that re-sent its
+state) gets the same messages again, without a new solve.
+
+With ``enabled=False`` (the paper's unfiltered run) the endpoint validates the same inputs
+and publishes ``u* = u_nom`` on the same topic, with the margins at u_nom.
+
+Diagnostic values of the ``safety_filter`` status on every tick: ``filter.enabled``,
+``status`` (``nominal``, ``solved``, ``relaxed``, ``fallback_last_good``,
+``fallback_nominal``, or ``disabled``), ``solve_time_us`` (OSQP), ``step_time_us`` (the
+whole tick: model, filter, messages), ``iterations``, ``relaxed``, ``relaxed_families``
+(comma-separated), ``max_violation``, ``active`` (comma-separated row names),
+``min_margin.<family>`` per constraint family, and the hold policy's ``input.*`` values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.control.hold_policy import (
+    Fallback,
+    HoldPolicy,
+    InputMode,
+    InputPolicyConfig,
+)
+from grasp_safety_filter.control.safety_filter import (
+    FilterResult,
+    FilterStatus,
+    SafetyFilter,
+    SafetyFilterConfig,
+)
+from grasp_safety_filter.io.messages import (
+    DiagnosticLevel,
+    DiagnosticReport,
+    diagnostics_to_msg,
+    effort_from_msg,
+    effort_to_msg,
+    EffortData,
+    header_stamp_ns,
+    joint_state_from_msg,
+    JointStateData,
+    margins_to_msg,
+    MessageError,
+    MessageNamespace,
+    nanoseconds_to_seconds,
+    ObjectStateData,
+    odometry_from_msg,
+    OutOfOrderError,
+    seconds_to_nanoseconds,
+    StaleInputError,
+    StampGuard,
+)
+from grasp_safety_filter.io.topics import (
+    DIAGNOSTICS,
+    EFFORT_COMMAND,
+    EFFORT_NOMINAL,
+    JOINT_STATES,
+    MARGINS,
+    OBJECT_ODOM,
+)
+from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+
+#: Name of the safety filter's ``DiagnosticStatus``.
+DIAGNOSTIC_NAME = 'safety_filter'
+
+#: ``status`` value when the filter is switched off (pass-through).
+DISABLED = 'disabled'
+
+#: Incomplete input sets kept waiting for their other inputs (older ones are dropped).
+MAX_PENDING = 64
+
+_INPUTS = (JOINT_STATES, OBJECT_ODOM, EFFORT_NOMINAL)
+
+
+@dataclass(frozen=True)
+class TickInputs:
+    """The three validated inputs of one tick.
+
+    Attributes:
+        joint_states: Joint positions, velocities and efforts, model joint order.
+        odometry: Object pose and twist, palm frame.
+        nominal: The nominal torque u_nom, model joint order.
+
+    """
+
+    joint_states: JointStateData
+    odometry: ObjectStateData
+    nominal: EffortData
+
+
+class SafetyFilterEndpoint:
+    """The CBF-QP safety filter over messages (module docstring).
+
+    Args:
+        model: The ``GraspModel`` (joint and contact names, limits, ``state(...)``).
+        filter_config: Constraint families, class-K functions, relaxation and OSQP settings.
+        input_policy_config: ``input.max_age``, ``input.hold_timeout``, ``input.fallback``.
+        msgs: Message classes to build (rclpy or rosbags).
+        enabled: Filter on; off passes u_nom through (still validated).
+
+    Attributes:
+        filter: The safety filter core.
+        hold: The input hold policy.
+        guard: Stale and out-of-order stamp checks, per input topic.
+        enabled: Whether u* is filtered (True) or u_nom passed through (False).
+        last_result: The last tick's :class:`FilterResult` (None when disabled or before).
+
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        filter_config: SafetyFilterConfig,
+        input_policy_config: InputPolicyConfig,
+        msgs: MessageNamespace,
+        enabled: bool = True,
+    ) -> None:
+        self.model = model
+        self.msgs = msgs
+        self.enabled = bool(enabled)
+        self.filter = SafetyFilter.from_config(model, filter_config)
+        effort_limits = np.asarray(model.effort_limits, dtype=float)
+        self.hold = HoldPolicy.from_config(
+            input_policy_config, model.n_joints, -effort_limits, effort_limits
+        )
+        self.guard = StampGuard(input_policy_config.max_age)
+        self.last_result: FilterResult | None = None
+        self._joint_names = list(model.joint_names)
+        self._pending: dict[int, dict[str, Any]] = {}
+        self._replay: dict[str, Any] = {}
+        self._last_tick_ns: int | None = None
+        self._last_outputs: list[Outgoing] = []
+        self._last_positions: np.ndarray | None = None
+
+    # -------------------------------------------------------------------------- inputs
+    def on_joint_states(self, msg: Any, now: float | None = None) -> list[Outgoing]:
+        """Handle ``/hand/joint_states`` (see :meth:`on_effort_nominal` for ``now``)."""
+        return self._on_input(
+            JOINT_STATES,
+            msg,
+            now,
+            lambda: joint_state_from_msg(msg, self._joint_names, JOINT_STATES),
+        )
+
+    def on_odom(self, msg: Any, now: float | None = None) -> list[Outgoing]:
+        """Handle ``/object/odom`` (see :meth:`on_effort_nominal` for ``now``)."""
+        return self._on_input(
+            OBJECT_ODOM, msg, now, lambda: odometry_from_msg(msg, source=OBJECT_ODOM)
+        )
+
+    def on_effort_nominal(self, msg: Any, now: float | None = None) -> list[Outgoing]:
+        """Handle ``/hand/effort_nominal``; tick when all inputs of its stamp are in hand.
+
+        Args:
+            msg: The message.
+            now: The node's clock, s (simulation time under ``use_sim_time``). None: the
+                time of the last tick, so a runner without a clock still detects stale and
+                out-of-order input.
+
+        Returns:
+            Nothing while the tick's inputs are incomplete; on a tick, ``/hand/effort_command``,
+            ``/safety_filter/margins`` and ``/diagnostics``; on a rejected input,
+            ``/hand/effort_command`` (held or fallback) and ``/diagnostics``.
+
+        """
+        return self._on_input(
+            EFFORT_NOMINAL,
+            msg,
+            now,
+            lambda: effort_from_msg(msg, self._joint_names, EFFORT_NOMINAL),
+        )
+
+    def update_config(
+        self,
+        filter_config: SafetyFilterConfig | None = None,
+        input_policy_config: InputPolicyConfig | None = None,
+        enabled: bool | None = None,
+    ) -> None:
+        """Apply new parameters from the next tick on (None: unchanged).
+
+        A new filter configuration rebuilds the filter (and its OSQP problems); the hold
+        policy keeps its last safe command and mode.
+        """
+        if filter_config is not None:
+            self.filter = SafetyFilter.from_config(self.model, filter_config)
+        if input_policy_config is not None:
+            self.guard.max_age = input_policy_config.max_age
+            self.hold.hold_timeout = input_policy_config.hold_timeout
+            self.hold.fallback = input_policy_config.fallback
+        if enabled is not None:
+            self.enabled = bool(enabled)
+
+    # ------------------------------------------------------------------------ internals
+    def _now(self, msg: Any, now: float | None) -> float:
+        """Return the clock for this input: ``now``, else the last tick's time or the stamp."""
+        if now is not None:
+            return float(now)
+        if self._last_tick_ns is not None:
+            return nanoseconds_to_seconds(self._last_tick_ns)
+        try:
+            return nanoseconds_to_seconds(header_stamp_ns(msg))
+        except (AttributeError, MessageError):
+            return 0.0
+
+    def _on_input(self, topic: str, msg: Any, now: float | None, parse: Any) -> list[Outgoing]:
+        now_s = self._now(msg, now)
+        try:
+            data = parse()
+            self.guard.accept(topic, data.t, now_s)
+            stamp = seconds_to_nanoseconds(data.t)
+            if self._last_tick_ns is not None and stamp < self._last_tick_ns:
+                raise OutOfOrderError(
+                    f'{topic}: stamp {data.t:.9f} s belongs to a tick already closed (last '
+                    f'tick {nanoseconds_to_seconds(self._last_tick_ns):.9f} s)'
+                )
+        except MessageError as error:
+            return self._reject(topic, msg, error, now_s)
+        if topic == JOINT_STATES:
+            self._last_positions = np.array(data.position)
+        if stamp == self._last_tick_ns:
+            # The same tick again (e.g. a simulator that re-sent its state): same answer.
+            self._replay[topic] = data
+            if len(self._replay) < len(_INPUTS):
+                return []
+            self._replay = {}
+            return list(self._last_outputs)
+        inputs = self._pending.setdefault(stamp, {})
+        inputs[topic] = data
+        if len(inputs) < len(_INPUTS):
+            while len(self._pending) > MAX_PENDING:
+                del self._pending[min(self._pending)]
+            return []
+        del self._pending[stamp]
+        tick = TickInputs(inputs[JOINT_STATES], inputs[OBJECT_ODOM], inputs[EFFORT_NOMINAL])
+        return self._tick(stamp, tick, now_s)
+
+    def _close(self, stamp: int) -> None:
+        """Mark the tick of ``stamp`` as done: drop every older or equal pending input."""
+        self._last_tick_ns = stamp
+        self._replay = {}
+        for old in [s for s in self._pending if s <= stamp]:
+            del self._pending[old]
+
+    def _tick(self, stamp: int, inputs: TickInputs, now: float) -> list[Outgoing]:
+        start = time.perf_counter()
+        t = inputs.joint_states.t
+        u_nom = inputs.nominal.effort
+        try:
+            state = self.model.state(
+                t,
+                inputs.joint_states.position,
+                inputs.joint_states.velocity,
+                inputs.odometry.p_object_in_palm,
+                inputs.odometry.R_object_to_palm,
+                inputs.odometry.twist_object,
+            )
+            if self.enabled:
+                result = self.filter.solve(state, u_nom)
+                u, margins = result.u, result.margins
+            else:
+                result = None
+                u, margins = u_nom, self.filter.margins(state, u_nom)
+        except (ValueError, np.linalg.LinAlgError) as error:
+            return self._reject(
+                'state',
+                None,
+                MessageError(f'the model rejected the state at t = {t:.9f} s: {error}'),
+                now,
+                stamp,
+            )
+        self.last_result = result
+        u = self.hold.accept(now, u)
+        self._close(stamp)
+        names = list(margins)
+        outgoing = [
+            stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
+            stamped(
+                MARGINS, margins_to_msg(self.msgs, t, names, np.array(list(margins.values())))
+            ),
+        ]
+        step_time = time.perf_counter() - start
+        outgoing.append(self._tick_status(t, now, result, margins, step_time))
+        self._last_outputs = outgoing
+        return list(outgoing)
+
+    def _tick_status(
+        self,
+        t: float,
+        now: float,
+        result: FilterResult | None,
+        margins: dict[str, float],
+        step_time: float,
+    ) -> Outgoing:
+        values: dict[str, Any] = {'filter.enabled': self.enabled}
+        if result is None:
+            level, text = DiagnosticLevel.OK, 'filter off: u* = u_nom'
+            values.update(status=DISABLED, solve_time_us=0.0, iterations=0, relaxed=False)
+            values.update(relaxed_families='', max_violation=0.0, active='')
+        else:
+            status = str(getattr(result.status, 'value', result.status))
+            level, text = _status_level_and_text(status, result.relaxed)
+            if result.relaxed_families:
+                text += ': ' + ', '.join(result.relaxed_families)
+            values.update(
+                status=status,
+                solve_time_us=result.solve_time * 1e6,
+                iterations=result.iterations,
+                relaxed=result.relaxed,
+                relaxed_families=','.join(result.relaxed_families),
+                max_violation=result.max_violation,
+                active=','.join(result.active),
+            )
+        values['step_time_us'] = step_time * 1e6
+        for family, h in _min_margin_per_family(margins).items():
+            values[f'min_margin.{family}'] = h
+        values.update(self.hold.diagnostic_values(now))
+        report = DiagnosticReport.create(DIAGNOSTIC_NAME, level, text, values)
+        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))
+
+    def _reject(
+        self,
+        topic: str,
+        msg: Any,
+        error: Exception,
+        now: float,
+        stamp: int | None = None,
+    ) -> list[Outgoing]:
+        """Held or fallback command for a rejected input, and the status saying why."""
+        if stamp is None and not isinstance(error, StaleInputError | OutOfOrderError):
+            stamp = self._current_stamp(msg, now)
+        if stamp is None:
+            # The message's own stamp is unusable: stamp the command with the clock.
+            stamp = seconds_to_nanoseconds(max(now, 0.0))
+            if self._last_tick_ns is not None:
+                stamp = max(stamp, self._last_tick_ns)
+        gravity = None
+        note = ''
+        if self.hold.fallback is Fallback.GRAVITY_COMPENSATION:
+            if self._last_positions is not None:
+                q = self._last_positions
+                gravity = self.model.hand.terms(q, np.zeros_like(q)).gravity_torque
+            else:
+                gravity = np.zeros(len(self._joint_names))
+                note = ' (no joint state accepted yet: zero torque)'
+        u = self.hold.reject(now, f'{topic}: {error}', gravity)
+        self._close(stamp)
+        t = nanoseconds_to_seconds(stamp)
+        mode = self.hold.mode
+        action = (
+            'holding the last safe command'
+            if mode is InputMode.HOLDING
+            else f'fallback command: {self.hold.fallback.value}{note}'
+        )
+        values: dict[str, Any] = {'filter.enabled': self.enabled, 'input.topic': topic}
+        values.update(self.hold.diagnostic_values(now))
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            self.hold.diagnostic_level,
+            f'input rejected, {action}: {error}',
+            values,
+        )
+        outgoing = [
+            stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
+            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report)),
+        ]
+        self._last_outputs = outgoing
+        return list(outgoing)
+
+    def _current_stamp(self, msg: Any, now: float) -> int | None:
+        """Return the message's stamp if readable, not before the last tick, not in the future.
+
+        "Future" is beyond ``now + input.max_age``: a garbled stamp must not close ticks
+        that have not happened yet.
+        """
+        try:
+            stamp = header_stamp_ns(msg)
+        except (AttributeError, MessageError):
+            return None
+        if self._last_tick_ns is not None and stamp < self._last_tick_ns:
+            return None
+        if nanoseconds_to_seconds(stamp) > now + self.guard.max_age:
+            return None
+        return stamp
+
+
+_STATUS_TEXT: dict[str, str] = {
+    FilterStatus.NOMINAL.value: 'u* = u_nom: every constraint holds',
+    FilterStatus.SOLVED.value: 'QP solved',
+    FilterStatus.RELAXED.value: 'QP infeasible, relaxed',
+    FilterStatus.FALLBACK_LAST_GOOD.value: 'no QP solution: last good u*',
+    FilterStatus.FALLBACK_NOMINAL.value: 'no QP solution: u_nom clipped to the actuator limits',
+}
+
+
+def _status_level_and_text(status: str, relaxed: bool) -> tuple[DiagnosticLevel, str]:
+    """Level and summary of a filter status: ERROR without a QP answer, WARN if relaxed."""
+    if status.startswith('fallback'):
+        level = DiagnosticLevel.ERROR
+    elif relaxed:
+        level = DiagnosticLevel.WARN
+    else:
+        level = DiagnosticLevel.OK
+    return level, _STATUS_TEXT.get(status, f'QP {status}')
+
+
+def _min_margin_per_family(margins: dict[str, float]) -> dict[str, float]:
+    """Smallest barrier value per family (the first component of the row names)."""
+    smallest: dict[str, float] = {}
+    for name, h in margins.items():
+        family = name.split('/', 1)[0]
+        smallest[family] = min(smallest.get(family, math.inf), h)
+    return smallest

@@ -1,0 +1,101 @@
+"""``safety_filter_node``: the grasp safety filter as a ROS 2 node (rclpy shell).
+
+Run: ``ros2 run grasp_safety_filter safety_filter_node --ros-args --params-file
+config/paper_scenario.yaml``, remapping the topics to a real hand's driver and planner::
+
+    -r /hand/joint_states:=/my_hand/joint_states -r /object/odom:=/object_tracker/odom
+    -r /hand/effort_nominal:=/my_planner/effort -r /hand/effort_command:=/my_hand/effort
+
+Subscribes to ``/hand/joint_states``, ``/object/odom`` and ``/hand/effort_nominal``;
+publishes ``/hand/effort_command`` (u*), ``/safety_filter/margins`` and ``/diagnostics``.
+Everything else is :class:`grasp_safety_filter.nodes.safety_filter.SafetyFilterEndpoint`.
+Input stamps are checked against the node's clock: with the simulator, run it with
+``use_sim_time:=true``; with a real hand, the driver's stamps must be on the same clock as
+this node.
+
+Live parameters: ``enabled`` (false passes u_nom through), the constraint switches,
+``no_slip.normal_force_margin``, the class-K functions, the relaxation weights, the OSQP
+settings (these rebuild the filter) and ``input.*`` (the hold policy) apply from the next
+tick; ``no_slip.pyramid_faces`` and the model are read-only (read at start-up).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from grasp_safety_filter.control.hold_policy import InputPolicyConfig
+from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
+from grasp_safety_filter.io.schemas import SAFETY_FILTER_NODE
+from grasp_safety_filter.io.topics import (
+    DIAGNOSTICS,
+    EFFORT_COMMAND,
+    EFFORT_NOMINAL,
+    JOINT_STATES,
+    MARGINS,
+    OBJECT_ODOM,
+)
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
+
+#: Parameter switching the filter off (u* = u_nom) for the paper's unfiltered run.
+ENABLED_PARAMETER = 'enabled'
+
+
+class SafetyFilterNode(EndpointNode):
+    """The safety filter node (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(
+            SAFETY_FILTER_NODE, publishes=(EFFORT_COMMAND, MARGINS, DIAGNOSTICS), **kwargs
+        )
+        model = GraspModel.from_parameters(self.parameters, self.config_directory)
+        self.endpoint = SafetyFilterEndpoint(
+            model,
+            SafetyFilterConfig.from_parameters(self.parameters),
+            InputPolicyConfig.from_parameters(self.parameters),
+            self.msgs,
+            enabled=self.parameters[ENABLED_PARAMETER],
+        )
+        endpoint = self.endpoint
+        self.subscribe(
+            JOINT_STATES,
+            lambda msg: self.publish(endpoint.on_joint_states(msg, now=self.now_seconds())),
+        )
+        self.subscribe(
+            OBJECT_ODOM, lambda msg: self.publish(endpoint.on_odom(msg, now=self.now_seconds()))
+        )
+        self.subscribe(
+            EFFORT_NOMINAL,
+            lambda msg: self.publish(endpoint.on_effort_nominal(msg, now=self.now_seconds())),
+        )
+        state = 'on' if endpoint.enabled else 'OFF (u* = u_nom)'
+        self.get_logger().info(
+            f'safety filter {state}: {len(endpoint.filter.row_names)} constraint rows'
+        )
+
+    def apply_parameters(self, changed: Mapping[str, Any]) -> None:
+        """Rebuild the filter, update the hold policy or switch the filter on or off."""
+        filter_changed = any(
+            not name.startswith('input.') and name != ENABLED_PARAMETER for name in changed
+        )
+        input_changed = any(name.startswith('input.') for name in changed)
+        self.endpoint.update_config(
+            filter_config=(
+                SafetyFilterConfig.from_parameters(self.parameters) if filter_changed else None
+            ),
+            input_policy_config=(
+                InputPolicyConfig.from_parameters(self.parameters) if input_changed else None
+            ),
+            enabled=self.parameters[ENABLED_PARAMETER] if ENABLED_PARAMETER in changed else None,
+        )
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run ``safety_filter_node`` until Ctrl-C or shutdown."""
+    spin_node(SafetyFilterNode, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,372 @@
+"""The simulator's message-level endpoint: commands in, state, contacts and clock out.
+
+Pure Python: the rclpy node (:mod:`hand_sim_node.node`) and the ROS-free runner call the
+same methods and publish (or record) the returned :class:`Outgoing` lists, so both produce
+the same stream. One tick in lockstep mode (the default)::
+
+    state at t_k  ──/clock, /hand/joint_states, /object/odom──▶  controllers
+    /hand/effort_command stamped t_k  ──▶  on_command
+        ──▶ /hand/contacts stamped t_k (coordinates, rates, contact forces under u_k)
+        ──▶ /clock, /hand/joint_states, /object/odom stamped t_k+1
+
+- ``/hand/joint_states`` holds ``q`` (rad), ``dq`` (rad/s) and, as effort, the torque
+  applied over the step that ended at its stamp (N·m; zero at t_0);
+- ``/object/odom`` the object pose in the palm frame and its twist in the object frame
+  (see :func:`grasp_safety_filter.io.messages.odometry_to_msg`);
+- ``/clock`` the simulation time (when ``publish_clock`` is set).
+
+A command is applied only if it parses (every joint by name, finite efforts) and, in
+lockstep, its stamp equals the current state's stamp; otherwise the endpoint reports it on
+``/diagnostics`` (status ``hand_sim``, WARN) and does not step. If no command arrives
+within ``command_timeout`` s of wall time, :meth:`HandSimEndpoint.timeout` reports it and
+publishes the current state again (same stamp), which recovers a command or state lost
+while the graph was still connecting. The run ends after ``duration`` (the state at
+``t = duration`` is published) or when the simulator stops on an event; a last
+``hand_sim`` status says which (``run.stop_reason``: ``duration``, ``fingertip_workspace``,
+``slip`` or ``numerical_failure``).
+
+Without lockstep, :meth:`HandSimEndpoint.on_command` only stores the latest valid
+command and :meth:`HandSimEndpoint.advance` (called by a wall-clock timer) integrates one
+step with it, zero-order hold, whatever its stamp.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.io.messages import (
+    clock_to_msg,
+    ContactData,
+    contacts_to_msg,
+    DiagnosticLevel,
+    DiagnosticReport,
+    diagnostics_to_msg,
+    effort_from_msg,
+    header_stamp_ns,
+    joint_state_to_msg,
+    MessageError,
+    MessageNamespace,
+    nanoseconds_to_seconds,
+    odometry_to_msg,
+    seconds_to_nanoseconds,
+)
+from grasp_safety_filter.io.topics import (
+    CLOCK,
+    CONTACTS,
+    DIAGNOSTICS,
+    EFFORT_COMMAND,
+    JOINT_STATES,
+    OBJECT_ODOM,
+    SCENARIO,
+)
+from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.scenario import (
+    scenario_document,
+    scenario_to_text,
+)
+from hand_sim_node.config import SimConfig
+from hand_sim_node.simulator import NUMERICAL_FAILURE, Simulator
+
+#: Name of the simulator's ``DiagnosticStatus``.
+DIAGNOSTIC_NAME = 'hand_sim'
+
+#: ``run.stop_reason`` of a run that reached its duration.
+DURATION = 'duration'
+
+#: SimConfig fields that may change while the simulator runs (the others are read-only).
+LIVE_FIELDS = (
+    'stop_on_slip',
+    'stop_on_workspace_exit',
+    'position_gain',
+    'velocity_gain',
+    'command_timeout',
+)
+
+
+class HandSimEndpoint:
+    """The hand–object simulator behind ``/hand/effort_command`` (module docstring).
+
+    Args:
+        model: The ``GraspModel`` of the hand and object.
+        sim_config: Initial state, integrator, step, duration, stop rules, lockstep.
+        msgs: Message classes to build (rclpy or rosbags).
+        scenario_text: The ``/grasp/scenario`` JSON; default: built from ``model`` and
+            ``sim_config`` (:func:`grasp_safety_filter.nodes.scenario.scenario_document`).
+
+    Attributes:
+        simulator: The plant.
+        command_timeout: Lockstep wait for a command before a diagnostic, s (wall time).
+
+    """
+
+    def __init__(
+        self,
+        model: Any,
+        sim_config: SimConfig,
+        msgs: MessageNamespace,
+        scenario_text: str | None = None,
+    ) -> None:
+        self.model = model
+        self.msgs = msgs
+        self.simulator = Simulator(model, sim_config)
+        self.command_timeout = float(sim_config.command_timeout)
+        self.scenario_text = (
+            scenario_text
+            if scenario_text is not None
+            else scenario_to_text(scenario_document(model, sim_config))
+        )
+        self._joint_names = list(model.joint_names)
+        self._applied_effort = np.zeros(model.n_joints)
+        self._latest_command: np.ndarray | None = None
+        self._latest_command_ns: int | None = None
+        self._started = False
+        self._reported_end = False
+        self._waiting_since: float | None = None
+
+    # ------------------------------------------------------------------------ properties
+    @property
+    def config(self) -> SimConfig:
+        """The simulator configuration in force."""
+        return self.simulator.config
+
+    @property
+    def lockstep(self) -> bool:
+        """Whether a step waits for the command stamped with the current state's stamp."""
+        return bool(self.config.lockstep)
+
+    @property
+    def started(self) -> bool:
+        """Whether :meth:`start` was called."""
+        return self._started
+
+    @property
+    def finished(self) -> bool:
+        """Whether the run is over (duration reached or stopped on an event)."""
+        return (
+            self.simulator.stop_reason is not None
+            or self.simulator.step_index >= self.config.n_steps
+        )
+
+    @property
+    def stop_reason(self) -> str | None:
+        """``"duration"``, the simulator's stop reason, or None while the run goes on."""
+        if self.simulator.stop_reason is not None:
+            return self.simulator.stop_reason
+        return DURATION if self.finished else None
+
+    @property
+    def t(self) -> float:
+        """Simulation time of the current state, s."""
+        return self.simulator.t
+
+    @property
+    def stamp_ns(self) -> int:
+        """Stamp of the current state, integer ns."""
+        return seconds_to_nanoseconds(self.simulator.t)
+
+    @property
+    def awaited_stamp_ns(self) -> int | None:
+        """Stamp of the command the lockstep simulator waits for, or None if it waits for none."""
+        if not (self._started and self.lockstep) or self.finished:
+            return None
+        return self.stamp_ns
+
+    # ------------------------------------------------------------------------------ run
+    def start(self, now: float = 0.0) -> list[Outgoing]:
+        """Reset the run; return ``/grasp/scenario`` and the state at t_0.
+
+        Args:
+            now: Wall-clock time, s (any origin), for the lockstep timeout.
+
+        """
+        self.simulator.reset()
+        self._applied_effort = np.zeros(self.model.n_joints)
+        self._latest_command = None
+        self._latest_command_ns = None
+        self._started = True
+        self._reported_end = False
+        self._waiting_since = float(now)
+        scenario = Outgoing(SCENARIO, self.stamp_ns, self.msgs.String(data=self.scenario_text))
+        return [scenario, *self._state_messages()]
+
+    def on_command(self, msg: Any, now: float = 0.0) -> list[Outgoing]:
+        """Handle a ``/hand/effort_command``; in lockstep, step when it is the awaited one.
+
+        Args:
+            msg: A ``sensor_msgs/JointState`` with one effort per joint, by name.
+            now: Wall-clock time, s, for the lockstep timeout.
+
+        Returns:
+            Lockstep, applied: ``/hand/contacts`` at t_k, then the state at t_k+1 (or the
+            end-of-run status). Rejected: one ``/diagnostics`` message. Not lockstep: the
+            command is stored (nothing is returned unless it is rejected).
+
+        """
+        if not self._started:
+            return self._warn('command before the simulation started: ignored', msg)
+        if self.finished:
+            return []  # the controllers answer the final state; nothing left to apply
+        try:
+            command = effort_from_msg(msg, self._joint_names, source=EFFORT_COMMAND)
+        except MessageError as error:
+            return self._warn(f'command rejected: {error}', msg)
+        stamp_ns = seconds_to_nanoseconds(command.t)
+        if not self.lockstep:
+            if self._latest_command_ns is not None and stamp_ns < self._latest_command_ns:
+                return self._warn(
+                    f'command rejected: stamp {command.t:.9f} s is older than the last '
+                    f'applied one ({nanoseconds_to_seconds(self._latest_command_ns):.9f} s)',
+                    msg,
+                )
+            self._latest_command = command.effort
+            self._latest_command_ns = stamp_ns
+            return []
+        if stamp_ns != self.stamp_ns:
+            when = 'late' if stamp_ns < self.stamp_ns else 'early'
+            return self._warn(
+                f'command stamped {command.t:.9f} s is {when}: waiting for the one stamped '
+                f'{self.t:.9f} s; not applied',
+                msg,
+            )
+        self._waiting_since = float(now)
+        return self._step(command.effort)
+
+    def advance(self) -> list[Outgoing]:
+        """Free-running mode: integrate one step with the latest command (none: wait).
+
+        Returns:
+            As an applied lockstep command; empty before the first command or after the end.
+
+        """
+        if self.lockstep:
+            raise RuntimeError('HandSimEndpoint.advance: the simulator runs in lockstep mode')
+        if not self._started or self.finished or self._latest_command is None:
+            return []
+        return self._step(self._latest_command)
+
+    def timeout(self, now: float) -> list[Outgoing]:
+        """Lockstep watchdog: report a missing command and publish the state again.
+
+        Args:
+            now: Wall-clock time, s, on the clock of the ``now`` given to :meth:`start`
+                and :meth:`on_command`.
+
+        Returns:
+            Nothing while the wait is shorter than ``command_timeout``; else a WARN status
+            and the current state (same stamp), and the wait starts over.
+
+        """
+        awaited = self.awaited_stamp_ns
+        if awaited is None or self._waiting_since is None:
+            return []
+        waited = float(now) - self._waiting_since
+        if waited < self.command_timeout:
+            return []
+        self._waiting_since = float(now)
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            DiagnosticLevel.WARN,
+            f'no command stamped {self.t:.9f} s after {waited:.3f} s (command_timeout '
+            f'{self.command_timeout} s); publishing the state again',
+            {'t': self.t, 'waited': waited, 'command_timeout': self.command_timeout},
+        )
+        return [self._diagnostics(report), *self._state_messages()]
+
+    def update_config(self, sim_config: SimConfig) -> None:
+        """Apply new live parameters (:data:`LIVE_FIELDS`) from the next step on.
+
+        Raises:
+            ValueError: A read-only field (initial state, integrator, time step, duration,
+                lockstep, publish_clock) differs from the one in force.
+
+        """
+        current = self.simulator.config
+        changed = [
+            f.name
+            for f in dataclasses.fields(SimConfig)
+            if f.name not in LIVE_FIELDS
+            and not np.array_equal(getattr(sim_config, f.name), getattr(current, f.name))
+        ]
+        if changed:
+            raise ValueError(
+                f'HandSimEndpoint.update_config: {changed} are read-only while the simulator runs'
+            )
+        self.simulator.config = sim_config
+        self.command_timeout = float(sim_config.command_timeout)
+
+    # ------------------------------------------------------------------------- internals
+    def _step(self, effort: np.ndarray) -> list[Outgoing]:
+        report = self.simulator.step(effort)
+        contacts = ContactData.from_grasp_state(report.grasp_state, report.contact_force)
+        outgoing = [
+            stamped(CONTACTS, contacts_to_msg(self.msgs, contacts, self.model.contact_names))
+        ]
+        if report.stop_reason is None:
+            self._applied_effort = np.array(report.effort)
+            outgoing += self._state_messages()
+        if self.finished and not self._reported_end:
+            outgoing.append(self._end_of_run())
+        return outgoing
+
+    def _state_messages(self) -> list[Outgoing]:
+        state = self.simulator.state
+        messages = []
+        if self.config.publish_clock:
+            messages.append(stamped(CLOCK, clock_to_msg(self.msgs, state.t)))
+        messages.append(
+            stamped(
+                JOINT_STATES,
+                joint_state_to_msg(
+                    self.msgs, state.t, self._joint_names, state.q, state.dq, self._applied_effort
+                ),
+            )
+        )
+        messages.append(
+            stamped(
+                OBJECT_ODOM,
+                odometry_to_msg(
+                    self.msgs,
+                    state.t,
+                    state.p_object_in_palm,
+                    state.R_object_to_palm,
+                    state.twist_object,
+                ),
+            )
+        )
+        return messages
+
+    def _end_of_run(self) -> Outgoing:
+        self._reported_end = True
+        reason = self.stop_reason
+        if reason == DURATION:
+            level, text = DiagnosticLevel.OK, f'run complete at t = {self.t:.9f} s'
+        else:
+            level = DiagnosticLevel.ERROR if reason == NUMERICAL_FAILURE else DiagnosticLevel.WARN
+            text = f'run stopped at t = {self.t:.9f} s: {reason}'
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            level,
+            text,
+            {
+                'run.finished': True,
+                'run.stop_reason': reason,
+                'run.t_end': self.t,
+                'run.steps': self.simulator.step_index,
+            },
+        )
+        return self._diagnostics(report)
+
+    def _warn(self, text: str, msg: Any) -> list[Outgoing]:
+        values: dict[str, Any] = {'t': self.t}
+        try:
+            values['command_stamp'] = nanoseconds_to_seconds(header_stamp_ns(msg))
+        except (AttributeError, MessageError):
+            values['command_stamp'] = 'unreadable'
+        report = DiagnosticReport.create(DIAGNOSTIC_NAME, DiagnosticLevel.WARN, text, values)
+        return [self._diagnostics(report)]
+
+    def _diagnostics(self, report: DiagnosticReport) -> Outgoing:
+        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, self.t, report))

@@ -1,0 +1,144 @@
+"""``hand_sim_node``: the hand–object simulator as a ROS 2 node (rclpy shell).
+
+Run: ``ros2 run grasp_safety_filter hand_sim_node --ros-args --params-file
+config/paper_scenario.yaml -p use_sim_time:=true``.
+
+Publishes ``/grasp/scenario`` (once, latched), ``/clock``, ``/hand/joint_states``,
+``/object/odom``, ``/hand/contacts`` and ``/diagnostics``; subscribes to
+``/hand/effort_command``. Everything else is :class:`hand_sim_node.endpoint.HandSimEndpoint`.
+
+Start-up: the run starts (scenario and state at t_0 published) once the command topic has
+a publisher and the state topics have subscribers, so the first state is not lost while
+the graph connects; then in lockstep (the default) each command stamped with the current
+state's stamp advances the simulation by one step, as fast as the controllers answer. A
+wall-clock watchdog reports a command missing for ``command_timeout`` s and publishes the
+state again. Without lockstep, a wall-clock timer steps every ``time_step`` s with the
+latest command. The node exits one second after the run ends (so that a launch file with
+``on_exit=Shutdown()`` ends the demo and a recorder closes its bag).
+
+Live parameters: ``stop_on_slip``, ``stop_on_workspace_exit``,
+``stabilization.position_gain``, ``stabilization.velocity_gain`` and ``command_timeout``
+apply from the next step; the others are read-only (read at start-up).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+import time
+from typing import Any
+
+import rclpy
+from rclpy.clock import Clock, ClockType
+
+from grasp_safety_filter.io.schemas import HAND_SIM_NODE
+from grasp_safety_filter.io.topics import (
+    CLOCK,
+    CONTACTS,
+    DIAGNOSTICS,
+    EFFORT_COMMAND,
+    JOINT_STATES,
+    OBJECT_ODOM,
+    SCENARIO,
+)
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from hand_sim_node.config import SimConfig
+from hand_sim_node.endpoint import HandSimEndpoint
+
+#: Wall-clock period of the start-up and watchdog checks, s.
+CHECK_PERIOD = 0.05
+
+#: Wall-clock delay between the end of the run and the node's exit, s.
+EXIT_DELAY = 1.0
+
+
+class HandSimNode(EndpointNode):
+    """The simulator node (module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(
+            HAND_SIM_NODE,
+            publishes=(SCENARIO, CLOCK, JOINT_STATES, OBJECT_ODOM, CONTACTS, DIAGNOSTICS),
+            **kwargs,
+        )
+        model = GraspModel.from_parameters(self.parameters, self.config_directory)
+        self.endpoint = HandSimEndpoint(
+            model, SimConfig.from_parameters(self.parameters), self.msgs
+        )
+        self._command_subscription = self.subscribe(EFFORT_COMMAND, self._on_command)
+        # Timers on the steady clock: simulation time stands still while the simulator waits.
+        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
+        self._check_timer = self.create_timer(CHECK_PERIOD, self._check, clock=self._steady_clock)
+        self._step_timer = None
+        if not self.endpoint.lockstep:
+            self._step_timer = self.create_timer(
+                self.endpoint.config.time_step, self._advance, clock=self._steady_clock
+            )
+        self._exit_timer = None
+        self._waiting_logged_at = time.monotonic()
+        self.get_logger().info(
+            f'simulating {model.n_joints} joints, {model.n_contacts} contacts for '
+            f'{self.endpoint.config.duration} s in steps of {self.endpoint.config.time_step} s '
+            f'({"lockstep" if self.endpoint.lockstep else "free-running"}); waiting for a '
+            f'controller on {self._command_subscription.topic_name}'
+        )
+
+    def apply_parameters(self, changed: Mapping[str, Any]) -> None:
+        """Apply new stop rules, stabilisation gains or command timeout."""
+        self.endpoint.update_config(SimConfig.from_parameters(self.parameters))
+
+    # ------------------------------------------------------------------------ callbacks
+    def _on_command(self, msg: Any) -> None:
+        self.publish(self.endpoint.on_command(msg, now=time.monotonic()))
+        self._exit_if_finished()
+
+    def _advance(self) -> None:
+        self.publish(self.endpoint.advance())
+        self._exit_if_finished()
+
+    def _check(self) -> None:
+        now = time.monotonic()
+        if self.endpoint.started:
+            self.publish(self.endpoint.timeout(now))
+            return
+        if self._graph_connected():
+            self.get_logger().info('controller connected: starting the run')
+            self.publish(self.endpoint.start(now=now))
+        elif now - self._waiting_logged_at > 5.0:
+            self._waiting_logged_at = now
+            self.get_logger().info(
+                f'still waiting for a publisher on {self._command_subscription.topic_name} '
+                'and subscribers on the state topics'
+            )
+
+    def _graph_connected(self) -> bool:
+        """Whether a controller is there: a command publisher and state subscribers."""
+        return (
+            self.count_publishers(self._command_subscription.topic_name) > 0
+            and self.publisher(JOINT_STATES).get_subscription_count() > 0
+            and self.publisher(OBJECT_ODOM).get_subscription_count() > 0
+        )
+
+    def _exit_if_finished(self) -> None:
+        if self.endpoint.finished and self._exit_timer is None:
+            self.get_logger().info(
+                f'run finished at t = {self.endpoint.t:.3f} s ({self.endpoint.stop_reason}); '
+                f'exiting in {EXIT_DELAY} s'
+            )
+            self._check_timer.cancel()
+            if self._step_timer is not None:
+                self._step_timer.cancel()
+            self._exit_timer = self.create_timer(EXIT_DELAY, self._exit, clock=self._steady_clock)
+
+    def _exit(self) -> None:
+        self._exit_timer.cancel()
+        rclpy.try_shutdown(context=self.context)
+
+
+def main(args: list[str] | None = None) -> None:
+    """Run ``hand_sim_node`` until the run ends, Ctrl-C or shutdown."""
+    spin_node(HandSimNode, args)
+
+
+if __name__ == '__main__':
+    main()

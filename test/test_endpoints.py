@@ -1,0 +1,607 @@
+"""Node endpoints: lockstep ticks through CDR, and every kind of bad input reported and held."""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+import dataclasses
+import json
+import math
+from pathlib import Path
+import re
+
+import numpy as np
+import pytest
+from rosbags.typesys import get_typestore, Stores
+
+from grasp_safety_filter.control.hold_policy import InputPolicyConfig
+from grasp_safety_filter.control.nominal import NominalConfig, NominalController
+from grasp_safety_filter.control.reference import PaperReference, Pose, ReferenceSample
+from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
+from grasp_safety_filter.io import messages as m
+from grasp_safety_filter.io import topics
+from grasp_safety_filter.io.messages import DiagnosticLevel, MessageNamespace, ObjectReference
+from grasp_safety_filter.io.schemas import load_node_parameters
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
+from grasp_safety_filter.nodes.outgoing import Outgoing
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
+from grasp_safety_filter.nodes.scenario import scenario_from_msg, scenario_from_text, ScenarioError
+from hand_sim_node.config import SimConfig
+from hand_sim_node.endpoint import HandSimEndpoint
+from hand_sim_node.simulator import Simulator
+
+CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+MSGS = MessageNamespace.from_typestore(TYPESTORE)
+STEPS = 4
+
+
+def through_cdr(msg):
+    """Serialise to CDR and back, as the middleware (or a bag) does."""
+    return TYPESTORE.deserialize_cdr(
+        TYPESTORE.serialize_cdr(msg, msg.__msgtype__), msg.__msgtype__
+    )
+
+
+@pytest.fixture(scope='module')
+def params():
+    return {
+        node: load_node_parameters(CONFIG, node)
+        for node in ('hand_sim_node', 'nominal_controller_node', 'safety_filter_node')
+    }
+
+
+def sim_config(params, **overrides) -> SimConfig:
+    config = SimConfig.from_parameters(params['hand_sim_node'])
+    return dataclasses.replace(config, duration=STEPS * config.time_step, **overrides)
+
+
+def make_sim(params, **overrides) -> HandSimEndpoint:
+    model = GraspModel.from_parameters(params['hand_sim_node'])
+    return HandSimEndpoint(model, sim_config(params, **overrides), MSGS)
+
+
+def make_nominal(params, **overrides) -> NominalControllerEndpoint:
+    values = {**params['nominal_controller_node'], **overrides}
+    model = GraspModel.from_parameters(values)
+    return NominalControllerEndpoint(model, NominalConfig.from_parameters(values), MSGS)
+
+
+def make_filter(params, enabled=True, **overrides) -> SafetyFilterEndpoint:
+    values = {**params['safety_filter_node'], **overrides}
+    model = GraspModel.from_parameters(values)
+    return SafetyFilterEndpoint(
+        model,
+        SafetyFilterConfig.from_parameters(values),
+        InputPolicyConfig.from_parameters(values),
+        MSGS,
+        enabled=enabled,
+    )
+
+
+class Graph:
+    """The three endpoints wired as the ROS graph wires the nodes; messages pass through CDR."""
+
+    def __init__(self, sim, nominal, safety_filter):
+        self.log: list[Outgoing] = []
+        self.subscribers = {
+            topics.JOINT_STATES: [nominal.on_joint_states, safety_filter.on_joint_states],
+            topics.OBJECT_ODOM: [nominal.on_odom, safety_filter.on_odom],
+            topics.OBJECT_REFERENCE: [nominal.on_reference],
+            topics.EFFORT_NOMINAL: [safety_filter.on_effort_nominal],
+            topics.EFFORT_COMMAND: [sim.on_command],
+        }
+
+    def deliver(self, outgoing):
+        queue = deque(outgoing)
+        while queue:
+            topic, stamp_ns, msg = queue.popleft()
+            received = through_cdr(msg)
+            self.log.append(Outgoing(topic, stamp_ns, received))
+            for handler in self.subscribers.get(topic, []):
+                queue.extend(handler(received))
+
+    def messages(self, topic):
+        return [o.msg for o in self.log if o.topic == topic]
+
+
+def statuses(outgoing, name):
+    """Return the DiagnosticStatus reports called ``name`` among the outgoing messages."""
+    return [
+        report
+        for o in outgoing
+        if o.topic == topics.DIAGNOSTICS
+        for report in m.diagnostics_from_msg(through_cdr(o.msg)).reports
+        if report.name == name
+    ]
+
+
+def efforts(msgs, joint_names):
+    return [m.effort_from_msg(msg, joint_names).effort for msg in msgs]
+
+
+def commands(outgoing, joint_names):
+    return [
+        m.effort_from_msg(through_cdr(o.msg), joint_names).effort
+        for o in outgoing
+        if o.topic == topics.EFFORT_COMMAND
+    ]
+
+
+# ----------------------------------------------------------------------------------------
+# Lockstep through CDR
+
+
+def test_lockstep_ticks_through_cdr_match_the_cores_wired_directly(params):
+    sim, nominal, safety_filter = make_sim(params), make_nominal(params), make_filter(params)
+    graph = Graph(sim, nominal, safety_filter)
+    graph.deliver(sim.start())
+
+    assert sim.finished
+    assert sim.stop_reason == 'duration'
+    counts = Counter(o.topic for o in graph.log)
+    assert counts[topics.SCENARIO] == 1
+    # States at t_0..t_N; the controllers also answer the final state, which ends the run.
+    for topic in (topics.JOINT_STATES, topics.OBJECT_ODOM, topics.CLOCK, topics.EFFORT_NOMINAL):
+        assert counts[topic] == STEPS + 1, topic
+    assert counts[topics.EFFORT_COMMAND] == STEPS + 1
+    assert counts[topics.MARGINS] == STEPS + 1
+    assert counts[topics.CONTACTS] == STEPS
+    for topic in counts:
+        stamps = [o.stamp_ns for o in graph.log if o.topic == topic]
+        assert stamps == sorted(stamps), topic
+    dt_ns = m.seconds_to_nanoseconds(sim.config.time_step)
+    command_stamps = [o.stamp_ns for o in graph.log if o.topic == topics.EFFORT_COMMAND]
+    assert command_stamps == [k * dt_ns for k in range(STEPS + 1)]
+    (end,) = statuses(graph.log, 'hand_sim')
+    assert end.values['run.stop_reason'] == 'duration'
+    assert int(end.values['run.steps']) == STEPS
+
+    # The same cores wired by function calls, without messages.
+    model = GraspModel.from_parameters(params['hand_sim_node'])
+    plant = Simulator(model, sim_config(params))
+    config = NominalConfig.from_parameters(params['nominal_controller_node'])
+    controller = NominalController(config)
+    core = SafetyFilter.from_config(
+        model, SafetyFilterConfig.from_parameters(params['safety_filter_node'])
+    )
+    start = plant.state
+    reference = PaperReference(
+        Pose(start.p_object_in_palm, start.R_object_to_palm), config.amplitude, config.frequency
+    )
+    joint_names = model.joint_names
+    sent = [
+        m.effort_from_msg(msg, joint_names).effort for msg in graph.messages(topics.EFFORT_COMMAND)
+    ]
+    for k in range(STEPS):
+        s = plant.state
+        state = model.state(s.t, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
+        u = core.solve(state, controller.compute(state, reference.sample(s.t)).u).u
+        np.testing.assert_allclose(sent[k], u, rtol=1e-7, atol=1e-8)
+        plant.step(u)
+    final = m.joint_state_from_msg(graph.messages(topics.JOINT_STATES)[-1], joint_names)
+    np.testing.assert_allclose(final.position, plant.state.q, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(final.velocity, plant.state.dq, rtol=0, atol=1e-9)
+    # The state's effort is the torque applied over the step that ended at its stamp.
+    np.testing.assert_array_equal(final.effort, sent[STEPS - 1])
+
+
+def test_filter_off_passes_the_nominal_command_through_bit_for_bit(params):
+    sim, nominal = make_sim(params), make_nominal(params)
+    safety_filter = make_filter(params, enabled=False)
+    graph = Graph(sim, nominal, safety_filter)
+    graph.deliver(sim.start())
+    joint_names = sim.model.joint_names
+    nominal_u = [
+        m.effort_from_msg(x, joint_names).effort for x in graph.messages(topics.EFFORT_NOMINAL)
+    ]
+    sent = [
+        m.effort_from_msg(x, joint_names).effort for x in graph.messages(topics.EFFORT_COMMAND)
+    ]
+    assert len(sent) == STEPS + 1
+    for u, u_nom in zip(sent, nominal_u, strict=True):
+        assert u.tobytes() == u_nom.tobytes()
+    margins = m.margins_from_msg(graph.messages(topics.MARGINS)[0])
+    assert any(name.startswith('no_slip/') for name in margins.names)
+    reports = statuses(graph.log, 'safety_filter')
+    assert {r.values['status'] for r in reports} == {'disabled'}
+    assert {r.values['filter.enabled'] for r in reports} == {'false'}
+    assert all(r.level is DiagnosticLevel.OK for r in reports)
+
+
+def test_scenario_message_describes_the_model_and_run(params):
+    sim = make_sim(params)
+    first, *_ = sim.start()
+    assert first.topic == topics.SCENARIO
+    document = scenario_from_msg(through_cdr(first.msg))
+    model = sim.model
+    assert document['joint_names'] == model.joint_names
+    assert document['joint_lower_limits'] == model.joint_lower_limits.tolist()
+    assert document['joint_upper_limits'] == model.joint_upper_limits.tolist()
+    assert document['effort_limits'] == model.effort_limits.tolist()
+    assert document['contact_names'] == model.contact_names
+    assert document['friction_coefficient'] == model.friction_coefficient
+    assert document['fingertip_workspace'] == dataclasses.asdict(model.fingertip_workspace)
+    assert document['time_step'] == sim.config.time_step
+    assert document['n_steps'] == STEPS
+    assert document['integrator'] == 'ode3'
+    assert not [key for key in document if 'filter' in key]
+
+
+@pytest.mark.parametrize(
+    ('text', 'match'),
+    [
+        ('not json', 'invalid JSON'),
+        ('[]', 'JSON object'),
+        ('{"format": "other", "version": 1}', 'format'),
+    ],
+)
+def test_scenario_parser_rejects_foreign_documents(text, match):
+    with pytest.raises(ScenarioError, match=match):
+        scenario_from_text(text)
+
+
+def test_scenario_parser_names_a_missing_key(params):
+    document = json.loads(make_sim(params).scenario_text)
+    del document['time_step']
+    with pytest.raises(ScenarioError, match="'time_step'"):
+        scenario_from_text(json.dumps(document))
+
+
+# ----------------------------------------------------------------------------------------
+# The simulator endpoint
+
+
+def test_simulator_rejects_bad_and_mistimed_commands_without_stepping(params):
+    sim = make_sim(params)
+    sim.start()
+    names = sim.model.joint_names
+    t0 = sim.t
+    u = np.zeros(len(names))
+    bad = [
+        m.effort_to_msg(MSGS, t0, names, np.full(len(names), np.nan)),
+        m.effort_to_msg(MSGS, t0, names[:-1], u[:-1]),
+        m.effort_to_msg(MSGS, t0, [*names[:-1], 'elbow'], u),
+        m.effort_to_msg(MSGS, t0 + sim.config.time_step, names, u),
+    ]
+    for msg in bad:
+        outgoing = sim.on_command(through_cdr(msg))
+        assert [o.topic for o in outgoing] == [topics.DIAGNOSTICS]
+        (report,) = statuses(outgoing, 'hand_sim')
+        assert report.level is DiagnosticLevel.WARN
+        assert sim.t == t0
+        assert sim.simulator.step_index == 0
+    applied = sim.on_command(through_cdr(m.effort_to_msg(MSGS, t0, list(reversed(names)), u)))
+    assert [o.topic for o in applied][:2] == [topics.CONTACTS, topics.CLOCK]
+    assert sim.simulator.step_index == 1
+
+
+def test_simulator_timeout_reports_and_republishes_the_same_state(params):
+    sim = make_sim(params, command_timeout=0.5)
+    sim.start(now=10.0)
+    assert sim.timeout(now=10.4) == []
+    outgoing = sim.timeout(now=10.6)
+    assert [o.topic for o in outgoing] == [
+        topics.DIAGNOSTICS,
+        topics.CLOCK,
+        topics.JOINT_STATES,
+        topics.OBJECT_ODOM,
+    ]
+    assert {o.stamp_ns for o in outgoing} == {0}
+    assert 'no command' in statuses(outgoing, 'hand_sim')[0].message
+    assert sim.timeout(now=10.7) == []  # the wait started over
+
+
+def test_simulator_without_lockstep_holds_the_latest_command(params):
+    sim = make_sim(params, lockstep=False)
+    sim.start()
+    assert sim.advance() == []  # no command yet: time does not advance
+    names = sim.model.joint_names
+    assert sim.on_command(m.effort_to_msg(MSGS, 123.0, names, np.zeros(len(names)))) == []
+    outgoing = sim.advance()
+    assert topics.JOINT_STATES in [o.topic for o in outgoing]
+    assert sim.simulator.step_index == 1
+    old = sim.on_command(m.effort_to_msg(MSGS, 1.0, names, np.zeros(len(names))))
+    assert 'older' in statuses(old, 'hand_sim')[0].message
+
+
+def test_simulator_live_parameters_apply_and_read_only_ones_are_refused(params):
+    sim = make_sim(params)
+    sim.update_config(dataclasses.replace(sim.config, stop_on_slip=True, command_timeout=2.0))
+    assert sim.simulator.config.stop_on_slip
+    assert sim.command_timeout == 2.0
+    with pytest.raises(ValueError, match='time_step'):
+        sim.update_config(dataclasses.replace(sim.config, time_step=0.0005))
+
+
+# ----------------------------------------------------------------------------------------
+# The nominal controller endpoint
+
+
+def first_state_messages(params):
+    """Return the simulator and its state at t_0 (joint states, odometry), through CDR."""
+    sim = make_sim(params)
+    state = {o.topic: through_cdr(o.msg) for o in sim.start()}
+    return sim, state[topics.JOINT_STATES], state[topics.OBJECT_ODOM]
+
+
+def bad_joint_states(msg):
+    msg.position = np.r_[np.inf, msg.position[1:]]
+    return msg
+
+
+def short_velocity(msg):
+    msg.velocity = msg.velocity[:-1]
+    return msg
+
+
+def unknown_joint(msg):
+    msg.name[3] = 'wrist'
+    return msg
+
+
+def missing_joint(msg):
+    msg.name, msg.position = msg.name[:-1], msg.position[:-1]
+    msg.velocity, msg.effort = msg.velocity[:-1], msg.effort[:-1]
+    return msg
+
+
+@pytest.mark.parametrize(
+    ('mutate', 'match'),
+    [
+        (bad_joint_states, 'position'),
+        (short_velocity, 'velocity'),
+        (unknown_joint, 'unknown joint'),
+        (missing_joint, 'missing joint'),
+    ],
+)
+def test_nominal_controller_rejects_bad_joint_states_without_a_command(params, mutate, match):
+    _, joints, odometry = first_state_messages(params)
+    nominal = make_nominal(params)
+    mutate(joints)
+    assert nominal.on_odom(odometry) == []
+    outgoing = nominal.on_joint_states(joints)
+    assert [o.topic for o in outgoing] == [topics.DIAGNOSTICS]
+    (report,) = statuses(outgoing, 'nominal_controller')
+    assert report.level is DiagnosticLevel.WARN
+    assert re.search(match, report.message)
+    assert nominal.last_output is None
+
+
+def test_nominal_controller_follows_a_topic_reference_and_reports_it_stale(params):
+    sim, joints, odometry = first_state_messages(params)
+    nominal = make_nominal(params, **{'reference.source': 'topic'})
+    nominal.on_joint_states(joints)
+    outgoing = nominal.on_odom(odometry)
+    (report,) = statuses(outgoing, 'nominal_controller')
+    assert 'no /object/reference' in report.message
+
+    # A planner's reference: a pose 1 cm above the start, moving up at 1 cm/s.
+    s = sim.simulator.state
+    target = ObjectReference(
+        s.p_object_in_palm + np.array([0.0, 0.0, 0.01]),
+        s.R_object_to_palm,
+        np.array([0.0, 0.0, 0.01, 0.0, 0.0, 0.0]),
+        np.zeros(6),
+    )
+    nominal.on_reference(through_cdr(m.reference_to_msg(MSGS, 0.0, [0.0], [target])))
+    nominal.on_joint_states(joints)
+    outgoing = nominal.on_odom(odometry)
+    assert [o.topic for o in outgoing] == [topics.EFFORT_NOMINAL]
+    u = m.effort_from_msg(through_cdr(outgoing[0].msg), sim.model.joint_names).effort
+    state = sim.simulator.grasp_state()
+    sample = ReferenceSample.from_pose(
+        Pose(target.p_object_in_palm, target.R_object_to_palm), target.twist_object
+    )
+    expected = NominalController(nominal.config).compute(state, sample).u
+    np.testing.assert_allclose(u, expected, rtol=1e-9, atol=1e-10)
+
+
+def test_nominal_controller_gains_change_live(params):
+    _, joints, odometry = first_state_messages(params)
+    nominal = make_nominal(params)
+    nominal.on_joint_states(joints)
+    before = nominal.on_odom(odometry)[0].msg.effort.copy()
+    nominal.update_config(dataclasses.replace(nominal.config, kf=20.0))
+    nominal.on_joint_states(joints)
+    after = nominal.on_odom(odometry)[0].msg.effort
+    assert not np.allclose(before, after)
+    with pytest.raises(ValueError, match='read-only'):
+        nominal.update_config(dataclasses.replace(nominal.config, reference_source='topic'))
+
+
+# ----------------------------------------------------------------------------------------
+# The safety filter endpoint: bad input is reported and never filtered
+
+
+class CountingFilter:
+    """Wraps a SafetyFilter and counts solve calls."""
+
+    def __init__(self, core):
+        self.core = core
+        self.calls = 0
+
+    def solve(self, state, u_nom):
+        self.calls += 1
+        return self.core.solve(state, u_nom)
+
+    def __getattr__(self, name):
+        return getattr(self.core, name)
+
+
+def tick_inputs(params):
+    """Return valid inputs of the first tick (state and u_nom at t_0), as received."""
+    sim, joints, odometry = first_state_messages(params)
+    nominal = make_nominal(params)
+    nominal.on_joint_states(joints)
+    (effort_nominal,) = nominal.on_odom(odometry)
+    return sim, joints, odometry, through_cdr(effort_nominal.msg)
+
+
+def restamp(msg, t):
+    msg.header.stamp = m.time_to_msg(MSGS, t)
+    return msg
+
+
+def filter_after_one_good_tick(params, **overrides):
+    """Return (sim, filter endpoint, its safe u*, the inputs) after one accepted tick."""
+    sim, joints, odometry, effort_nominal = tick_inputs(params)
+    safety_filter = make_filter(params, **overrides)
+    safety_filter.filter = CountingFilter(safety_filter.filter)
+    assert safety_filter.on_joint_states(joints) == []
+    assert safety_filter.on_odom(odometry) == []
+    outgoing = safety_filter.on_effort_nominal(effort_nominal)
+    assert [o.topic for o in outgoing] == [
+        topics.EFFORT_COMMAND,
+        topics.MARGINS,
+        topics.DIAGNOSTICS,
+    ]
+    assert safety_filter.filter.calls == 1
+    (safe,) = commands(outgoing, sim.model.joint_names)
+    return sim, safety_filter, safe, (joints, odometry, effort_nominal)
+
+
+def nan_nominal(msg):
+    msg.effort = np.r_[msg.effort[:4], np.nan, msg.effort[5:]]
+    return msg
+
+
+def skewed_quaternion(msg):
+    msg.pose.pose.orientation.w += 0.1
+    return msg
+
+
+CASES = {
+    'non-finite joint position': (topics.JOINT_STATES, bad_joint_states, 'position'),
+    'wrong velocity length': (topics.JOINT_STATES, short_velocity, 'velocity'),
+    'unknown joint name': (topics.JOINT_STATES, unknown_joint, 'unknown joint'),
+    'missing joint name': (topics.JOINT_STATES, missing_joint, 'missing joint'),
+    'NaN nominal effort': (topics.EFFORT_NOMINAL, nan_nominal, 'effort'),
+    'non-unit quaternion': (topics.OBJECT_ODOM, skewed_quaternion, 'quaternion'),
+}
+
+
+@pytest.mark.parametrize('case', list(CASES))
+def test_filter_holds_the_last_safe_command_on_bad_input(params, case):
+    topic, mutate, match = CASES[case]
+    sim, safety_filter, safe, (joints, odometry, effort_nominal) = filter_after_one_good_tick(
+        params
+    )
+    dt = sim.config.time_step
+    inputs = {
+        topics.JOINT_STATES: restamp(joints, dt),
+        topics.OBJECT_ODOM: restamp(odometry, dt),
+        topics.EFFORT_NOMINAL: restamp(effort_nominal, dt),
+    }
+    inputs[topic] = mutate(inputs[topic])
+    handlers = {
+        topics.JOINT_STATES: safety_filter.on_joint_states,
+        topics.OBJECT_ODOM: safety_filter.on_odom,
+        topics.EFFORT_NOMINAL: safety_filter.on_effort_nominal,
+    }
+    outgoing = handlers[topic](inputs[topic])
+    assert [o.topic for o in outgoing] == [topics.EFFORT_COMMAND, topics.DIAGNOSTICS]
+    (held,) = commands(outgoing, sim.model.joint_names)
+    assert held.tobytes() == safe.tobytes()
+    # Stamped with the rejected tick's stamp, so a lockstep simulator goes on.
+    assert outgoing[0].stamp_ns == m.seconds_to_nanoseconds(dt)
+    (report,) = statuses(outgoing, 'safety_filter')
+    assert report.level is DiagnosticLevel.WARN
+    assert report.values['input.mode'] == 'holding'
+    assert match in report.message
+    # The other inputs of that tick arrive afterwards: no command is computed from them.
+    for other, handler in handlers.items():
+        if other != topic:
+            assert handler(inputs[other]) == []
+    assert safety_filter.filter.calls == 1
+
+
+def test_filter_rejects_stale_and_out_of_order_stamps(params):
+    sim, safety_filter, safe, (joints, odometry, _) = filter_after_one_good_tick(params)
+    # Older than max_age, but within the hold timeout of the last safe command.
+    now = 1.5 * safety_filter.guard.max_age
+    assert now < safety_filter.hold.hold_timeout
+    stale = safety_filter.on_joint_states(joints, now=now)
+    (report,) = statuses(stale, 'safety_filter')
+    assert 'stale' in report.message
+    (held,) = commands(stale, sim.model.joint_names)
+    assert held.tobytes() == safe.tobytes()
+
+    fresh = make_filter(params)
+    fresh.filter = CountingFilter(fresh.filter)
+    assert fresh.on_odom(restamp(odometry, 0.002)) == []
+    out_of_order = fresh.on_odom(restamp(odometry, 0.001))
+    (report,) = statuses(out_of_order, 'safety_filter')
+    assert 'out-of-order' in report.message
+    # Nothing was ever accepted: fallback (gravity compensation needs a joint state first).
+    assert report.level is DiagnosticLevel.ERROR
+    (fallback,) = commands(out_of_order, sim.model.joint_names)
+    np.testing.assert_array_equal(fallback, 0.0)
+    assert 'zero torque' in report.message
+    assert fresh.filter.calls == 0
+
+
+def test_filter_falls_back_to_gravity_compensation_after_the_hold_timeout(params):
+    sim, safety_filter, safe, (joints, odometry, _) = filter_after_one_good_tick(params)
+    hold_timeout = safety_filter.hold.hold_timeout
+    late = 2 * hold_timeout
+    outgoing = safety_filter.on_odom(skewed_quaternion(restamp(odometry, late)), now=late)
+    (report,) = statuses(outgoing, 'safety_filter')
+    assert report.level is DiagnosticLevel.ERROR
+    assert report.values['input.mode'] == 'fallback'
+    (fallback,) = commands(outgoing, sim.model.joint_names)
+    accepted = m.joint_state_from_msg(joints, sim.model.joint_names)
+    s = sim.simulator.state
+    g = sim.model.state(
+        0.0, accepted.position, np.zeros(9), s.p_object_in_palm, s.R_object_to_palm, np.zeros(6)
+    ).gravity_torque
+    limits = sim.model.effort_limits
+    np.testing.assert_allclose(fallback, np.clip(g, -limits, limits), rtol=1e-12, atol=1e-12)
+    assert not np.allclose(fallback, safe)
+    assert safety_filter.filter.calls == 1
+
+
+def test_filter_answers_a_repeated_tick_with_the_same_messages(params):
+    _, safety_filter, _, (joints, odometry, effort_nominal) = filter_after_one_good_tick(params)
+    first = safety_filter._last_outputs
+    assert safety_filter.on_joint_states(joints) == []
+    assert safety_filter.on_odom(odometry) == []
+    again = safety_filter.on_effort_nominal(effort_nominal)
+    assert [o.msg for o in again] == [o.msg for o in first]
+    assert safety_filter.filter.calls == 1
+
+
+def test_filter_diagnostics_report_status_timing_margins_and_mode(params):
+    _, safety_filter, _, _ = filter_after_one_good_tick(params)
+    (_, margins_out, diagnostics) = safety_filter._last_outputs
+    margins = m.margins_from_msg(through_cdr(margins_out.msg))
+    (report,) = m.diagnostics_from_msg(through_cdr(diagnostics.msg)).reports
+    result = safety_filter.last_result
+    assert report.values['status'] == result.status.value
+    assert float(report.values['solve_time_us']) == pytest.approx(result.solve_time * 1e6)
+    assert float(report.values['step_time_us']) >= float(report.values['solve_time_us'])
+    assert report.values['relaxed'] == ('true' if result.relaxed else 'false')
+    assert report.values['input.mode'] == 'ok'
+    families = {name.split('/')[0] for name in margins.names}
+    assert families >= {'no_slip', 'joint_limits', 'fingertip_workspace', 'actuator_limits'}
+    for family in families:
+        smallest = min(
+            h for name, h in zip(margins.names, margins.h, strict=True) if name.startswith(family)
+        )
+        assert float(report.values[f'min_margin.{family}']) == smallest
+    assert list(margins.names) == list(result.margins)
+    assert margins.h.tolist() == list(result.margins.values())
+
+
+def test_filter_can_be_switched_off_and_on_live(params):
+    _, safety_filter, _, (joints, odometry, effort_nominal) = filter_after_one_good_tick(params)
+    safety_filter.update_config(enabled=False)
+    dt = 0.001
+    safety_filter.on_joint_states(restamp(joints, dt))
+    safety_filter.on_odom(restamp(odometry, dt))
+    outgoing = safety_filter.on_effort_nominal(restamp(effort_nominal, dt))
+    (passed,) = commands(outgoing, safety_filter.model.joint_names)
+    u_nom = m.effort_from_msg(effort_nominal, safety_filter.model.joint_names).effort
+    assert passed.tobytes() == u_nom.tobytes()
+    assert safety_filter.filter.calls == 1
+    assert math.isfinite(float(statuses(outgoing, 'safety_filter')[0].values['step_time_us']))

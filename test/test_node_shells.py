@@ -1,0 +1,226 @@
+"""The rclpy node shells and launch files: structure checks always, spinning where rclpy is."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+import py_compile
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from grasp_safety_filter.io import topics
+
+REPO = Path(__file__).resolve().parent.parent
+CONFIG = REPO / 'config' / 'paper_scenario.yaml'
+PACKAGES = ('grasp_safety_filter', 'hand_sim_node')
+LAUNCH_FILES = sorted((REPO / 'launch').glob('*.launch.py'))
+
+#: The package's executables: ``ros2 run grasp_safety_filter <name>`` -> module:function.
+CONSOLE_SCRIPTS = {
+    'hand_sim_node': 'hand_sim_node.node:main',
+    'nominal_controller_node': 'grasp_safety_filter.nodes.nominal_controller_node:main',
+    'safety_filter_node': 'grasp_safety_filter.nodes.safety_filter_node:main',
+}
+
+#: The message-level endpoints (and what they use): importable without ROS.
+PURE_MODULES = (
+    'grasp_safety_filter.nodes.outgoing',
+    'grasp_safety_filter.nodes.scenario',
+    'grasp_safety_filter.nodes.nominal_controller',
+    'grasp_safety_filter.nodes.safety_filter',
+    'hand_sim_node.endpoint',
+)
+
+ROS_PACKAGES = ('rclpy', 'launch', 'launch_ros', 'ament_index_python', 'std_msgs', 'sensor_msgs')
+
+
+def module_path(module: str) -> Path:
+    return REPO.joinpath(*module.split('.')).with_suffix('.py')
+
+
+def python_files() -> list[Path]:
+    return sorted(p for package in PACKAGES for p in (REPO / package).rglob('*.py'))
+
+
+def is_shell(path: Path) -> bool:
+    return path.name == 'node.py' or path.name.endswith('_node.py')
+
+
+def imported_roots(path: Path) -> set[str]:
+    """Top-level packages a module imports when it is imported (not inside functions)."""
+    roots = set()
+    for node in ast.parse(path.read_text(encoding='utf-8')).body:
+        if isinstance(node, ast.Import):
+            roots.update(alias.name.split('.')[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            roots.add(node.module.split('.')[0])
+    return roots
+
+
+def function(tree: ast.Module, name: str) -> ast.FunctionDef | None:
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == name:
+            return node
+    return None
+
+
+# ----------------------------------------------------------------------------------------
+# Always (no ROS needed)
+
+
+@pytest.mark.parametrize(
+    'path',
+    [*(module_path(m.split(':')[0]) for m in CONSOLE_SCRIPTS.values()), *LAUNCH_FILES],
+    ids=lambda p: p.name,
+)
+def test_node_modules_and_launch_files_compile(path, tmp_path):
+    py_compile.compile(str(path), cfile=str(tmp_path / 'out.pyc'), doraise=True)
+
+
+def test_launch_files_exist_and_define_generate_launch_description():
+    assert {p.name for p in LAUNCH_FILES} >= {'paper_demo.launch.py', 'safety_filter.launch.py'}
+    for path in LAUNCH_FILES:
+        tree = ast.parse(path.read_text(encoding='utf-8'))
+        generate = function(tree, 'generate_launch_description')
+        assert generate is not None, path.name
+        assert not generate.args.args, path.name
+
+
+@pytest.mark.parametrize('name', list(CONSOLE_SCRIPTS))
+def test_every_executable_has_a_main_taking_optional_args(name):
+    module, _, entry = CONSOLE_SCRIPTS[name].partition(':')
+    tree = ast.parse(module_path(module).read_text(encoding='utf-8'))
+    main = function(tree, entry)
+    assert main is not None
+    assert [a.arg for a in main.args.args] == ['args']
+    assert len(main.args.defaults) == 1
+    assert isinstance(main.args.defaults[0], ast.Constant)
+    assert main.args.defaults[0].value is None
+
+
+def test_only_the_node_shells_import_rclpy_at_import_time():
+    importers = {
+        p.relative_to(REPO).as_posix() for p in python_files() if 'rclpy' in imported_roots(p)
+    }
+    assert importers, 'no module imports rclpy: the node shells are missing'
+    assert {p for p in importers if not is_shell(REPO / p)} == set()
+    for script in CONSOLE_SCRIPTS.values():
+        assert is_shell(module_path(script.split(':')[0])), script
+
+
+def test_endpoints_import_without_any_ros_package():
+    """Import the pure modules in a fresh interpreter in which every ROS package is missing."""
+    code = textwrap.dedent(
+        f"""
+        import importlib
+        import sys
+
+        class NoRos:
+            def find_spec(self, name, path=None, target=None):
+                if name.split('.')[0] in {ROS_PACKAGES!r}:
+                    raise ImportError('ROS package imported: ' + name)
+                return None
+
+        sys.meta_path.insert(0, NoRos())
+        for module in {PURE_MODULES!r}:
+            importlib.import_module(module)
+        print('ok')
+        """
+    )
+    result = subprocess.run(
+        [sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == 'ok'
+
+
+def test_paper_demo_records_every_topic_of_the_table_as_mcap():
+    source = (REPO / 'launch' / 'paper_demo.launch.py').read_text(encoding='utf-8')
+    constants = {
+        node.value for node in ast.walk(ast.parse(source)) if isinstance(node, ast.Constant)
+    }
+    assert {'ros2', 'bag', 'record', '-s', 'mcap', '-o', '--topics'} <= constants
+    assert 'from grasp_safety_filter.io.topics import TOPICS' in source
+    assert {'filter', 'config', 'record', 'bag', 'enabled', 'use_sim_time'} <= constants
+    assert len(topics.TOPICS) == len({spec.name for spec in topics.TOPICS})
+
+
+# ----------------------------------------------------------------------------------------
+# With rclpy (a ROS 2 Jazzy install)
+
+
+@pytest.fixture
+def ros_context():
+    rclpy = pytest.importorskip('rclpy')
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+def make_nodes(context, duration):
+    from rclpy.parameter import Parameter
+
+    from grasp_safety_filter.nodes.nominal_controller_node import NominalControllerNode
+    from grasp_safety_filter.nodes.safety_filter_node import SafetyFilterNode
+    from hand_sim_node.node import HandSimNode
+
+    args = ['--ros-args', '--params-file', str(CONFIG)]
+    sim_time = Parameter('use_sim_time', value=True)
+    return (
+        HandSimNode(
+            context=context,
+            cli_args=args,
+            parameter_overrides=[sim_time, Parameter('duration', value=duration)],
+        ),
+        NominalControllerNode(context=context, cli_args=args, parameter_overrides=[sim_time]),
+        SafetyFilterNode(context=context, cli_args=args, parameter_overrides=[sim_time]),
+    )
+
+
+def test_nodes_run_the_lockstep_loop_to_the_end(ros_context):
+    from rclpy.executors import SingleThreadedExecutor
+
+    sim, nominal, safety_filter = make_nodes(ros_context, duration=0.005)
+    executor = SingleThreadedExecutor(context=ros_context)
+    for node in (sim, nominal, safety_filter):
+        executor.add_node(node)
+    try:
+        deadline = time.monotonic() + 60.0
+        while not sim.endpoint.finished and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        assert sim.endpoint.finished
+        assert sim.endpoint.stop_reason == 'duration'
+        assert sim.endpoint.simulator.step_index == 5
+        assert safety_filter.endpoint.hold.rejected_ticks == 0
+        assert nominal.endpoint.last_output is not None
+    finally:
+        executor.shutdown()
+        for node in (sim, nominal, safety_filter):
+            node.destroy_node()
+
+
+def test_live_parameters_apply_and_read_only_ones_are_refused(ros_context):
+    from rclpy.parameter import Parameter
+
+    sim, nominal, safety_filter = make_nodes(ros_context, duration=0.005)
+    try:
+        assert sim.set_parameters([Parameter('command_timeout', value=2.5)])[0].successful
+        assert sim.endpoint.command_timeout == 2.5
+        assert not sim.set_parameters([Parameter('time_step', value=0.002)])[0].successful
+        assert not sim.set_parameters([Parameter('command_timeout', value=-1.0)])[0].successful
+        assert nominal.set_parameters([Parameter('gains.kf', value=20.0)])[0].successful
+        assert nominal.endpoint.config.kf == 20.0
+        assert safety_filter.set_parameters([Parameter('enabled', value=False)])[0].successful
+        assert not safety_filter.endpoint.enabled
+        assert safety_filter.set_parameters([Parameter('input.hold_timeout', value=0.3)])[
+            0
+        ].successful
+        assert safety_filter.endpoint.hold.hold_timeout == 0.3
+    finally:
+        for node in (sim, nominal, safety_filter):
+            node.destroy_node()
