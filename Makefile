@@ -15,7 +15,7 @@ $(STAMP): setup.py setup.cfg package.xml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/grasp-model-report
+	$(BIN)/grasp-demo --mode both --out $(OUT)
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q test

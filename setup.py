@@ -2,43 +2,61 @@ from glob import glob
 
 from setuptools import find_packages, setup
 
-package_name = "grasp_safety_filter"
+package_name = 'grasp_safety_filter'
 
 setup(
     name=package_name,
-    version="0.1.0",
-    packages=find_packages(exclude=["test", "test.*"]),
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
     data_files=[
-        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
-        ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
-        ("share/" + package_name + "/config", glob("config/*.yaml") + glob("config/*.urdf")),
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.urdf')),
     ],
     # Runtime dependencies for a pip install without ROS; under colcon they come from
     # package.xml (rosdep) and osqp from pip.
     install_requires=[
-        "setuptools",
-        "numpy>=1.24",
-        "osqp>=1.0",
-        "pin>=3.0",
-        "rosbags>=0.10",
-        "pyyaml>=6.0",
-        "matplotlib>=3.6",
+        'setuptools',
+        'numpy>=1.24',
+        'osqp>=1.0',
+        'pin>=3.0',
+        'rosbags>=0.10',
+        'pyyaml>=6.0',
+        'matplotlib>=3.6',
     ],
     extras_require={
-        "test": ["pytest>=7", "ruff>=0.6", "flake8>=7", "pydocstyle>=6", "daqp>=0.6"],
-        "bench": ["cvxpy>=1.4", "qpsolvers>=4.0", "daqp>=0.6"],
+        'test': [
+            'pytest>=7',
+            'ruff>=0.6',
+            'daqp>=0.6',
+            # The linters a colcon build runs on Jazzy (ament_flake8 with its plugins, pep257).
+            'ament-lint==0.14.2',
+            'ament-lint-flake8==0.14.4',
+            'ament-lint-pep257==0.14.3',
+            'flake8-quotes==3.4.0',
+            'flake8-import-order==0.19.2',
+            'flake8-docstrings==1.7.0',
+            'flake8-builtins==3.1.0',
+            'flake8-comprehensions==3.17.0',
+        ],
+        'bench': ['cvxpy>=1.4', 'qpsolvers>=4.0', 'daqp>=0.6'],
     },
-    python_requires=">=3.10",
+    python_requires='>=3.10',
     zip_safe=True,
-    maintainer="grasp_safety_filter maintainers",
-    maintainer_email="maintainers@users.noreply.github.com",
+    maintainer='grasp_safety_filter maintainers',
+    maintainer_email='maintainers@users.noreply.github.com',
     description="CBF-QP safety filter keeping an object in a robotic hand's grasp (ROS 2 Jazzy).",
-    license="Apache-2.0",
-    tests_require=["pytest"],
+    license='Apache-2.0',
+    tests_require=['pytest'],
     entry_points={
-        "console_scripts": [
-            "grasp-model-report = grasp_safety_filter.cli:model_report_main",
+        'console_scripts': [
+            'grasp-demo = grasp_safety_filter.cli:demo_main',
+            'grasp-analyze = grasp_safety_filter.cli:analyze_main',
+            'grasp-model-report = grasp_safety_filter.cli:model_report_main',
+            'hand_sim_node = hand_sim_node.node:main',
+            'nominal_controller_node = grasp_safety_filter.nodes.nominal_controller_node:main',
+            'safety_filter_node = grasp_safety_filter.nodes.safety_filter_node:main',
         ],
     },
 )

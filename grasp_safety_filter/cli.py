@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+import json
 from pathlib import Path
+import sys
+from typing import Any
 
 import numpy as np
 
@@ -18,27 +22,174 @@ def _quaternion_to_matrix(xyzw: np.ndarray) -> np.ndarray:
 
 
 def model_report_main(argv: list[str] | None = None) -> int:
-    """``grasp-model-report``: the scenario's initial grasp and its distance to every constraint."""
+    """``grasp-model-report``: the initial grasp and its distance to every constraint."""
     from grasp_safety_filter.model.grasp_model import GraspModel
 
-    parser = argparse.ArgumentParser(prog="grasp-model-report", description=model_report_main.__doc__)
-    parser.add_argument("--config", type=Path, default=config_path(), help="scenario parameter file")
+    parser = argparse.ArgumentParser(
+        prog='grasp-model-report', description=model_report_main.__doc__
+    )
+    parser.add_argument(
+        '--config', type=Path, default=config_path(), help='scenario parameter file'
+    )
     args = parser.parse_args(argv)
-    model, params = GraspModel.from_parameter_file(args.config, "hand_sim_node")
-    p_object = np.asarray(params["initial.object_position"], dtype=float)
-    R_object = _quaternion_to_matrix(params["initial.object_orientation"])
-    model.check_grasp(params["initial.joint_positions"], p_object, R_object)
-    q = model.project_to_contact(params["initial.joint_positions"], p_object, R_object)
+    model, params = GraspModel.from_parameter_file(args.config, 'hand_sim_node')
+    p_object = np.asarray(params['initial.object_position'], dtype=float)
+    R_object = _quaternion_to_matrix(params['initial.object_orientation'])
+    model.check_grasp(params['initial.joint_positions'], p_object, R_object)
+    q = model.project_to_contact(params['initial.joint_positions'], p_object, R_object)
     state = model.state(0.0, q, np.zeros(model.n_joints), p_object, R_object, np.zeros(6))
-    print(f"scenario: {args.config}")
-    print(f"hand: {model.n_joints} joints, {model.n_contacts} contacts; object mass {model.object.mass} kg")
-    print("\njoint                q [rad]   q - q_min   q_max - q")
-    for name, value, lo, hi in zip(model.joint_names, q, model.joint_lower_limits, model.joint_upper_limits, strict=True):
-        print(f"{name:18s} {value:9.4f} {value - lo:11.4f} {hi - value:11.4f}")
-    print("\ncontact     a [rad]   b [rad]   workspace margin [rad]   penetration [m]")
+    print(f'scenario: {args.config}')
+    print(
+        f'hand: {model.n_joints} joints, {model.n_contacts} contacts; '
+        f'object mass {model.object.mass} kg'
+    )
+    print('\njoint                q [rad]   q - q_min   q_max - q')
+    for name, value, lo, hi in zip(
+        model.joint_names, q, model.joint_lower_limits, model.joint_upper_limits, strict=True
+    ):
+        print(f'{name:18s} {value:9.4f} {value - lo:11.4f} {hi - value:11.4f}')
+    print('\ncontact     a [rad]   b [rad]   workspace margin [rad]   penetration [m]')
     margins = model.fingertip_workspace.margins(state.xi_cf)
-    for name, xi, margin, gap in zip(model.contact_names, state.xi_cf, margins, state.penetration, strict=True):
-        print(f"{name:10s} {xi[0]:8.4f} {xi[1]:9.4f} {margin.min():14.4f} {gap:22.2e}")
-    print(f"\ncond(J_h) = {np.linalg.cond(state.J_h):.3g}, cond(G) = {np.linalg.cond(state.G):.3g}, "
-          f"min eig(B_ho) = {np.linalg.eigvalsh(state.B_ho).min():.3g}")
+    for name, xi, margin, gap in zip(
+        model.contact_names, state.xi_cf, margins, state.penetration, strict=True
+    ):
+        print(f'{name:10s} {xi[0]:8.4f} {xi[1]:9.4f} {margin.min():14.4f} {gap:22.2e}')
+    print(
+        f'\ncond(J_h) = {np.linalg.cond(state.J_h):.3g}, cond(G) = {np.linalg.cond(state.G):.3g}, '
+        f'min eig(B_ho) = {np.linalg.eigvalsh(state.B_ho).min():.3g}'
+    )
+    return 0
+
+
+def _progress_printer(label: str) -> Callable[[float, float], None] | None:
+    """Show one line of progress on a terminal (nothing when output is redirected)."""
+    if not sys.stderr.isatty():
+        return None
+    last = [-1]
+
+    def show(t: float, duration: float) -> None:
+        percent = int(100 * t / duration) if duration > 0 else 100
+        if percent != last[0]:
+            last[0] = percent
+            end = '\n' if percent >= 100 else ''
+            print(
+                f'\r{label}: t = {t:6.2f} / {duration:g} s ({percent:3d} %)',
+                end=end,
+                file=sys.stderr,
+                flush=True,
+            )
+
+    return show
+
+
+def paper_verdict(mode: str, summary: dict[str, Any]) -> tuple[bool, str]:
+    """Tell whether a run shows the paper's outcome for its mode, and why (one line)."""
+    violations = summary['violations']
+    if mode == 'nominal':
+        joint = violations['joint_limits']['first_t']
+        checks = {
+            'stopped early on a contact leaving the fingertip workspace': (
+                not summary['completed'] and summary['stop_reason'] == 'fingertip_workspace'
+            ),
+            'a joint limit passed before that': joint is not None and joint < summary['t_end'],
+            'required friction above mu': violations['slip']['count'] > 0,
+        }
+    else:
+        checks = {
+            'ran the full duration': summary['completed'],
+            'no constraint violated': all(v['count'] == 0 for v in violations.values()),
+        }
+    failed = [name for name, ok in checks.items() if not ok]
+    if failed:
+        return False, 'NOT reproduced: ' + '; '.join(f'not {name}' for name in failed)
+    return True, 'reproduced: ' + '; '.join(checks)
+
+
+def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> bool:
+    ok, verdict = paper_verdict(mode, summary)
+    stop = summary['stop_reason'] or 'none'
+    print(f'\n[{mode}] {out_dir}')
+    print(
+        f'  t_end {summary["t_end"]:.3f} s of {summary["duration_requested"]:g} s, '
+        f'stop reason: {stop}'
+    )
+    for family, record in summary['violations'].items():
+        first = '' if record['first_t'] is None else f' (first at {record["first_t"]:.3f} s)'
+        print(f'  {family:20s} {record["count"]:6d} steps violated{first}')
+    margins = ', '.join(
+        f'{k} {v:.4g}' if v is not None else f'{k} -inf' for k, v in summary['min_margin'].items()
+    )
+    print(f'  smallest margins: {margins}')
+    if 'filter' in summary:
+        f = summary['filter']
+        print(
+            f'  filter: {f["steps"]} steps, {f["relaxed_steps"]} relaxed, {f["failed_steps"]} '
+            f'failed; QP {f["qp_solve_us"]["median"]:.0f} / {f["qp_solve_us"]["p99"]:.0f} us, '
+            f'step {f["step_us"]["median"]:.0f} / {f["step_us"]["p99"]:.0f} us (median / p99)'
+        )
+    print(f'  paper outcome {verdict}')
+    return ok
+
+
+def demo_main(argv: list[str] | None = None) -> int:
+    """``grasp-demo``: the paper's runs, recorded to bags, with figures and a verdict."""
+    from grasp_safety_filter.runner import run, RunOptions
+
+    parser = argparse.ArgumentParser(prog='grasp-demo', description=demo_main.__doc__)
+    parser.add_argument(
+        '--mode',
+        choices=('nominal', 'filtered', 'both'),
+        default='both',
+        help='nominal controller alone, with the safety filter, or both runs',
+    )
+    parser.add_argument(
+        '--out',
+        type=Path,
+        default=Path('results'),
+        help='output directory (with --mode both: OUT/nominal and OUT/filtered)',
+    )
+    parser.add_argument(
+        '--config', type=Path, default=config_path(), help='scenario parameter file'
+    )
+    parser.add_argument('--duration', type=float, help='simulated time, s (default: scenario)')
+    parser.add_argument('--dt', type=float, help='integration step, s (default: scenario)')
+    parser.add_argument('--integrator', choices=('ode3', 'rk4'), help='default: scenario')
+    parser.add_argument(
+        '--storage', choices=('mcap', 'sqlite3'), default='mcap', help='bag storage format'
+    )
+    args = parser.parse_args(argv)
+    modes = ('nominal', 'filtered') if args.mode == 'both' else (args.mode,)
+    verdicts = {}
+    for mode in modes:
+        out_dir = args.out / mode if args.mode == 'both' else args.out
+        options = RunOptions(
+            args.config, mode, args.duration, args.dt, args.integrator, args.storage
+        )
+        try:
+            result = run(options, out_dir, _progress_printer(mode))
+        except KeyboardInterrupt:
+            print(
+                f'\n[{mode}] interrupted: the bag and summary of the partial run are in {out_dir}',
+                file=sys.stderr,
+            )
+            return 130
+        ok = _print_summary(mode, result.summary, out_dir)
+        verdicts[mode] = {'reproduced': ok, 'verdict': paper_verdict(mode, result.summary)[1]}
+    (args.out / 'verdict.json').write_text(json.dumps(verdicts, indent=2) + '\n')
+    return 0 if all(v['reproduced'] for v in verdicts.values()) else 1
+
+
+def analyze_main(argv: list[str] | None = None) -> int:
+    """``grasp-analyze BAG``: figures and summary.json of any recorded run of this package."""
+    from grasp_safety_filter.runner import analyze_bag
+
+    parser = argparse.ArgumentParser(prog='grasp-analyze', description=analyze_main.__doc__)
+    parser.add_argument('bag', type=Path, help='rosbag2 directory (mcap or sqlite3)')
+    parser.add_argument('--out', type=Path, help='output directory (default: next to the bag)')
+    args = parser.parse_args(argv)
+    out_dir = args.out if args.out is not None else args.bag.resolve().parent
+    summary, figures = analyze_bag(args.bag, out_dir)
+    _print_summary(summary['mode'], summary, out_dir)
+    for figure in figures:
+        print(f'  figure: {figure}')
     return 0

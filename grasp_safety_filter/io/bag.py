@@ -34,7 +34,7 @@ from typing import Any, Literal
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.io.topics import TOPICS, TopicSpec
 
@@ -224,13 +224,16 @@ class BagRecorder:
                 raise
             self._writer = writer
 
-    def write(self, topic: str, stamp_ns: int, msg: Any) -> None:
+    def write(self, topic: str, stamp_ns: int, msg: Any) -> bytes:
         """Serialise ``msg`` to CDR and append it to ``topic`` at ``stamp_ns``.
 
         Args:
             topic: A registered topic.
             stamp_ns: Bag timestamp, integer ns >= 0 (the runner uses the header stamp).
             msg: A message of the topic's type (typestore class).
+
+        Returns:
+            The CDR bytes written (what a subscriber of the topic would receive).
 
         Raises:
             KeyError: Unknown topic.
@@ -253,6 +256,7 @@ class BagRecorder:
         with _critical_section():
             self._writer.write(self._connections[topic], stamp_ns, data)
             self.counts[topic] += 1
+        return data
 
     def set_custom_data(self, key: str, value: str) -> None:
         """Store a string in the bag's ``metadata.yaml`` ``custom_data`` (before closing)."""

@@ -1,0 +1,1 @@
+"""From a recorded bag to the paper's figures and a verdict: ``grasp-analyze BAG``."""

@@ -1,0 +1,134 @@
+"""The paper's figures (Fig. 3 nominal, Fig. 4 filtered) drawn from a run's recorded series."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+import numpy as np
+
+from grasp_safety_filter.analysis.run_data import RunData
+
+INFEASIBLE = {'color': '0.85', 'zorder': 0}
+# Symmetric grasps give identical curves; line styles keep each one visible.
+LINE_STYLES = ('-', '--', ':', '-.')
+
+
+def _shade_outside(axes: Axes, low: float, high: float, values: np.ndarray) -> None:
+    """Grey out everything below ``low`` and above ``high`` (the paper's infeasible regions)."""
+    finite = values[np.isfinite(values)]
+    span = max(high - low, 1e-9)
+    bottom = min(low - 0.15 * span, finite.min() if finite.size else low)
+    top = max(high + 0.15 * span, finite.max() if finite.size else high)
+    axes.axhspan(bottom, low, **INFEASIBLE)
+    axes.axhspan(high, top, **INFEASIBLE)
+    axes.set_ylim(bottom, top)
+
+
+def _stop_marker(axes: Axes, run: RunData) -> None:
+    if run.stop_reason:
+        axes.axvline(run.t_end, color='k', linestyle=':', linewidth=1.0)
+
+
+def plot_contacts(run: RunData, path: Path) -> Path:
+    """Plot contact coordinates a and b on each fingertip, the fingertip workspace unshaded."""
+    a_min, a_max, b_min, b_max = run.fingertip_workspace
+    figure = Figure(figsize=(7, 6))
+    (axes_a, axes_b) = figure.subplots(2, 1, sharex=True)
+    for i, name in enumerate(run.contact_names):
+        style = LINE_STYLES[i % len(LINE_STYLES)]
+        axes_a.plot(run.t, run.xi_cf[:, i, 0], style, label=name)
+        axes_b.plot(run.t, run.xi_cf[:, i, 1], style, label=name)
+    _shade_outside(axes_a, a_min, a_max, run.xi_cf[:, :, 0])
+    _shade_outside(axes_b, b_min, b_max, run.xi_cf[:, :, 1])
+    axes_a.set_ylabel('$a_{cf,i}$ [rad]')
+    axes_b.set_ylabel('$b_{cf,i}$ [rad]')
+    axes_b.set_xlabel('t [s]')
+    axes_a.legend(loc='best')
+    for axes in (axes_a, axes_b):
+        _stop_marker(axes, run)
+    axes_a.set_title(f'{run.mode}: contact coordinates (grey: outside the fingertip workspace)')
+    return _save(figure, path)
+
+
+def plot_joints(run: RunData, path: Path) -> Path:
+    """Plot each finger's k-th joint in panel k, with that joint's limits (grey beyond)."""
+    per_finger = run.joints_per_finger
+    figure = Figure(figsize=(7, 2.4 * per_finger))
+    axes_list = figure.subplots(per_finger, 1, sharex=True)
+    axes_list = np.atleast_1d(axes_list)
+    for k, axes in enumerate(axes_list):
+        columns = list(range(k, len(run.joint_names), per_finger))
+        for finger, j in enumerate(columns):
+            style = LINE_STYLES[finger % len(LINE_STYLES)]
+            axes.plot(run.t, run.q[:, j], style, label=run.joint_names[j])
+        low = float(np.min(run.joint_lower_limits[columns]))
+        high = float(np.max(run.joint_upper_limits[columns]))
+        _shade_outside(axes, low, high, run.q[:, columns])
+        axes.set_ylabel(f'$q_{{i{k + 1}}}$ [rad]')
+        axes.legend(loc='best', fontsize='small')
+        _stop_marker(axes, run)
+    axes_list[-1].set_xlabel('t [s]')
+    axes_list[0].set_title(f'{run.mode}: joint angles (grey: beyond the joint limits)')
+    return _save(figure, path)
+
+
+def plot_friction(run: RunData, path: Path) -> Path:
+    """Plot the required friction beta_i against mu (grey: slip)."""
+    figure = Figure(figsize=(7, 3.5))
+    axes = figure.subplots()
+    beta = np.where(np.isfinite(run.required_friction), run.required_friction, np.nan)
+    for i, name in enumerate(run.contact_names):
+        axes.plot(run.t, beta[:, i], LINE_STYLES[i % len(LINE_STYLES)], label=name)
+    top = max(1.5 * run.mu, float(np.nanmax(beta)) * 1.05 if np.isfinite(beta).any() else 0.0)
+    axes.axhspan(run.mu, top, **INFEASIBLE)
+    axes.axhline(run.mu, color='k', linewidth=1.0, label=f'$\\mu$ = {run.mu:g}')
+    axes.set_ylim(0.0, top)
+    axes.set_xlabel('t [s]')
+    axes.set_ylabel('$\\beta_i$')
+    axes.legend(loc='best')
+    _stop_marker(axes, run)
+    axes.set_title(f'{run.mode}: required friction (grey: slip)')
+    return _save(figure, path)
+
+
+def plot_torques(run: RunData, path: Path) -> Path:
+    """Plot the commanded torque u against the nominal u_nom, one panel per joint."""
+    m = len(run.joint_names)
+    columns = run.joints_per_finger
+    rows = int(np.ceil(m / columns))
+    figure = Figure(figsize=(3.2 * columns, 2.2 * rows))
+    axes_grid = figure.subplots(rows, columns, sharex=True)
+    for j, axes in enumerate(np.atleast_1d(axes_grid).ravel()):
+        if j >= m:
+            axes.set_visible(False)
+            continue
+        axes.plot(run.t_command, run.u_nominal[:, j], color='0.5', label='$u_{nom}$')
+        axes.plot(run.t_command, run.u_command[:, j], color='C3', linewidth=1.0, label='$u^*$')
+        axes.set_title(run.joint_names[j], fontsize='small')
+        if j == 0:
+            axes.legend(fontsize='small')
+    figure.supxlabel('t [s]')
+    figure.supylabel('torque [N m]')
+    return _save(figure, path)
+
+
+def plot_run(run: RunData, out_dir: Path) -> list[Path]:
+    """Draw every figure of a run into ``out_dir``; return their paths."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [
+        plot_contacts(run, out_dir / 'contacts.png'),
+        plot_joints(run, out_dir / 'joints.png'),
+        plot_friction(run, out_dir / 'friction.png'),
+    ]
+    if run.t_command.size:
+        paths.append(plot_torques(run, out_dir / 'torques.png'))
+    return paths
+
+
+def _save(figure: Figure, path: Path) -> Path:
+    # Figure without pyplot: no GUI backend, no global state, works headless.
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    return path

@@ -1,0 +1,178 @@
+"""A recorded run as arrays: read from any bag with this package's topics.
+
+Works on bags written by the ROS-free runner and by ``ros2 bag record`` alike: everything
+is taken from the messages (header stamps, ``/grasp/scenario``), nothing from the runner.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.io import topics
+from grasp_safety_filter.io.bag import read_bag
+from grasp_safety_filter.io.messages import (
+    contacts_from_msg,
+    diagnostics_from_msg,
+    effort_from_msg,
+    header_stamp_ns,
+    joint_state_from_msg,
+)
+from grasp_safety_filter.nodes.scenario import scenario_from_msg
+
+SIM_STATUS = 'hand_sim'
+FILTER_STATUS = 'safety_filter'
+
+
+class RunDataError(ValueError):
+    """The bag lacks what the analysis needs (names the topic)."""
+
+
+@dataclass
+class RunData:
+    """One run's series, aligned on the simulator's steps.
+
+    Attributes:
+        scenario: The ``/grasp/scenario`` document (names, limits, mu, workspace, duration).
+        mode: ``"filtered"`` or ``"nominal"`` (filter off or absent).
+        t: Step start times, shape (K,), s (one per ``/hand/contacts`` sample).
+        q: Joint angles at ``t``, shape (K, m), rad.
+        xi_cf: Fingertip contact coordinates ``(a, b)``, shape (K, n, 2), rad.
+        force: Contact forces ``(f_x, f_y, f_n)`` on the object, contact frames, (K, n, 3), N.
+        required_friction: ``beta_i``, shape (K, n).
+        t_command: Stamps of the commands, shape (C,), s.
+        u_nominal, u_command: Nominal and commanded torques at ``t_command``, (C, m), N·m.
+        filter_values: Per tick (at ``t_command``), the safety filter's diagnostic values.
+        stop_reason: Why the simulator stopped (``"duration"`` when it ran to the end), or None
+            if the bag has no end-of-run status (an interrupted recording).
+        t_end: Time the run reached, s.
+    """
+
+    scenario: dict[str, Any]
+    mode: str
+    t: np.ndarray
+    q: np.ndarray
+    xi_cf: np.ndarray
+    force: np.ndarray
+    required_friction: np.ndarray
+    t_command: np.ndarray
+    u_nominal: np.ndarray
+    u_command: np.ndarray
+    filter_values: list[dict[str, str]] = field(default_factory=list)
+    stop_reason: str | None = None
+    t_end: float = 0.0
+
+    @property
+    def joint_names(self) -> list[str]:
+        """Joint names, command order."""
+        return list(self.scenario['joint_names'])
+
+    @property
+    def contact_names(self) -> list[str]:
+        """Contact names."""
+        return list(self.scenario['contact_names'])
+
+    @property
+    def joint_lower_limits(self) -> np.ndarray:
+        """q_min, rad."""
+        return np.asarray(self.scenario['joint_lower_limits'], dtype=float)
+
+    @property
+    def joint_upper_limits(self) -> np.ndarray:
+        """q_max, rad."""
+        return np.asarray(self.scenario['joint_upper_limits'], dtype=float)
+
+    @property
+    def fingertip_workspace(self) -> tuple[float, float, float, float]:
+        """``(a_min, a_max, b_min, b_max)``, rad."""
+        box = self.scenario['fingertip_workspace']
+        return (box['a_min'], box['a_max'], box['b_min'], box['b_max'])
+
+    @property
+    def mu(self) -> float:
+        """Friction coefficient."""
+        return float(self.scenario['friction_coefficient'])
+
+    @property
+    def joints_per_finger(self) -> int:
+        """Joints of each finger when they are listed finger by finger, else 1."""
+        m, n = len(self.joint_names), len(self.contact_names)
+        return m // n if n and m % n == 0 else 1
+
+
+def load_run(bag: Path | str) -> RunData:
+    """Read a run from a rosbag2 directory (mcap or sqlite3).
+
+    Raises:
+        RunDataError: A topic the analysis needs is missing or empty.
+    """
+    wanted = (
+        topics.SCENARIO,
+        topics.CONTACTS,
+        topics.JOINT_STATES,
+        topics.EFFORT_NOMINAL,
+        topics.EFFORT_COMMAND,
+        topics.DIAGNOSTICS,
+    )
+    messages = read_bag(Path(bag), topics=wanted)
+    for topic in (topics.SCENARIO, topics.CONTACTS, topics.JOINT_STATES):
+        if not messages.get(topic):
+            raise RunDataError(f'{bag}: no messages on {topic}; the analysis needs it')
+    scenario = scenario_from_msg(messages[topics.SCENARIO][0][1])
+    joint_names, contact_names = scenario['joint_names'], scenario['contact_names']
+
+    q_by_stamp = {}
+    for _, msg in messages[topics.JOINT_STATES]:
+        q_by_stamp[header_stamp_ns(msg)] = joint_state_from_msg(
+            msg, joint_names, source=topics.JOINT_STATES
+        ).position
+    contacts = [contacts_from_msg(msg, contact_names) for _, msg in messages[topics.CONTACTS]]
+    contacts.sort(key=lambda c: c.t)
+    stamps = [header_stamp_ns(msg) for _, msg in messages[topics.CONTACTS]]
+    stamps.sort()
+    missing = [s for s in stamps if s not in q_by_stamp]
+    if missing:
+        raise RunDataError(
+            f'{bag}: {len(missing)} contact samples have no joint state of the same stamp '
+            f'(first at {missing[0] * 1e-9:.9f} s)'
+        )
+
+    def efforts(topic: str) -> dict[int, np.ndarray]:
+        return {
+            header_stamp_ns(msg): effort_from_msg(msg, joint_names, source=topic).effort
+            for _, msg in messages.get(topic, [])
+        }
+
+    nominal, command = efforts(topics.EFFORT_NOMINAL), efforts(topics.EFFORT_COMMAND)
+    command_stamps = sorted(set(nominal) & set(command))
+    filter_values: dict[int, dict[str, str]] = {}
+    stop_reason, t_end = None, None
+    for _, msg in messages.get(topics.DIAGNOSTICS, []):
+        data = diagnostics_from_msg(msg)
+        for report in data.reports:
+            if report.name == FILTER_STATUS and 'status' in report.values:
+                filter_values[header_stamp_ns(msg)] = dict(report.values)
+            elif report.name == SIM_STATUS and 'run.stop_reason' in report.values:
+                stop_reason = report.values['run.stop_reason']
+                t_end = float(report.values['run.t_end'])
+    enabled = [v.get('filter.enabled') for v in filter_values.values()]
+    mode = 'filtered' if enabled and all(e == 'true' for e in enabled) else 'nominal'
+    m = len(joint_names)
+    return RunData(
+        scenario=scenario,
+        mode=mode,
+        t=np.array([c.t for c in contacts]),
+        q=np.array([q_by_stamp[s] for s in stamps]).reshape(-1, m),
+        xi_cf=np.array([c.xi_cf for c in contacts]),
+        force=np.array([c.force for c in contacts]),
+        required_friction=np.array([c.required_friction for c in contacts]),
+        t_command=np.array(command_stamps, dtype=float) * 1e-9,
+        u_nominal=np.array([nominal[s] for s in command_stamps]).reshape(-1, m),
+        u_command=np.array([command[s] for s in command_stamps]).reshape(-1, m),
+        filter_values=[filter_values[s] for s in sorted(filter_values)],
+        stop_reason=stop_reason,
+        t_end=t_end if t_end is not None else max(q_by_stamp) * 1e-9,
+    )

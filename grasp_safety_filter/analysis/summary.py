@@ -1,0 +1,100 @@
+"""A run's verdict, ``summary.json``: violations, margins and filter timing from its series.
+
+The constraint families are judged by :class:`hand_sim_node.events.EventMonitor`, the code
+the simulator judges a live run with, so a bag and its run always agree.
+
+Keys (later additions never rename one)::
+
+    {"mode", "completed", "t_end", "duration_requested", "stop_reason",
+     "violations": {family: {"count", "first_t"}},
+     "min_margin": {"fingertip_workspace", "joint_limits", "friction"},
+     "max_required_friction", "mu",
+     "filter": {"steps", "relaxed_steps", "failed_steps",
+                "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"}}}
+
+A margin is the smallest barrier value h over the run in its own units (negative =
+violated); infinite values (a separated contact) are written as null.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.analysis.run_data import RunData
+from hand_sim_node.events import EventLog, EventMonitor
+
+# Filter statuses that count as a failed step: the QP gave no usable answer and the
+# fallback command went out.
+FAILED_STATUSES = frozenset({'failed', 'fallback', 'invalid_input'})
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _percentiles(values: list[float]) -> dict[str, float | None]:
+    if not values:
+        return {'median': None, 'p99': None}
+    array = np.asarray(values, dtype=float)
+    return {'median': float(np.median(array)), 'p99': float(np.percentile(array, 99))}
+
+
+def constraint_log(run: RunData) -> EventLog:
+    """Judge every step of the run with the simulator's event monitor."""
+    monitor = EventMonitor(
+        run.joint_lower_limits,
+        run.joint_upper_limits,
+        run.fingertip_workspace,
+        run.mu,
+        run.joint_names,
+        run.contact_names,
+    )
+    log = EventLog()
+    for k, t in enumerate(run.t):
+        margins = monitor.margins_at(t, run.q[k], run.xi_cf[k], run.force[k].ravel())
+        log.record(margins, monitor.events(margins))
+    return log
+
+
+def filter_summary(run: RunData) -> dict[str, Any]:
+    """Count the filter's steps, relaxed and failed steps; QP and whole-step times."""
+    statuses = [values.get('status', '') for values in run.filter_values]
+    return {
+        'steps': len(run.filter_values),
+        'relaxed_steps': sum(values.get('relaxed') == 'true' for values in run.filter_values),
+        'failed_steps': sum(status in FAILED_STATUSES for status in statuses),
+        'qp_solve_us': _percentiles(
+            [float(v['solve_time_us']) for v in run.filter_values if 'solve_time_us' in v]
+        ),
+        'step_us': _percentiles(
+            [float(v['step_time_us']) for v in run.filter_values if 'step_time_us' in v]
+        ),
+    }
+
+
+def summarize(run: RunData) -> dict[str, Any]:
+    """Build the run's ``summary.json`` document."""
+    log = constraint_log(run)
+    duration = float(run.scenario['duration'])
+    step = float(run.scenario['time_step'])
+    completed = run.stop_reason == 'duration' or (
+        run.stop_reason is None and run.t_end >= duration - 0.5 * step
+    )
+    stop_reason = None if completed else (run.stop_reason or 'interrupted')
+    summary: dict[str, Any] = {
+        'mode': run.mode,
+        'completed': bool(completed),
+        't_end': float(run.t_end),
+        'duration_requested': duration,
+        'stop_reason': stop_reason,
+        'violations': log.violations(),
+        'min_margin': {k: _finite_or_none(v) for k, v in log.min_margin().items()},
+        'max_required_friction': _finite_or_none(log.max_required_friction),
+        'mu': run.mu,
+    }
+    if run.mode == 'filtered':
+        summary['filter'] = filter_summary(run)
+    return summary
