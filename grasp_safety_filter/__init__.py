@@ -11,4 +11,4 @@ Layout: ``model/`` (hand, object, surfaces, rolling contacts, the per-tick grasp
 (configuration, parameters, messages, bags), ``nodes/`` (rclpy shells).
 """
 
-__version__ = "0.1.0"
+__version__ = '0.1.0'

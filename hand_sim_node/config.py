@@ -109,7 +109,7 @@ class SimConfig:
         if abs(norm - 1.0) > 1e-6:
             raise ParameterError(
                 "parameter 'initial.object_orientation': expected a unit quaternion (x, y, z, "
-                f"w), got {quaternion.tolist()} (norm {norm:.9g})"
+                f'w), got {quaternion.tolist()} (norm {norm:.9g})'
             )
         unit = quaternion / norm
         unit.setflags(write=False)
@@ -117,7 +117,7 @@ class SimConfig:
         if self.time_step > self.duration:
             raise ParameterError(
                 f"parameter 'time_step': expected <= duration ({self.duration} s), got "
-                f"{self.time_step}"
+                f'{self.time_step}'
             )
 
     @property
@@ -138,7 +138,9 @@ class SimConfig:
         """
         flat = flatten_parameters(params)
         names = {**_ARRAY_FIELDS, **_SCALAR_FIELDS}
-        return cls(**{
-            field_name: flat[name] if name in flat else _SPECS[name].default
-            for field_name, name in names.items()
-        })
+        return cls(
+            **{
+                field_name: flat[name] if name in flat else _SPECS[name].default
+                for field_name, name in names.items()
+            }
+        )

@@ -194,18 +194,49 @@ class EventMonitor:
             return ()
         found: list[Event] = []
         for row, side in zip(*np.nonzero(violated[FINGERTIP_WORKSPACE]), strict=True):
-            found.append(Event(margins.t, FINGERTIP_WORKSPACE, int(row),
-                               self.contact_names[row], WORKSPACE_SIDES[side],
-                               float(margins.fingertip_workspace[row, side])))
+            found.append(
+                Event(
+                    margins.t,
+                    FINGERTIP_WORKSPACE,
+                    int(row),
+                    self.contact_names[row],
+                    WORKSPACE_SIDES[side],
+                    float(margins.fingertip_workspace[row, side]),
+                )
+            )
         for row, side in zip(*np.nonzero(violated[JOINT_LIMITS]), strict=True):
-            found.append(Event(margins.t, JOINT_LIMITS, int(row), self.joint_names[row],
-                               JOINT_SIDES[side], float(margins.joint_limits[row, side])))
+            found.append(
+                Event(
+                    margins.t,
+                    JOINT_LIMITS,
+                    int(row),
+                    self.joint_names[row],
+                    JOINT_SIDES[side],
+                    float(margins.joint_limits[row, side]),
+                )
+            )
         for row in np.flatnonzero(violated[SLIP]):
-            found.append(Event(margins.t, SLIP, int(row), self.contact_names[row], '',
-                               float(margins.friction[row])))
+            found.append(
+                Event(
+                    margins.t,
+                    SLIP,
+                    int(row),
+                    self.contact_names[row],
+                    '',
+                    float(margins.friction[row]),
+                )
+            )
         for row in np.flatnonzero(violated[SEPARATION]):
-            found.append(Event(margins.t, SEPARATION, int(row), self.contact_names[row], '',
-                               float(margins.normal_force[row])))
+            found.append(
+                Event(
+                    margins.t,
+                    SEPARATION,
+                    int(row),
+                    self.contact_names[row],
+                    '',
+                    float(margins.normal_force[row]),
+                )
+            )
         return tuple(found)
 
 
@@ -264,8 +295,9 @@ class EventLog:
         for family, values in worst.items():
             record = self.families[family]
             record.min_margin = min(record.min_margin, _finite_or_inf_min(values))
-        self.max_required_friction = max(self.max_required_friction,
-                                         -_finite_or_inf_min(-margins.required_friction))
+        self.max_required_friction = max(
+            self.max_required_friction, -_finite_or_inf_min(-margins.required_friction)
+        )
         active = {(event.family, event.index, event.side) for event in events}
         for family in {event.family for event in events}:
             record = self.families[family]
@@ -273,7 +305,8 @@ class EventLog:
             if record.first_t is None:
                 record.first_t = margins.t
         self.onsets.extend(
-            event for event in events
+            event
+            for event in events
             if (event.family, event.index, event.side) not in self._active
         )
         self._active = active

@@ -45,18 +45,18 @@ class ButcherTableau:
         if self.a.shape != (s, s) or self.c.shape != (s,):
             raise ValueError(
                 f"ButcherTableau '{self.name}': expected a ({s}, {s}) and c ({s},), got "
-                f"a {self.a.shape} and c {self.c.shape}"
+                f'a {self.a.shape} and c {self.c.shape}'
             )
         if np.any(np.triu(self.a) != 0.0):
             raise ValueError(
                 f"ButcherTableau '{self.name}': expected a strictly lower-triangular a "
-                "(explicit method)"
+                '(explicit method)'
             )
         if not np.isclose(self.b.sum(), 1.0) or not np.allclose(self.a.sum(axis=1), self.c):
             raise ValueError(
                 f"ButcherTableau '{self.name}': expected sum(b) = 1 and c_i = sum_j a_ij, got "
-                f"sum(b) = {self.b.sum()}, c = {self.c.tolist()}, row sums "
-                f"{self.a.sum(axis=1).tolist()}"
+                f'sum(b) = {self.b.sum()}, c = {self.c.tolist()}, row sums '
+                f'{self.a.sum(axis=1).tolist()}'
             )
         for array in (self.a, self.b, self.c):
             array.setflags(write=False)

@@ -32,12 +32,14 @@ def quaternion_derivative(quaternion_xyzw: np.ndarray, omega_in_palm: np.ndarray
     x, y, z, w = quaternion_xyzw
     wx, wy, wz = omega_in_palm
     # Written out: np.cross costs more than the rest of a simulator stage's bookkeeping.
-    return 0.5 * np.array([
-        w * wx + wy * z - wz * y,
-        w * wy + wz * x - wx * z,
-        w * wz + wx * y - wy * x,
-        -(wx * x + wy * y + wz * z),
-    ])
+    return 0.5 * np.array(
+        [
+            w * wx + wy * z - wz * y,
+            w * wy + wz * x - wx * z,
+            w * wz + wx * y - wy * x,
+            -(wx * x + wy * y + wz * z),
+        ]
+    )
 
 
 def normalized(quaternion_xyzw: np.ndarray) -> np.ndarray:
@@ -71,19 +73,35 @@ def from_rotation_matrix(R: np.ndarray) -> np.ndarray:
     k = int(np.argmax(pivots))
     if k == 0:
         s = 2.0 * np.sqrt(1.0 + trace)
-        quaternion = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s,
-                      0.25 * s]
+        quaternion = [
+            (R[2, 1] - R[1, 2]) / s,
+            (R[0, 2] - R[2, 0]) / s,
+            (R[1, 0] - R[0, 1]) / s,
+            0.25 * s,
+        ]
     elif k == 1:
         s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        quaternion = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s,
-                      (R[2, 1] - R[1, 2]) / s]
+        quaternion = [
+            0.25 * s,
+            (R[0, 1] + R[1, 0]) / s,
+            (R[0, 2] + R[2, 0]) / s,
+            (R[2, 1] - R[1, 2]) / s,
+        ]
     elif k == 2:
         s = 2.0 * np.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
-        quaternion = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s,
-                      (R[0, 2] - R[2, 0]) / s]
+        quaternion = [
+            (R[0, 1] + R[1, 0]) / s,
+            0.25 * s,
+            (R[1, 2] + R[2, 1]) / s,
+            (R[0, 2] - R[2, 0]) / s,
+        ]
     else:
         s = 2.0 * np.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
-        quaternion = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s,
-                      (R[1, 0] - R[0, 1]) / s]
+        quaternion = [
+            (R[0, 2] + R[2, 0]) / s,
+            (R[1, 2] + R[2, 1]) / s,
+            0.25 * s,
+            (R[1, 0] - R[0, 1]) / s,
+        ]
     result = normalized(np.array(quaternion))
     return result if result[3] >= 0.0 else -result

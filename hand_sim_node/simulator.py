@@ -40,12 +40,12 @@ import numpy as np
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.config import SimConfig
 from hand_sim_node.events import (
-    FINGERTIP_WORKSPACE,
-    SLIP,
     ConstraintMargins,
     Event,
     EventLog,
     EventMonitor,
+    FINGERTIP_WORKSPACE,
+    SLIP,
 )
 from hand_sim_node.integrators import integrator
 from hand_sim_node.quaternion import normalized, quaternion_derivative, rotation_matrix
@@ -97,8 +97,14 @@ class SimState:
     def from_vector(cls, t: float, x: np.ndarray, n_joints: int) -> SimState:
         """Inverse of :meth:`to_vector` for a hand with ``n_joints`` joints."""
         m = n_joints
-        return cls(t, x[:m], x[m:2 * m], x[2 * m:2 * m + 3], x[2 * m + 3:2 * m + 7],
-                   x[2 * m + 7:2 * m + 13])
+        return cls(
+            t,
+            x[:m],
+            x[m : 2 * m],
+            x[2 * m : 2 * m + 3],
+            x[2 * m + 3 : 2 * m + 7],
+            x[2 * m + 7 : 2 * m + 13],
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,7 +165,7 @@ class Simulator:
         if config.initial_joint_positions.shape != (model.n_joints,):
             raise ValueError(
                 f"parameter 'initial.joint_positions': expected {model.n_joints} joint angles "
-                f"({', '.join(model.joint_names)}), got {config.initial_joint_positions.size}"
+                f'({", ".join(model.joint_names)}), got {config.initial_joint_positions.size}'
             )
         self.model = model
         self.config = config
@@ -181,8 +187,14 @@ class Simulator:
             q = self.model.project_to_contact(
                 config.initial_joint_positions, config.initial_object_position, R_object_to_palm
             )
-            state = SimState(0.0, q, np.zeros(self._m), config.initial_object_position,
-                             config.initial_object_orientation, np.zeros(6))
+            state = SimState(
+                0.0,
+                q,
+                np.zeros(self._m),
+                config.initial_object_position,
+                config.initial_object_orientation,
+                np.zeros(6),
+            )
         self._t0 = state.t
         self._step_index = 0
         self._state = state
@@ -221,8 +233,12 @@ class Simulator:
     def _model_state(self, t: float, x: np.ndarray) -> GraspState:
         m = self._m
         return self.model.state(
-            t, x[:m], x[m:2 * m], x[2 * m:2 * m + 3],
-            rotation_matrix(x[2 * m + 3:2 * m + 7]), x[2 * m + 7:],
+            t,
+            x[:m],
+            x[m : 2 * m],
+            x[2 * m : 2 * m + 3],
+            rotation_matrix(x[2 * m + 3 : 2 * m + 7]),
+            x[2 * m + 7 :],
         )
 
     def contact_force(self, state: GraspState, effort: np.ndarray) -> np.ndarray:
@@ -253,10 +269,15 @@ class Simulator:
         f_c = self.contact_force(state, effort)
         ddq = np.linalg.solve(state.M_h, effort - state.h_bias - state.J_h.T @ f_c)
         x_o_ddot = np.linalg.solve(state.M_o, state.G @ f_c + state.w_e - state.C_o_twist)
-        x_dot = np.concatenate((
-            state.dq, ddq, state.twist_object[:3],
-            quaternion_derivative(quaternion_xyzw, state.twist_object[3:]), x_o_ddot,
-        ))
+        x_dot = np.concatenate(
+            (
+                state.dq,
+                ddq,
+                state.twist_object[:3],
+                quaternion_derivative(quaternion_xyzw, state.twist_object[3:]),
+                x_o_ddot,
+            )
+        )
         return x_dot, f_c
 
     # ------------------------------------------------------------------------------ step
@@ -321,9 +342,16 @@ class Simulator:
             else:
                 stop_reason = NUMERICAL_FAILURE
         self._stop_reason = stop_reason
-        return StepReport(start=start, state=self._state, grasp_state=state0, effort=u,
-                          contact_force=f_c, margins=margins, events=events,
-                          stop_reason=stop_reason)
+        return StepReport(
+            start=start,
+            state=self._state,
+            grasp_state=state0,
+            effort=u,
+            contact_force=f_c,
+            margins=margins,
+            events=events,
+            stop_reason=stop_reason,
+        )
 
     def _stopping(self, events: tuple[Event, ...]) -> str | None:
         families = {event.family for event in events}

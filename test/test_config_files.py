@@ -11,11 +11,11 @@ import pytest
 import yaml
 
 from grasp_safety_filter.io.parameters import (
+    load_parameter_file,
     ROS_PARAMETERS_KEY,
     WILDCARD_NODE,
-    load_parameter_file,
 )
-from grasp_safety_filter.io.schemas import MODEL_PARAMETERS, NODE_SCHEMAS, load_node_parameters
+from grasp_safety_filter.io.schemas import load_node_parameters, MODEL_PARAMETERS, NODE_SCHEMAS
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 CONFIG_FILES = sorted(CONFIG.glob('*.yaml'))

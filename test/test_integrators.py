@@ -5,7 +5,7 @@ import itertools
 import numpy as np
 import pytest
 
-from hand_sim_node.integrators import INTEGRATORS, ODE3, RK4, ButcherTableau, integrator
+from hand_sim_node.integrators import ButcherTableau, integrator, INTEGRATORS, ODE3, RK4
 from hand_sim_node.quaternion import (
     from_rotation_matrix,
     normalized,
@@ -167,8 +167,9 @@ def test_rotation_matrix_round_trip_and_orthonormality():
 
 def test_rotation_about_z_by_a_quarter_turn():
     quaternion = np.array([0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4)])
-    np.testing.assert_allclose(rotation_matrix(quaternion) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0],
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        rotation_matrix(quaternion) @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-15
+    )
 
 
 def test_quaternion_rate_gives_spatial_angular_velocity():

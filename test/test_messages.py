@@ -8,7 +8,7 @@ from grasp_states import paper_model, random_configuration
 import numpy as np
 import pinocchio as pin
 import pytest
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.control.hold_policy import Fallback, HoldPolicy
 from grasp_safety_filter.io import messages as m
@@ -753,7 +753,7 @@ def test_stamp_guard_rejects_non_finite_stamps():
 
 
 def filter_tick(policy, guard, msg, now, gravity_torque):
-    """The input path of a filter tick: parse, check stamps, then compute or hold."""
+    """Run the input path of a filter tick: parse, check stamps, then compute or hold."""
     try:
         state = m.joint_state_from_msg(msg, JOINTS, source='/hand/joint_states')
         guard.accept('/hand/joint_states', state.t, now)

@@ -2,29 +2,31 @@
 
 from __future__ import annotations
 
+from grasp_states import Configuration, paper_model, random_configuration
 import numpy as np
 import pinocchio as pin
 import pytest
-from grasp_states import Configuration, paper_model, random_configuration
 
 N_STATES = 20
 EPS = 1e-6
 RTOL = 1e-5
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def model():
     return paper_model()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope='module')
 def configurations(model):
     rng = np.random.default_rng(7)
     return [random_configuration(model, rng) for _ in range(N_STATES)]
 
 
-def moved(c: Configuration, t: float, ddq: np.ndarray | None = None, x_ddot: np.ndarray | None = None) -> Configuration:
-    """The configuration after time t of the motion (second order when accelerations are given)."""
+def moved(
+    c: Configuration, t: float, ddq: np.ndarray | None = None, x_ddot: np.ndarray | None = None
+) -> Configuration:
+    """Return the configuration after time t (second order when accelerations are given)."""
     ddq = np.zeros_like(c.dq) if ddq is None else ddq
     x_ddot = np.zeros(6) if x_ddot is None else x_ddot
     v, w = c.twist_object[:3], c.twist_object[3:]
@@ -39,28 +41,36 @@ def moved(c: Configuration, t: float, ddq: np.ndarray | None = None, x_ddot: np.
 
 
 def central(f, c: Configuration, **kwargs) -> np.ndarray:
-    return (np.asarray(f(moved(c, EPS, **kwargs))) - np.asarray(f(moved(c, -EPS, **kwargs)))) / (2 * EPS)
+    return (np.asarray(f(moved(c, EPS, **kwargs))) - np.asarray(f(moved(c, -EPS, **kwargs)))) / (
+        2 * EPS
+    )
 
 
 def assert_close(actual: np.ndarray, expected: np.ndarray, what: str) -> None:
     scale = max(np.max(np.abs(expected)), 1e-3)
     error = np.max(np.abs(actual - expected)) / scale
-    assert error <= RTOL, f"{what}: relative error {error:.2e} > {RTOL:g}\n{actual}\n{expected}"
+    assert error <= RTOL, f'{what}: relative error {error:.2e} > {RTOL:g}\n{actual}\n{expected}'
 
 
 def test_fingertip_jacobians_match_finite_differences(model, configurations):
     for c in configurations:
         state = c.state(model)
+
         def tips(x):
             p, _, _ = model.hand.fingertip_placements(x.q)
             return p
+
         v_fd = central(tips, c)
         R_plus = model.hand.fingertip_placements(moved(c, EPS).q)[1]
         R_minus = model.hand.fingertip_placements(moved(c, -EPS).q)[1]
-        w_fd = np.array([pin.log3(Rp @ Rm.T) / (2 * EPS) for Rp, Rm in zip(R_plus, R_minus)])
+        w_fd = np.array(
+            [pin.log3(Rp @ Rm.T) / (2 * EPS) for Rp, Rm in zip(R_plus, R_minus, strict=True)]
+        )
         for i in range(model.n_contacts):
-            assert_close(state.J_fingertip[i] @ c.dq, np.concatenate([v_fd[i], w_fd[i]]), f"J_s[{i}] dq")
-            assert_close(state.twist_fingertip[i], state.J_fingertip[i] @ c.dq, f"twist_f[{i}]")
+            assert_close(
+                state.J_fingertip[i] @ c.dq, np.concatenate([v_fd[i], w_fd[i]]), f'J_s[{i}] dq'
+            )
+            assert_close(state.twist_fingertip[i], state.J_fingertip[i] @ c.dq, f'twist_f[{i}]')
 
 
 def test_hand_jacobian_and_grasp_map_match_material_point_velocities(model, configurations):
@@ -72,15 +82,25 @@ def test_hand_jacobian_and_grasp_map_match_material_point_velocities(model, conf
             R_cp = state.R_contact_to_palm[i].T
             # Material point of the fingertip at the contact, carried by the finger's motion.
             p_fc_in_f = state.R_fingertip_to_palm[i].T @ (p_c - state.p_fingertip_in_palm[i])
+
             def finger_point(x, i=i, p_fc_in_f=p_fc_in_f):
                 p, R, _ = model.hand.fingertip_placements(x.q)
                 return p[i] + R[i] @ p_fc_in_f
-            assert_close(state.J_h[rows] @ c.dq, R_cp @ central(finger_point, c), f"J_h contact {i}")
+
+            assert_close(
+                state.J_h[rows] @ c.dq, R_cp @ central(finger_point, c), f'J_h contact {i}'
+            )
             # Material point of the object at the contact, carried by the object's motion.
             p_oc_in_o = c.R_object.T @ (p_c - c.p_object)
+
             def object_point(x, p_oc_in_o=p_oc_in_o):
                 return x.p_object + x.R_object @ p_oc_in_o
-            assert_close(state.G[:, rows].T @ c.twist_object, R_cp @ central(object_point, c), f"G contact {i}")
+
+            assert_close(
+                state.G[:, rows].T @ c.twist_object,
+                R_cp @ central(object_point, c),
+                f'G contact {i}',
+            )
         # On a rolling motion the two material velocities agree (the no-slip constraint).
         np.testing.assert_allclose(state.J_h @ c.dq, state.G.T @ c.twist_object, atol=1e-10)
 
@@ -90,20 +110,22 @@ def test_jacobian_time_derivatives_match_finite_differences(model, configuration
         state = c.state(model)
         Jh_dot = central(lambda x: x.state(model).J_h, c)
         G_dot = central(lambda x: x.state(model).G, c)
-        assert_close(state.Jh_dot_dq, Jh_dot @ c.dq, "J_h_dot dq")
-        assert_close(state.G_dot_T_twist, G_dot.T @ c.twist_object, "G_dot^T x_o_dot")
+        assert_close(state.Jh_dot_dq, Jh_dot @ c.dq, 'J_h_dot dq')
+        assert_close(state.G_dot_T_twist, G_dot.T @ c.twist_object, 'G_dot^T x_o_dot')
 
 
 def test_rolling_rates_match_geometric_coordinates(model, configurations):
     for c in configurations:
         state = c.state(model)
+
         def coordinates(x):
             geometry = model.contact_geometry(x.q, x.p_object, x.R_object)
             return np.array([np.concatenate([g.xi_cf, g.xi_co, [g.psi]]) for g in geometry])
+
         rates = central(coordinates, c)
-        assert_close(state.xi_cf_dot, rates[:, :2], "xi_cf_dot")
-        assert_close(state.xi_co_dot, rates[:, 2:4], "xi_co_dot")
-        assert_close(state.psi_dot, rates[:, 4], "psi_dot")
+        assert_close(state.xi_cf_dot, rates[:, :2], 'xi_cf_dot')
+        assert_close(state.xi_co_dot, rates[:, 2:4], 'xi_co_dot')
+        assert_close(state.psi_dot, rates[:, 4], 'psi_dot')
 
 
 def test_contact_coordinate_accelerations_match_finite_differences(model, configurations):
@@ -114,13 +136,13 @@ def test_contact_coordinate_accelerations_match_finite_differences(model, config
         ddq = state.joint_acceleration(u)
         x_ddot = state.object_acceleration(u)
         rate = central(lambda x: x.state(model).xi_cf_dot, c, ddq=ddq, x_ddot=x_ddot)
-        assert_close(state.xi_cf_ddot(u).reshape(-1, 2), rate, "xi_cf_ddot")
+        assert_close(state.xi_cf_ddot(u).reshape(-1, 2), rate, 'xi_cf_ddot')
 
 
 def test_mass_matrices_are_symmetric_positive_definite(model, configurations):
     for c in configurations:
         state = c.state(model)
-        for name in ("M_h", "M_o", "B_ho"):
+        for name in ('M_h', 'M_o', 'B_ho'):
             matrix = getattr(state, name)
             np.testing.assert_allclose(matrix, matrix.T, atol=1e-12, err_msg=name)
             assert np.linalg.eigvalsh(matrix).min() > 0.0, name
@@ -139,8 +161,12 @@ def test_accelerations_satisfy_the_differentiated_rolling_constraint(model, conf
             np.testing.assert_allclose(lhs, rhs, atol=1e-9)
             # And both dynamics hold with the same contact force.
             f_c = state.contact_force(u)
-            np.testing.assert_allclose(state.M_h @ ddq + state.h_bias, u - state.J_h.T @ f_c, atol=1e-9)
-            np.testing.assert_allclose(state.M_o @ x_ddot + state.C_o_twist, state.G @ f_c + state.w_e, atol=1e-9)
+            np.testing.assert_allclose(
+                state.M_h @ ddq + state.h_bias, u - state.J_h.T @ f_c, atol=1e-9
+            )
+            np.testing.assert_allclose(
+                state.M_o @ x_ddot + state.C_o_twist, state.G @ f_c + state.w_e, atol=1e-9
+            )
 
 
 def test_joint_accelerations_match_pinocchio_forward_dynamics(model, configurations):

@@ -3,10 +3,10 @@
 import dataclasses
 import math
 
+from grasp_states import paper_model, random_configuration
 import numpy as np
 import pinocchio as pin
 import pytest
-from grasp_states import paper_model, random_configuration
 
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.pose_error import (
@@ -38,9 +38,12 @@ def grasp_map(p_contact, R_contact, p_object):
 
 
 def synthetic_state(seed, n=3, m=9):
-    """A random state whose affine maps solve the hand/object dynamics under the
-    acceleration-level rolling constraint J_h ddq + J_h_dot dq = G^T x_ddot + G_dot^T x_dot
-    (DESIGN.md §3), written out independently of the model."""
+    """Build a random state whose affine maps solve the hand/object dynamics.
+
+    The maps obey the acceleration-level rolling constraint
+    J_h ddq + J_h_dot dq = G^T x_ddot + G_dot^T x_dot (DESIGN.md §3), written out
+    independently of the model.
+    """
     rng = np.random.default_rng(seed)
     p_object = rng.normal(size=3) * 0.1
     R_object = matrix_from_euler(rng.uniform([-3, -1.2, -3], [3, 1.2, 3]))
@@ -83,15 +86,38 @@ def synthetic_state(seed, n=3, m=9):
     )
     zeros = np.zeros
     return GraspState(
-        t=0.0, q=zeros(m), dq=dq, p_object_in_palm=p_object, R_object_to_palm=R_object,
-        twist_object=twist, p_fingertip_in_palm=zeros((n, 3)),
-        R_fingertip_to_palm=np.tile(np.eye(3), (n, 1, 1)), twist_fingertip=zeros((n, 6)),
-        xi_cf=zeros((n, 2)), xi_co=zeros((n, 2)), psi=zeros(n), xi_cf_dot=zeros((n, 2)),
-        xi_co_dot=zeros((n, 2)), psi_dot=zeros(n), penetration=zeros(n),
-        p_contact_in_palm=p_contact, R_contact_to_palm=R_contact, M_h=M_h, h_bias=h_bias,
-        gravity_torque=gravity_torque, J_fingertip=zeros((n, 6, m)), J_h=J_h, G=G,
-        Jh_dot_dq=Jh_dot_dq, G_dot_T_twist=G_dot_T_twist, M_o=M_o, C_o_twist=C_o_twist,
-        w_e=w_e, B_ho=B_ho, contact_force=contact_force, joint_acceleration=joint_acceleration,
+        t=0.0,
+        q=zeros(m),
+        dq=dq,
+        p_object_in_palm=p_object,
+        R_object_to_palm=R_object,
+        twist_object=twist,
+        p_fingertip_in_palm=zeros((n, 3)),
+        R_fingertip_to_palm=np.tile(np.eye(3), (n, 1, 1)),
+        twist_fingertip=zeros((n, 6)),
+        xi_cf=zeros((n, 2)),
+        xi_co=zeros((n, 2)),
+        psi=zeros(n),
+        xi_cf_dot=zeros((n, 2)),
+        xi_co_dot=zeros((n, 2)),
+        psi_dot=zeros(n),
+        penetration=zeros(n),
+        p_contact_in_palm=p_contact,
+        R_contact_to_palm=R_contact,
+        M_h=M_h,
+        h_bias=h_bias,
+        gravity_torque=gravity_torque,
+        J_fingertip=zeros((n, 6, m)),
+        J_h=J_h,
+        G=G,
+        Jh_dot_dq=Jh_dot_dq,
+        G_dot_T_twist=G_dot_T_twist,
+        M_o=M_o,
+        C_o_twist=C_o_twist,
+        w_e=w_e,
+        B_ho=B_ho,
+        contact_force=contact_force,
+        joint_acceleration=joint_acceleration,
         object_acceleration=object_acceleration,
         xi_cf_ddot=AffineMap(zeros((2 * n, m)), zeros(2 * n)),
     )
@@ -104,27 +130,28 @@ def real_state(seed):
     return random_configuration(MODEL, np.random.default_rng(seed)).state(MODEL)
 
 
-STATES = [("synthetic", seed) for seed in range(4)] + [("model", seed) for seed in range(6)]
+STATES = [('synthetic', seed) for seed in range(4)] + [('model', seed) for seed in range(6)]
 
 
 def make_state(kind, seed):
-    return synthetic_state(seed) if kind == "synthetic" else real_state(seed)
+    return synthetic_state(seed) if kind == 'synthetic' else real_state(seed)
 
 
 def references(state):
-    """A paper reference mid-motion, a random one, and holding the current pose."""
+    """Return a paper reference mid-motion, a random one, and one holding the pose."""
     phi = euler_from_matrix(state.R_object_to_palm) + np.array([0.1, -0.1, 0.2])
     pose = Pose(state.p_object_in_palm + np.array([0.01, -0.02, 0.03]), matrix_from_euler(phi))
     rng = np.random.default_rng(99)
     random_sample = ReferenceSample(
-        r=pose.euler + rng.normal(size=6) * 0.1, r_dot=rng.normal(size=6),
+        r=pose.euler + rng.normal(size=6) * 0.1,
+        r_dot=rng.normal(size=6),
         r_ddot=rng.normal(size=6),
     )
     hold = ReferenceSample.from_pose(Pose(state.p_object_in_palm, state.R_object_to_palm))
     return [PaperReference(pose).sample(2.3), random_sample, hold]
 
 
-@pytest.mark.parametrize(("kind", "seed"), STATES)
+@pytest.mark.parametrize(('kind', 'seed'), STATES)
 def test_internal_force_lies_in_null_space_of_grasp_map(kind, seed):
     state = make_state(kind, seed)
     u_f = NominalController().internal_force(state)
@@ -133,12 +160,12 @@ def test_internal_force_lies_in_null_space_of_grasp_map(kind, seed):
     assert np.linalg.norm(u_f) > 0.1  # a real squeeze, not a trivially zero one
     np.testing.assert_allclose(G @ u_f, 0.0, atol=1e-12)
     # Palm-frame forces point from each contact to the centroid, with magnitude k_f * distance.
-    f_palm = np.einsum("nij,nj->ni", state.R_contact_to_palm, u_f.reshape(-1, 3))
+    f_palm = np.einsum('nij,nj->ni', state.R_contact_to_palm, u_f.reshape(-1, 3))
     centroid = state.p_contact_in_palm.mean(axis=0)
     np.testing.assert_allclose(f_palm, 10.0 * (centroid - state.p_contact_in_palm), atol=1e-12)
 
 
-@pytest.mark.parametrize(("kind", "seed"), STATES)
+@pytest.mark.parametrize(('kind', 'seed'), STATES)
 def test_computed_torque_produces_the_desired_object_acceleration(kind, seed):
     state = make_state(kind, seed)
     controller = NominalController()
@@ -152,12 +179,13 @@ def test_computed_torque_produces_the_desired_object_acceleration(kind, seed):
         # The hand moves consistently with the object (acceleration-level rolling constraint).
         ddq = state.joint_acceleration(output.u)
         np.testing.assert_allclose(
-            state.J_h @ ddq + state.Jh_dot_dq, state.G.T @ x_ddot + state.G_dot_T_twist,
+            state.J_h @ ddq + state.Jh_dot_dq,
+            state.G.T @ x_ddot + state.G_dot_T_twist,
             atol=1e-8 * max(1.0, np.linalg.norm(ddq)),
         )
 
 
-@pytest.mark.parametrize(("kind", "seed"), STATES)
+@pytest.mark.parametrize(('kind', 'seed'), STATES)
 def test_squeeze_adds_exactly_the_internal_force_to_the_contact_forces(kind, seed):
     state = make_state(kind, seed)
     reference = references(state)[0]
@@ -165,7 +193,8 @@ def test_squeeze_adds_exactly_the_internal_force_to_the_contact_forces(kind, see
     loose = NominalController(NominalConfig(kf=0.0)).compute(state, reference)
     np.testing.assert_array_equal(loose.u_internal, 0.0)
     np.testing.assert_allclose(
-        state.contact_force(squeezing.u) - state.contact_force(loose.u), squeezing.u_internal,
+        state.contact_force(squeezing.u) - state.contact_force(loose.u),
+        squeezing.u_internal,
         atol=1e-9,
     )
     np.testing.assert_allclose(
@@ -174,10 +203,12 @@ def test_squeeze_adds_exactly_the_internal_force_to_the_contact_forces(kind, see
 
 
 def object_euler_second_derivative(state, x_ddot, h=2e-3):
-    """r_o_ddot by central second differences of the object's Euler coordinates, moving
-    with twist x_dot and acceleration x_ddot: R(s) = exp(w s + alpha s^2 / 2) R agrees with
-    the rotation integrated from w(s) = w + alpha s up to O(s^3), odd terms cancel.
-    Richardson extrapolation over h and h/2 removes the O(h^2) truncation error."""
+    """Differentiate the object's Euler coordinates twice, centrally.
+
+    The object moves with twist x_dot and acceleration x_ddot: R(s) = exp(w s + alpha s^2 / 2) R
+    agrees with the rotation integrated from w(s) = w + alpha s up to O(s^3), odd terms
+    cancel. Richardson extrapolation over h and h/2 removes the O(h^2) truncation error.
+    """
     p, R, twist = state.p_object_in_palm, state.R_object_to_palm, state.twist_object
 
     def r_at(s):
@@ -194,7 +225,7 @@ def object_euler_second_derivative(state, x_ddot, h=2e-3):
     return (4.0 * second_difference(h / 2) - second_difference(h)) / 3.0
 
 
-@pytest.mark.parametrize(("kind", "seed"), STATES)
+@pytest.mark.parametrize(('kind', 'seed'), STATES)
 def test_euler_error_obeys_the_linear_closed_loop(kind, seed):
     state = make_state(kind, seed)
     config = NominalConfig(kp=1.7, kd=2.5)
@@ -204,15 +235,21 @@ def test_euler_error_obeys_the_linear_closed_loop(kind, seed):
         r_ddot_object = object_euler_second_derivative(state, output.object_acceleration_desired)
         e_ddot = reference.r_ddot - r_ddot_object
         np.testing.assert_allclose(
-            e_ddot + config.kd * output.pose_error_rate + config.kp * output.pose_error, 0.0,
+            e_ddot + config.kd * output.pose_error_rate + config.kp * output.pose_error,
+            0.0,
             atol=1e-5,
         )
         # Without the P_dot term the loop would not be exact: the test can tell.
         phi = euler_from_matrix(state.R_object_to_palm)
         without = output.object_acceleration_desired.copy()
-        without[3:] = euler_rate_jacobian(phi) @ (
-            reference.r_ddot + config.kp * output.pose_error + config.kd * output.pose_error_rate
-        )[3:]
+        without[3:] = (
+            euler_rate_jacobian(phi)
+            @ (
+                reference.r_ddot
+                + config.kp * output.pose_error
+                + config.kd * output.pose_error_rate
+            )[3:]
+        )
         residual = reference.r_ddot - object_euler_second_derivative(state, without)
         residual += config.kd * output.pose_error_rate + config.kp * output.pose_error
         assert np.linalg.norm(residual) > 1e-2
@@ -222,9 +259,7 @@ def test_pose_error_and_rate_definitions():
     state = real_state(0)
     reference = references(state)[1]
     output = NominalController().compute(state, reference)
-    r_object = np.concatenate(
-        (state.p_object_in_palm, euler_from_matrix(state.R_object_to_palm))
-    )
+    r_object = np.concatenate((state.p_object_in_palm, euler_from_matrix(state.R_object_to_palm)))
     np.testing.assert_allclose(output.pose_error[:3], reference.r[:3] - r_object[:3])
     # Same rotation error whatever 2 pi branch the reference angles are given on.
     shifted = dataclasses.replace(reference, r=reference.r + np.array([0, 0, 0, 2, 0, -4]) * np.pi)
@@ -236,10 +271,12 @@ def test_pose_error_and_rate_definitions():
 
 
 def test_closed_object_loop_tracks_the_paper_reference_through_the_yaw_cut():
-    """Drive the object's pose with x_ddot_des (the acceleration u_nom produces) and compare
-    the pose error with the analytic solution of e'' + kd e' + kp e = 0 (kd = 2.5, kp = 1:
-    e(t) = c1 exp(-t/2) + c2 exp(-2t)). The initial yaw of -2.5 rad makes the reference yaw
-    (-2.5 + 2 (cos t - 1)) cross -pi, and the object's measured yaw jump to +pi."""
+    """Drive the object with x_ddot_des and compare the error with the analytic solution.
+
+    x_ddot_des is the acceleration u_nom produces; e'' + kd e' + kp e = 0 with kd = 2.5,
+    kp = 1 gives e(t) = c1 exp(-t/2) + c2 exp(-2t). The initial yaw of -2.5 rad makes the
+    reference yaw (-2.5 + 2 (cos t - 1)) cross -pi, and the object's measured yaw jump to +pi.
+    """
     base = real_state(0)
     controller = NominalController()
     reference = PaperReference(Pose([0.0, 0.0, 0.3], matrix_from_euler([0.0, 0.0, -2.5])))
@@ -274,8 +311,14 @@ def test_closed_object_loop_tracks_the_paper_reference_through_the_yaw_cut():
         k2 = derivative(t + dt / 2, step(y, k1, dt / 2))
         k3 = derivative(t + dt / 2, step(y, k2, dt / 2))
         k4 = derivative(t + dt, step(y, k3, dt))
-        y = step(y, tuple((b1 + 2 * b2 + 2 * b3 + b4) / 6
-                          for b1, b2, b3, b4 in zip(k1, k2, k3, k4, strict=True)), dt)
+        y = step(
+            y,
+            tuple(
+                (b1 + 2 * b2 + 2 * b3 + b4) / 6
+                for b1, b2, b3, b4 in zip(k1, k2, k3, k4, strict=True)
+            ),
+            dt,
+        )
         t += dt
         crossed |= reference.sample(t).r[5] < -math.pi and euler_from_matrix(y[1])[2] > 0.0
         _, e, _ = acceleration(t, *y)
@@ -304,24 +347,24 @@ def test_stale_topic_reference_holds_pose_with_zero_feed_forward():
 def test_rejects_a_non_square_hand_jacobian():
     state = synthetic_state(0)
     wide = dataclasses.replace(state, J_h=np.hstack((state.J_h, np.ones((9, 1)))))
-    with pytest.raises(ValueError, match="square hand Jacobian"):
+    with pytest.raises(ValueError, match='square hand Jacobian'):
         NominalController().compute(wide, references(state)[2])
 
 
 def test_config_defaults_are_the_papers():
-    config = NominalConfig.from_parameters({"model.fingertip_radius": 0.06})
+    config = NominalConfig.from_parameters({'model.fingertip_radius': 0.06})
     assert (config.kp, config.kd, config.kf) == (1.0, 2.5, 10.0)
-    assert config.reference_source == "paper"
+    assert config.reference_source == 'paper'
     assert config.amplitude == (0.0, 0.0, 0.25, 0.0, 0.0, 2.0)
     assert config.frequency == 1.0
 
 
 def test_config_reads_flat_and_nested_parameters():
     flat = NominalConfig.from_parameters(
-        {"gains.kp": 2.0, "reference.source": "topic", "reference.timeout": 0.25}
+        {'gains.kp': 2.0, 'reference.source': 'topic', 'reference.timeout': 0.25}
     )
     nested = NominalConfig.from_parameters(
-        {"gains": {"kp": 2.0}, "reference": {"source": "topic", "timeout": 0.25}}
+        {'gains': {'kp': 2.0}, 'reference': {'source': 'topic', 'timeout': 0.25}}
     )
     assert flat == nested
     assert flat.kp == 2.0 and flat.timeout == 0.25
@@ -331,17 +374,17 @@ def test_config_reads_flat_and_nested_parameters():
 
 
 @pytest.mark.parametrize(
-    ("name", "value", "message"),
+    ('name', 'value', 'message'),
     [
-        ("gains.kp", 0.0, "expected > 0"),
-        ("gains.kd", -2.5, "expected > 0"),
-        ("gains.kf", -1.0, "expected >= 0"),
-        ("gains.kp", "fast", "expected a double"),
-        ("reference.source", "joystick", "expected one of"),
-        ("reference.amplitude", [0.0, 0.25], "expected 6 elements"),
-        ("reference.amplitude", [0, 0, 0.25, 0, 0, math.inf], "finite"),
-        ("reference.frequency", -1.0, "expected >= 0"),
-        ("reference.timeout", 0.0, "expected > 0"),
+        ('gains.kp', 0.0, 'expected > 0'),
+        ('gains.kd', -2.5, 'expected > 0'),
+        ('gains.kf', -1.0, 'expected >= 0'),
+        ('gains.kp', 'fast', 'expected a double'),
+        ('reference.source', 'joystick', 'expected one of'),
+        ('reference.amplitude', [0.0, 0.25], 'expected 6 elements'),
+        ('reference.amplitude', [0, 0, 0.25, 0, 0, math.inf], 'finite'),
+        ('reference.frequency', -1.0, 'expected >= 0'),
+        ('reference.timeout', 0.0, 'expected > 0'),
     ],
 )
 def test_config_errors_name_the_parameter(name, value, message):

@@ -13,27 +13,27 @@ from typing import ClassVar
 import pytest
 
 from grasp_safety_filter.io.parameters import (
-    NodeSchema,
-    ParameterError,
-    ParameterSpec,
-    ParameterType,
     declare_node_parameters,
     load_parameter_file,
     make_parameter_descriptor,
+    NodeSchema,
     on_set_parameters_callback,
+    ParameterError,
     parameters_for_node,
+    ParameterSpec,
+    ParameterType,
     resolve_relative_paths,
     validate_parameters,
 )
 from grasp_safety_filter.io.schemas import (
-    HAND_SIM_NODE,
-    NODE_SCHEMAS,
-    NOMINAL_CONTROLLER_NODE,
-    SAFETY_FILTER_NODE,
     check_hand_sim_parameters,
     check_model_parameters,
+    HAND_SIM_NODE,
     load_node_parameters,
+    NODE_SCHEMAS,
+    NOMINAL_CONTROLLER_NODE,
     parameter_table_markdown,
+    SAFETY_FILTER_NODE,
 )
 
 T = ParameterType
@@ -681,7 +681,7 @@ class ParameterTypeMsg:
 
 
 def ros_type_of(value) -> int:
-    """rclpy's Parameter.Type.from_parameter_value, as type ids."""
+    """Return rclpy's Parameter.Type.from_parameter_value, as type ids."""
     if isinstance(value, bool):
         return 1
     if isinstance(value, int):

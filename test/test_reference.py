@@ -58,7 +58,7 @@ EULER_CASES = [
 RATE = np.array([0.7, -0.5, 1.3])
 
 
-@pytest.mark.parametrize("phi", EULER_CASES)
+@pytest.mark.parametrize('phi', EULER_CASES)
 def test_matrix_from_euler_is_extrinsic_zyx(phi):
     roll, pitch, yaw = phi
     np.testing.assert_allclose(
@@ -67,7 +67,7 @@ def test_matrix_from_euler_is_extrinsic_zyx(phi):
     np.testing.assert_allclose(euler_from_matrix(matrix_from_euler(phi)), phi, atol=1e-12)
 
 
-@pytest.mark.parametrize("phi", EULER_CASES)
+@pytest.mark.parametrize('phi', EULER_CASES)
 def test_euler_rate_jacobian_gives_palm_angular_velocity(phi):
     w_fd = angular_velocity_fd(lambda s: matrix_from_euler(phi + s * RATE), 0.0)
     np.testing.assert_allclose(euler_rate_jacobian(phi) @ RATE, w_fd, atol=1e-8)
@@ -76,15 +76,15 @@ def test_euler_rate_jacobian_gives_palm_angular_velocity(phi):
     )
 
 
-@pytest.mark.parametrize("phi", EULER_CASES)
+@pytest.mark.parametrize('phi', EULER_CASES)
 def test_euler_rate_jacobian_dot_matches_finite_difference(phi):
-    E_dot_fd = (
-        euler_rate_jacobian(phi + H * RATE) - euler_rate_jacobian(phi - H * RATE)
-    ) / (2 * H)
+    E_dot_fd = (euler_rate_jacobian(phi + H * RATE) - euler_rate_jacobian(phi - H * RATE)) / (
+        2 * H
+    )
     np.testing.assert_allclose(euler_rate_jacobian_dot(phi, RATE), E_dot_fd, atol=1e-8)
 
 
-@pytest.mark.parametrize("phi", EULER_CASES)
+@pytest.mark.parametrize('phi', EULER_CASES)
 def test_acceleration_from_euler_matches_second_difference(phi):
     r = np.concatenate(([0.1, -0.2, 0.3], phi))
     r_dot = np.array([0.2, 0.1, -0.3, *RATE])
@@ -102,7 +102,7 @@ def test_acceleration_from_euler_matches_second_difference(phi):
 
 
 @pytest.mark.parametrize(
-    ("angle", "expected"),
+    ('angle', 'expected'),
     [
         (0.0, 0.0),
         (math.pi, math.pi),
@@ -145,12 +145,13 @@ def test_paper_reference_starts_at_the_initial_pose_at_rest():
     assert not sample.stale
 
 
-@pytest.mark.parametrize("t", [0.0, 0.3, 1.7, math.pi, 5.0, 12.4])
-@pytest.mark.parametrize("frequency", [1.0, 2.3])
+@pytest.mark.parametrize('t', [0.0, 0.3, 1.7, math.pi, 5.0, 12.4])
+@pytest.mark.parametrize('frequency', [1.0, 2.3])
 def test_paper_reference_derivatives_match_finite_differences(t, frequency):
     pose = random_pose(np.random.default_rng(1))
-    reference = PaperReference(pose, amplitude=(0.05, -0.1, 0.25, 0.3, 0.2, 2.0),
-                               frequency=frequency)
+    reference = PaperReference(
+        pose, amplitude=(0.05, -0.1, 0.25, 0.3, 0.2, 2.0), frequency=frequency
+    )
     sample = reference.sample(t)
     r_dot_fd = (reference.sample(t + H).r - reference.sample(t - H).r) / (2 * H)
     r_ddot_fd = (reference.sample(t + H).r_dot - reference.sample(t - H).r_dot) / (2 * H)
@@ -182,8 +183,9 @@ def test_paper_reference_values_are_the_papers_cosines():
 
 
 def test_reference_sample_round_trips_through_pose_twist_acceleration():
-    reference = PaperReference(random_pose(np.random.default_rng(3)),
-                               amplitude=(0.1, 0, 0.25, 0.4, -0.3, 2.0))
+    reference = PaperReference(
+        random_pose(np.random.default_rng(3)), amplitude=(0.1, 0, 0.25, 0.4, -0.3, 2.0)
+    )
     for t in (0.4, 2.2, 3.5):
         sample = reference.sample(t)
         again = ReferenceSample.from_pose(sample.pose, sample.twist, sample.acceleration)
@@ -227,15 +229,15 @@ def test_topic_reference_holds_until_first_sample_and_when_stale():
 
 
 @pytest.mark.parametrize(
-    ("build", "message"),
+    ('build', 'message'),
     [
-        (lambda: Pose([0, 0], np.eye(3)), "p_in_palm"),
-        (lambda: Pose([0, 0, 0], 2 * np.eye(3)), "R_to_palm"),
-        (lambda: Pose([0, 0, 0], np.diag([1.0, 1.0, -1.0])), "R_to_palm"),
-        (lambda: PaperReference(Pose([0, 0, 0], np.eye(3)), amplitude=(0, 0, 1)), "amplitude"),
-        (lambda: PaperReference(Pose([0, 0, 0], np.eye(3)), frequency=-1.0), "frequency"),
-        (lambda: TopicReference(Pose([0, 0, 0], np.eye(3)), timeout=0.0), "timeout"),
-        (lambda: ReferenceSample(r=[0, 0, 0, 0, 0, math.nan]), "ReferenceSample.r"),
+        (lambda: Pose([0, 0], np.eye(3)), 'p_in_palm'),
+        (lambda: Pose([0, 0, 0], 2 * np.eye(3)), 'R_to_palm'),
+        (lambda: Pose([0, 0, 0], np.diag([1.0, 1.0, -1.0])), 'R_to_palm'),
+        (lambda: PaperReference(Pose([0, 0, 0], np.eye(3)), amplitude=(0, 0, 1)), 'amplitude'),
+        (lambda: PaperReference(Pose([0, 0, 0], np.eye(3)), frequency=-1.0), 'frequency'),
+        (lambda: TopicReference(Pose([0, 0, 0], np.eye(3)), timeout=0.0), 'timeout'),
+        (lambda: ReferenceSample(r=[0, 0, 0, 0, 0, math.nan]), 'ReferenceSample.r'),
     ],
 )
 def test_invalid_construction_names_the_argument(build, message):

@@ -15,22 +15,22 @@ import pytest
 
 from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.model.grasp_model import GraspModel
-from hand_sim_node.config import SimConfig, flatten_parameters
+from hand_sim_node.config import flatten_parameters, SimConfig
 from hand_sim_node.events import (
+    EventLog,
+    EventMonitor,
     FAMILIES,
     FINGERTIP_WORKSPACE,
     JOINT_LIMITS,
     SEPARATION,
     SLIP,
-    EventLog,
-    EventMonitor,
 )
 from hand_sim_node.quaternion import from_rotation_matrix
 from hand_sim_node.simulator import (
+    contact_velocity_residual,
     NUMERICAL_FAILURE,
     SimState,
     Simulator,
-    contact_velocity_residual,
 )
 
 SCENARIO = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
@@ -68,7 +68,7 @@ def rotation_z(angle):
 
 
 def squeeze_force(state, k_f):
-    """The paper's internal force f_i = R_cp,i k_f (p_bar - p_c,i), stacked in contact frames."""
+    """Return the paper's internal force f_i = R_cp,i k_f (p_bar - p_c,i), contact frames."""
     p_c = state.p_contact_in_palm
     centroid = p_c.mean(axis=0)
     return np.concatenate(
@@ -122,23 +122,26 @@ class ObjectTracker:
 
 
 def rolling_start(model, config, twist_object):
-    """The configured initial grasp, set rolling with the object twist ``twist_object``."""
+    """Return the configured initial grasp, rolling with the object twist ``twist_object``."""
     simulator = Simulator(model, config)
     start = simulator.state
     dq = model.rolling_joint_velocity(
         start.q, start.p_object_in_palm, start.R_object_to_palm, twist_object
     )
-    return SimState(0.0, start.q, dq, start.p_object_in_palm, start.quaternion_object,
-                    twist_object)
+    return SimState(
+        0.0, start.q, dq, start.p_object_in_palm, start.quaternion_object, twist_object
+    )
 
 
 # --------------------------------------------------------------------------------- config
 def test_config_from_scenario_file(config, scenario):
     params = scenario[1]
-    np.testing.assert_array_equal(config.initial_joint_positions,
-                                  params['initial.joint_positions'])
-    np.testing.assert_array_equal(config.initial_object_position,
-                                  params['initial.object_position'])
+    np.testing.assert_array_equal(
+        config.initial_joint_positions, params['initial.joint_positions']
+    )
+    np.testing.assert_array_equal(
+        config.initial_object_position, params['initial.object_position']
+    )
     assert config.integrator == params['integrator']
     assert config.time_step == params['time_step']
     assert config.position_gain == params['stabilization.position_gain']
@@ -166,8 +169,10 @@ BAD_CONFIGS = [
     ({'time_step': 0.5, 'duration': 0.1}, "parameter 'time_step': expected <= duration"),
     ({'integrator': 'euler'}, "parameter 'integrator': expected one of"),
     ({'initial_object_position': (0.0, 0.3)}, "parameter 'initial.object_position'"),
-    ({'initial_object_orientation': (0.0, 0.0, 0.5, 0.5)},
-     "parameter 'initial.object_orientation': expected a unit quaternion"),
+    (
+        {'initial_object_orientation': (0.0, 0.0, 0.5, 0.5)},
+        "parameter 'initial.object_orientation': expected a unit quaternion",
+    ),
     ({'initial_joint_positions': ()}, "parameter 'initial.joint_positions'"),
     ({'position_gain': -1.0}, "parameter 'stabilization.position_gain'"),
 ]
@@ -203,8 +208,10 @@ def test_event_margins_and_violations_table(model, config):
     changed = dataclasses.replace(state, t=0.25, xi_cf=xi, q=q)
     margins = monitor.margins(changed, forces.ravel())
 
-    np.testing.assert_allclose(margins.fingertip_workspace[0],
-                               [xi[0, 0] - a_min, -0.01, xi[0, 1] - b_min, b_max - xi[0, 1]])
+    np.testing.assert_allclose(
+        margins.fingertip_workspace[0],
+        [xi[0, 0] - a_min, -0.01, xi[0, 1] - b_min, b_max - xi[0, 1]],
+    )
     np.testing.assert_allclose(margins.joint_limits[4], [q[4] - lower[4], -0.05])
     np.testing.assert_allclose(margins.required_friction, [np.inf, 1.0, math.sqrt(0.02)])
     np.testing.assert_allclose(margins.friction, mu - margins.required_friction)
@@ -236,9 +243,13 @@ def test_event_log_counts_steps_first_times_onsets_and_worst_margins(model, conf
     upper = model.joint_upper_limits
     safe = np.array([0.0, 0.0, 1.0] * 3)  # beta = 0
     # Joint 2 over its limit at t = 0.1, 0.2 and again at 0.4; contact 1 separates at 0.3.
-    samples = [(0.0, 0.0, safe), (0.1, 0.02, safe), (0.2, 0.03, safe),
-               (0.3, -0.01, np.array([0.0, 0.0, 1.0, 0.5, 0.0, -0.1, 0.0, 0.0, 1.0])),
-               (0.4, 0.01, safe)]
+    samples = [
+        (0.0, 0.0, safe),
+        (0.1, 0.02, safe),
+        (0.2, 0.03, safe),
+        (0.3, -0.01, np.array([0.0, 0.0, 1.0, 0.5, 0.0, -0.1, 0.0, 0.0, 1.0])),
+        (0.4, 0.01, safe),
+    ]
     for t, excess, forces in samples:
         q = state.q.copy()
         q[2] = upper[2] + excess
@@ -252,13 +263,18 @@ def test_event_log_counts_steps_first_times_onsets_and_worst_margins(model, conf
     assert violations[SLIP] == {'count': 1, 'first_t': 0.3}
     assert violations[FINGERTIP_WORKSPACE] == {'count': 0, 'first_t': None}
     onsets = [(e.t, e.family, e.index) for e in log.onsets]
-    assert onsets == [(0.1, JOINT_LIMITS, 2), (0.3, SLIP, 1), (0.3, SEPARATION, 1),
-                      (0.4, JOINT_LIMITS, 2)]
+    assert onsets == [
+        (0.1, JOINT_LIMITS, 2),
+        (0.3, SLIP, 1),
+        (0.3, SEPARATION, 1),
+        (0.4, JOINT_LIMITS, 2),
+    ]
     minimum = log.min_margin()
     assert minimum[JOINT_LIMITS] == pytest.approx(-0.03)
     assert minimum['friction'] == -np.inf
     assert minimum[FINGERTIP_WORKSPACE] == pytest.approx(
-        np.min(model.fingertip_workspace.margins(state.xi_cf)))
+        np.min(model.fingertip_workspace.margins(state.xi_cf))
+    )
     assert log.max_required_friction == np.inf
     assert log.n_evaluations == len(samples)
 
@@ -267,7 +283,8 @@ def test_event_log_counts_steps_first_times_onsets_and_worst_margins(model, conf
 def test_reset_projects_onto_the_contacts_at_rest(model, config):
     # Start from joint angles off the contact manifold: reset must put the tips on the faces.
     perturbed = dataclasses.replace(
-        config, initial_joint_positions=config.initial_joint_positions + 0.02)
+        config, initial_joint_positions=config.initial_joint_positions + 0.02
+    )
     simulator = Simulator(model, perturbed)
     state = simulator.grasp_state()
     np.testing.assert_allclose(state.penetration, 0.0, atol=1e-12)
@@ -280,8 +297,14 @@ def test_reset_projects_onto_the_contacts_at_rest(model, config):
 def test_sim_state_vector_round_trip():
     rng = np.random.default_rng(3)
     quaternion = rng.normal(size=4)
-    state = SimState(0.5, rng.normal(size=9), rng.normal(size=9), rng.normal(size=3),
-                     quaternion / np.linalg.norm(quaternion), rng.normal(size=6))
+    state = SimState(
+        0.5,
+        rng.normal(size=9),
+        rng.normal(size=9),
+        rng.normal(size=3),
+        quaternion / np.linalg.norm(quaternion),
+        rng.normal(size=6),
+    )
     back = SimState.from_vector(0.5, state.to_vector(), 9)
     for name in ('q', 'dq', 'p_object_in_palm', 'quaternion_object', 'twist_object'):
         np.testing.assert_array_equal(getattr(back, name), getattr(state, name))
@@ -348,8 +371,9 @@ def test_static_hold_forces_and_slip_stop(model, config, k_f, slips):
         for _ in range(20):
             report = simulator.step(u)
         np.testing.assert_allclose(report.state.q, report.start.q, atol=1e-12)
-        np.testing.assert_allclose(report.state.p_object_in_palm, config.initial_object_position,
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            report.state.p_object_in_palm, config.initial_object_position, atol=1e-12
+        )
 
 
 def test_unactuated_hand_drops_the_object_and_stops_on_workspace_exit(model, config):
@@ -372,8 +396,14 @@ def test_numerical_failure_stops_instead_of_raising(model, config):
     simulator = Simulator(model, config)
     start = simulator.state
     # Absurd velocities overflow the dynamics: the step must stop, not raise or return NaN.
-    broken = SimState(0.0, start.q, np.full(9, 1e200), start.p_object_in_palm,
-                      start.quaternion_object, np.full(6, 1e200))
+    broken = SimState(
+        0.0,
+        start.q,
+        np.full(9, 1e200),
+        start.p_object_in_palm,
+        start.quaternion_object,
+        np.full(6, 1e200),
+    )
     simulator.reset(broken)
     with np.errstate(all='ignore'):
         report = simulator.step(np.zeros(9))
@@ -383,8 +413,7 @@ def test_numerical_failure_stops_instead_of_raising(model, config):
 
 # ------------------------------------------------------------------- stabilised dynamics
 def test_without_stabilisation_the_rates_are_the_models_affine_maps(model, config):
-    simulator = Simulator(model, dataclasses.replace(config, position_gain=0.0,
-                                                     velocity_gain=0.0))
+    simulator = Simulator(model, dataclasses.replace(config, position_gain=0.0, velocity_gain=0.0))
     rng = np.random.default_rng(5)
     simulator.reset(rolling_start(model, config, rng.normal(0.0, 0.2, 6)))
     state = simulator.grasp_state()
@@ -406,8 +435,14 @@ def test_stabilisation_makes_the_residual_decay_as_designed(model, config):
     q = model.project_to_contact(start.q, start.p_object_in_palm, R)
     # Move the object 0.1 mm away from finger 3 (+y face): a gap at contact 3.
     p_shifted = start.p_object_in_palm + np.array([0.0, 1e-4, 0.0])
-    off = SimState(0.0, q, rng.normal(0.0, 0.3, 9), p_shifted, start.quaternion_object,
-                   rng.normal(0.0, 0.1, 6))
+    off = SimState(
+        0.0,
+        q,
+        rng.normal(0.0, 0.3, 9),
+        p_shifted,
+        start.quaternion_object,
+        rng.normal(0.0, 0.1, 6),
+    )
     simulator.reset(off)
     state = simulator.grasp_state()
     assert np.max(np.abs(state.penetration)) > 5e-5
@@ -419,8 +454,14 @@ def test_stabilisation_makes_the_residual_decay_as_designed(model, config):
 
     def at(h):
         moved = SimState.from_vector(h, x + h * x_dot, 9)
-        return model.state(h, moved.q, moved.dq, moved.p_object_in_palm,
-                           moved.R_object_to_palm, moved.twist_object)
+        return model.state(
+            h,
+            moved.q,
+            moved.dq,
+            moved.p_object_in_palm,
+            moved.R_object_to_palm,
+            moved.twist_object,
+        )
 
     h = 1e-6
     plus, minus = at(h), at(-h)
@@ -435,9 +476,14 @@ def test_stabilisation_makes_the_residual_decay_as_designed(model, config):
 # ----------------------------------------------------------------------------- physics
 def energy_drift(model, config, time_step, duration=2.0):
     """Largest |E(t) - E(0)| of the unactuated plant (u = 0, ode3, no stabilisation), and E(0)."""
-    plain = dataclasses.replace(config, integrator='ode3', time_step=time_step,
-                                position_gain=0.0, velocity_gain=0.0,
-                                stop_on_workspace_exit=False)
+    plain = dataclasses.replace(
+        config,
+        integrator='ode3',
+        time_step=time_step,
+        position_gain=0.0,
+        velocity_gain=0.0,
+        stop_on_workspace_exit=False,
+    )
     simulator = Simulator(model, plain)
     energy_0 = model.total_energy(simulator.grasp_state())
     drift, kinetic_peak = 0.0, 0.0
@@ -496,13 +542,17 @@ def test_contact_constraint_holds_over_a_fifteen_second_manipulation(model, conf
 
 @pytest.fixture(scope='module')
 def coasting(weightless_model, config):
-    """A free rolling motion (no gravity, no torque) and an accurate solution at t = 1 s."""
+    """Return a free rolling motion (no gravity, no torque) and its solution at t = 1 s."""
     twist = np.array([0.02, -0.03, 0.05, 0.2, 0.1, 0.5])
     start = rolling_start(weightless_model, config, twist)
 
     def solve(integrator, dt):
-        simulator = Simulator(weightless_model, dataclasses.replace(
-            config, integrator=integrator, time_step=dt, stop_on_workspace_exit=False))
+        simulator = Simulator(
+            weightless_model,
+            dataclasses.replace(
+                config, integrator=integrator, time_step=dt, stop_on_workspace_exit=False
+            ),
+        )
         simulator.reset(start)
         for _ in range(round(1.0 / dt)):
             simulator.step(np.zeros(weightless_model.n_joints))
@@ -529,5 +579,7 @@ def test_quaternion_stays_unit_and_matches_the_rotation(model, config):
     quaternion = simulator.state.quaternion_object
     assert abs(np.linalg.norm(quaternion) - 1.0) < 1e-15
     np.testing.assert_allclose(
-        np.abs(from_rotation_matrix(simulator.grasp_state().R_object_to_palm)), np.abs(quaternion),
-        atol=1e-14)
+        np.abs(from_rotation_matrix(simulator.grasp_state().R_object_to_palm)),
+        np.abs(quaternion),
+        atol=1e-14,
+    )

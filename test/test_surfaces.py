@@ -1,20 +1,28 @@
-"""Surface geometry: every chart's closed forms against their definitions, by finite differences."""
+"""Surface geometry: every chart's closed forms against their definitions (finite differences)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface, cube_face
+from grasp_safety_filter.model.surfaces import cube_face, FlatSurface, SphereSurface
 
 EPS = 1e-6
 
 SURFACES = {
-    "sphere fingertip R=0.06": (SphereSurface(0.06), lambda rng: np.array([rng.uniform(-1.3, 1.3), rng.uniform(-3.0, -0.1)])),
-    "sphere object R=0.2": (SphereSurface(0.2), lambda rng: np.array([rng.uniform(-1.3, 1.3), rng.uniform(-3.0, 3.0)])),
-    "cube face -x": (cube_face("-x", 0.2604), lambda rng: rng.uniform(-0.13, 0.13, 2)),
-    "tilted plane": (
-        FlatSurface(np.array([0.1, -0.2, 0.3]), np.array([0.6, 0.8, 0.0]), np.array([0.0, 0.0, 1.0])),
+    'sphere fingertip R=0.06': (
+        SphereSurface(0.06),
+        lambda rng: np.array([rng.uniform(-1.3, 1.3), rng.uniform(-3.0, -0.1)]),
+    ),
+    'sphere object R=0.2': (
+        SphereSurface(0.2),
+        lambda rng: np.array([rng.uniform(-1.3, 1.3), rng.uniform(-3.0, 3.0)]),
+    ),
+    'cube face -x': (cube_face('-x', 0.2604), lambda rng: rng.uniform(-0.13, 0.13, 2)),
+    'tilted plane': (
+        FlatSurface(
+            np.array([0.1, -0.2, 0.3]), np.array([0.6, 0.8, 0.0]), np.array([0.0, 0.0, 1.0])
+        ),
         lambda rng: rng.uniform(-1.0, 1.0, 2),
     ),
 }
@@ -64,9 +72,13 @@ def test_metric_curvature_torsion_match_their_definitions(surface_samples):
         norms = np.array([np.linalg.norm(c_a), np.linalg.norm(c_b)])
         np.testing.assert_allclose(surface.metric(xi), np.diag(norms), atol=1e-12)
         R = surface.frame(xi)
-        dn = np.column_stack([d(lambda x: surface.frame(x)[:, 2], xi, k) / norms[k] for k in range(2)])
+        dn = np.column_stack(
+            [d(lambda x: surface.frame(x)[:, 2], xi, k) / norms[k] for k in range(2)]
+        )
         np.testing.assert_allclose(surface.curvature(xi), R[:, :2].T @ dn, atol=1e-7)
-        drho1 = np.column_stack([d(lambda x: surface.frame(x)[:, 0], xi, k) / norms[k] for k in range(2)])
+        drho1 = np.column_stack(
+            [d(lambda x: surface.frame(x)[:, 0], xi, k) / norms[k] for k in range(2)]
+        )
         np.testing.assert_allclose(surface.torsion(xi), R[:, 1] @ drho1, atol=1e-7)
 
 
@@ -75,11 +87,17 @@ def test_rates_match_finite_differences(surface_samples):
     rng = np.random.default_rng(2)
     for xi in samples:
         xi_dot = rng.normal(size=2)
+
         def along(f, xi=xi, xi_dot=xi_dot):
             return (f(xi + EPS * xi_dot) - f(xi - EPS * xi_dot)) / (2 * EPS)
+
         np.testing.assert_allclose(surface.frame_rate(xi, xi_dot), along(surface.frame), atol=1e-7)
-        np.testing.assert_allclose(surface.metric_rate(xi, xi_dot), along(surface.metric), atol=1e-7)
-        np.testing.assert_allclose(surface.curvature_rate(xi, xi_dot), along(surface.curvature), atol=1e-7)
+        np.testing.assert_allclose(
+            surface.metric_rate(xi, xi_dot), along(surface.metric), atol=1e-7
+        )
+        np.testing.assert_allclose(
+            surface.curvature_rate(xi, xi_dot), along(surface.curvature), atol=1e-7
+        )
 
 
 def test_sphere_closed_forms_of_the_design_notes():
@@ -91,20 +109,27 @@ def test_sphere_closed_forms_of_the_design_notes():
         np.testing.assert_allclose(sphere.curvature(xi), np.eye(2) / R)
         np.testing.assert_allclose(sphere.torsion(xi), [0.0, -np.tan(a) / R])
         np.testing.assert_allclose(sphere.frame(xi)[:, 2], sphere.point(xi) / R, atol=1e-15)
-        np.testing.assert_allclose(sphere.coordinates_of_normal(sphere.point(xi) / R), xi, atol=1e-12)
+        np.testing.assert_allclose(
+            sphere.coordinates_of_normal(sphere.point(xi) / R), xi, atol=1e-12
+        )
     # The tip of the fingertip is (a, b) = (0, -pi/2), on the frame's +z axis.
-    np.testing.assert_allclose(sphere.point(np.array([0.0, -np.pi / 2])), [0.0, 0.0, R], atol=1e-15)
+    np.testing.assert_allclose(
+        sphere.point(np.array([0.0, -np.pi / 2])), [0.0, 0.0, R], atol=1e-15
+    )
 
 
 @pytest.mark.parametrize(
-    ("make", "message"),
+    ('make', 'message'),
     [
-        (lambda: SphereSurface(0.0), "radius"),
-        (lambda: SphereSurface(float("nan")), "radius"),
-        (lambda: FlatSurface(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 0, 0])), "orthogonal"),
-        (lambda: FlatSurface(np.zeros(3), np.array([2.0, 0, 0]), np.array([0.0, 1, 0])), "unit"),
-        (lambda: cube_face("x", 0.2), "expected one of"),
-        (lambda: cube_face("+x", -1.0), "edge length"),
+        (lambda: SphereSurface(0.0), 'radius'),
+        (lambda: SphereSurface(float('nan')), 'radius'),
+        (
+            lambda: FlatSurface(np.zeros(3), np.array([1.0, 0, 0]), np.array([1.0, 0, 0])),
+            'orthogonal',
+        ),
+        (lambda: FlatSurface(np.zeros(3), np.array([2.0, 0, 0]), np.array([0.0, 1, 0])), 'unit'),
+        (lambda: cube_face('x', 0.2), 'expected one of'),
+        (lambda: cube_face('+x', -1.0), 'edge length'),
     ],
 )
 def test_invalid_surfaces_are_rejected(make, message):

@@ -8,8 +8,8 @@ convertible to and from pose / twist / acceleration.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
+import math
 from typing import Protocol
 
 import numpy as np
@@ -34,7 +34,7 @@ def _vector(name: str, value: np.ndarray | None, size: int) -> np.ndarray:
         return np.zeros(size)
     array = np.array(value, dtype=float)
     if array.shape != (size,) or not np.all(np.isfinite(array)):
-        raise ValueError(f"{name}: expected {size} finite numbers, got {value!r}")
+        raise ValueError(f'{name}: expected {size} finite numbers, got {value!r}')
     array.flags.writeable = False
     return array
 
@@ -42,9 +42,9 @@ def _vector(name: str, value: np.ndarray | None, size: int) -> np.ndarray:
 def _rotation(name: str, value: np.ndarray) -> np.ndarray:
     R = np.array(value, dtype=float)
     if R.shape != (3, 3) or not np.all(np.isfinite(R)):
-        raise ValueError(f"{name}: expected a finite 3x3 rotation matrix, got {value!r}")
+        raise ValueError(f'{name}: expected a finite 3x3 rotation matrix, got {value!r}')
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0.0:
-        raise ValueError(f"{name}: expected a rotation matrix (R^T R = I, det R = +1), got {R!r}")
+        raise ValueError(f'{name}: expected a rotation matrix (R^T R = I, det R = +1), got {R!r}')
     R.flags.writeable = False
     return R
 
@@ -63,8 +63,8 @@ class Pose:
     R_to_palm: np.ndarray
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "p_in_palm", _vector("Pose.p_in_palm", self.p_in_palm, 3))
-        object.__setattr__(self, "R_to_palm", _rotation("Pose.R_to_palm", self.R_to_palm))
+        object.__setattr__(self, 'p_in_palm', _vector('Pose.p_in_palm', self.p_in_palm, 3))
+        object.__setattr__(self, 'R_to_palm', _rotation('Pose.R_to_palm', self.R_to_palm))
 
     @property
     def euler(self) -> np.ndarray:
@@ -92,8 +92,8 @@ class ReferenceSample:
     stale: bool = False
 
     def __post_init__(self) -> None:
-        for name in ("r", "r_dot", "r_ddot"):
-            value = _vector(f"ReferenceSample.{name}", getattr(self, name), 6)
+        for name in ('r', 'r_dot', 'r_ddot'):
+            value = _vector(f'ReferenceSample.{name}', getattr(self, name), 6)
             object.__setattr__(self, name, value)
 
     @classmethod
@@ -111,8 +111,8 @@ class ReferenceSample:
         They are converted with ``r_dot = P^-1 x_dot`` and
         ``r_ddot = P^-1 (x_ddot - P_dot r_dot)``.
         """
-        twist = _vector("ReferenceSample.from_pose twist", twist, 6)
-        acceleration = _vector("ReferenceSample.from_pose acceleration", acceleration, 6)
+        twist = _vector('ReferenceSample.from_pose twist', twist, 6)
+        acceleration = _vector('ReferenceSample.from_pose acceleration', acceleration, 6)
         r = pose.euler
         r_dot = euler_rates_from_twist(r[3:], twist)
         r_ddot = euler_accelerations_from_acceleration(r[3:], r_dot, acceleration)
@@ -174,11 +174,11 @@ class PaperReference:
         t0: float = 0.0,
     ) -> None:
         self.initial_pose = initial_pose
-        self.amplitude = _vector("PaperReference amplitude", amplitude, 6)
+        self.amplitude = _vector('PaperReference amplitude', amplitude, 6)
         if not (math.isfinite(frequency) and frequency >= 0.0):
-            raise ValueError(f"PaperReference frequency: expected >= 0 rad/s, got {frequency!r}")
+            raise ValueError(f'PaperReference frequency: expected >= 0 rad/s, got {frequency!r}')
         if not math.isfinite(t0):
-            raise ValueError(f"PaperReference t0: expected a finite time, got {t0!r}")
+            raise ValueError(f'PaperReference t0: expected a finite time, got {t0!r}')
         self.frequency = float(frequency)
         self.t0 = float(t0)
         self._r0 = initial_pose.euler
@@ -214,7 +214,7 @@ class TopicReference:
 
     def __init__(self, initial_pose: Pose, timeout: float) -> None:
         if not (math.isfinite(timeout) and timeout > 0.0):
-            raise ValueError(f"TopicReference timeout: expected > 0 s, got {timeout!r}")
+            raise ValueError(f'TopicReference timeout: expected > 0 s, got {timeout!r}')
         self.timeout = float(timeout)
         self._latest = ReferenceSample(r=initial_pose.euler)
         self._stamp: float | None = None
@@ -227,7 +227,7 @@ class TopicReference:
     def update(self, sample: ReferenceSample, stamp: float) -> None:
         """Store a planner sample stamped ``stamp``, s (replaces the previous one)."""
         if not math.isfinite(stamp):
-            raise ValueError(f"TopicReference.update stamp: expected a finite time, got {stamp!r}")
+            raise ValueError(f'TopicReference.update stamp: expected a finite time, got {stamp!r}')
         self._latest = sample
         self._stamp = float(stamp)
 

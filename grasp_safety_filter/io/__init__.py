@@ -1,0 +1,1 @@
+"""Input and output: parameters and config files, topics, messages, bags, paths."""

@@ -2,16 +2,16 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
+import sys
 
-PACKAGE_NAME = "grasp_safety_filter"
+PACKAGE_NAME = 'grasp_safety_filter'
 
 
 def share_directory() -> Path:
-    """The package's share directory: ament index (ROS), source checkout, or pip's data prefix."""
+    """Return the share directory: ament index (ROS), source checkout, or pip's data prefix."""
     try:  # Under ROS 2 the ament index knows the install location.
-        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
+        from ament_index_python.packages import get_package_share_directory, PackageNotFoundError
 
         try:
             return Path(get_package_share_directory(PACKAGE_NAME))
@@ -20,11 +20,11 @@ def share_directory() -> Path:
     except ImportError:
         pass
     source_tree = Path(__file__).resolve().parents[2]
-    if (source_tree / "config").is_dir() and (source_tree / "package.xml").is_file():
+    if (source_tree / 'config').is_dir() and (source_tree / 'package.xml').is_file():
         return source_tree
-    return Path(sys.prefix) / "share" / PACKAGE_NAME
+    return Path(sys.prefix) / 'share' / PACKAGE_NAME
 
 
-def config_path(name: str = "paper_scenario.yaml") -> Path:
-    """A file of the package's config/ directory."""
-    return share_directory() / "config" / name
+def config_path(name: str = 'paper_scenario.yaml') -> Path:
+    """Return a file of the package's config/ directory."""
+    return share_directory() / 'config' / name
