@@ -1,0 +1,29 @@
+"""The README's commands and generated tables stay true."""
+
+from __future__ import annotations
+
+from pathlib import Path
+import re
+
+from grasp_safety_filter.io.readme_tables import render
+
+REPO = Path(__file__).resolve().parent.parent
+README = (REPO / 'README.md').read_text()
+
+
+def test_generated_tables_are_current():
+    assert render(README) == README, (
+        'run: python -m grasp_safety_filter.io.readme_tables README.md'
+    )
+
+
+def test_readme_starts_with_the_two_commands_and_ci_runs_the_test_one():
+    first_block = re.search(r'```sh\n(.*?)```', README, re.DOTALL)[1].splitlines()
+    assert [line.split('#')[0].strip() for line in first_block] == ['make demo', 'make test']
+    assert 'make test' in (REPO / '.ci' / 'run').read_text()
+
+
+def test_every_console_script_the_readme_names_is_installed():
+    setup = (REPO / 'setup.py').read_text()
+    for command in sorted(set(re.findall(r'\b(grasp-[a-z-]+)', README))):
+        assert f"'{command} = " in setup or f'"{command} = ' in setup, command
