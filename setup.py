@@ -20,6 +20,7 @@ setup(
         'setuptools',
         'numpy>=1.24',
         'osqp>=1.0',
+        'scipy>=1.8',  # sparse matrices for OSQP, LU/QR in the active-set step
         'pin>=3.0',
         'rosbags>=0.10',
         'pyyaml>=6.0',

@@ -787,3 +787,17 @@ def test_no_command_is_computed_from_bad_input(rng, mutate):
     assert_bitwise_equal(command, safe)
     assert policy.mode.value == 'holding'
     assert '/hand/joint_states' in policy.last_reason
+
+
+def test_joint_state_without_effort_is_accepted_as_hand_drivers_publish_it():
+    rng = np.random.default_rng(4)
+    q, dq = rng.normal(size=9), rng.normal(size=9)
+    msg = m.joint_state_to_msg(MSGS, 0.5, JOINTS[::-1], q[::-1], dq[::-1], np.zeros(9))
+    msg.effort = np.array([], dtype=np.float64)
+    parsed = m.joint_state_from_msg(msg, JOINTS)
+    np.testing.assert_array_equal(parsed.position, q)
+    np.testing.assert_array_equal(parsed.velocity, dq)
+    assert parsed.effort is None
+    msg.effort = np.zeros(4)  # present but of the wrong length is still an error
+    with pytest.raises(m.MessageError, match="'effort' has 4 entries"):
+        m.joint_state_from_msg(msg, JOINTS)

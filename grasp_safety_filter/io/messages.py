@@ -433,14 +433,15 @@ class JointStateData:
         t: Header stamp, s.
         position: Joint angles, shape (m,), rad.
         velocity: Joint velocities, shape (m,), rad/s.
-        effort: Applied joint torques, shape (m,), N·m.
+        effort: Applied joint torques, shape (m,), N·m; None when the message has none
+            (many hand drivers publish no effort; the filter does not need it).
 
     """
 
     t: float
     position: np.ndarray
     velocity: np.ndarray
-    effort: np.ndarray
+    effort: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -502,7 +503,7 @@ def joint_state_to_msg(
 def joint_state_from_msg(
     msg: Any, joint_names: Sequence[str], source: str = 'JointState'
 ) -> JointStateData:
-    """Parse a JointState carrying position, velocity and effort of exactly ``joint_names``.
+    """Parse a JointState carrying position and velocity (effort optional) of ``joint_names``.
 
     Args:
         msg: A ``sensor_msgs/JointState``.
@@ -517,11 +518,11 @@ def joint_state_from_msg(
     order = _match_names(source, msg.name, joint_names, 'joint')
     names = list(msg.name)
     arrays = {
-        f: _array_field(source, getattr(msg, f), f, names, required=True)
+        f: _array_field(source, getattr(msg, f), f, names, required=f != 'effort')
         for f in ('position', 'velocity', 'effort')
     }
     t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
-    return JointStateData(t=t, **{f: a[order] for f, a in arrays.items()})
+    return JointStateData(t=t, **{f: None if a is None else a[order] for f, a in arrays.items()})
 
 
 def effort_to_msg(
