@@ -10,7 +10,9 @@ import sys
 from typing import Any
 
 import numpy as np
+import yaml
 
+from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.io.paths import config_path
 
 
@@ -131,6 +133,14 @@ def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> bool:
     return ok
 
 
+def _override(text: str) -> tuple[str, Any]:
+    """Parse ``NAME=VALUE`` with a YAML value (``10.0`` a double, ``true`` a bool)."""
+    name, separator, value = text.partition('=')
+    if not separator or not name:
+        raise argparse.ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
+    return name.strip(), yaml.safe_load(value)
+
+
 def demo_main(argv: list[str] | None = None) -> int:
     """``grasp-demo``: the paper's runs, recorded to bags, with figures and a verdict."""
     from grasp_safety_filter.runner import run, RunOptions
@@ -157,16 +167,35 @@ def demo_main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         '--storage', choices=('mcap', 'sqlite3'), default='mcap', help='bag storage format'
     )
+    parser.add_argument(
+        '--set',
+        dest='overrides',
+        action='append',
+        default=[],
+        metavar='NAME=VALUE',
+        type=_override,
+        help='override a parameter of every node that declares it, e.g. '
+        'barrier.alpha1.gain=10.0 (YAML value, repeatable)',
+    )
     args = parser.parse_args(argv)
     modes = ('nominal', 'filtered') if args.mode == 'both' else (args.mode,)
     verdicts = {}
     for mode in modes:
         out_dir = args.out / mode if args.mode == 'both' else args.out
-        options = RunOptions(
-            args.config, mode, args.duration, args.dt, args.integrator, args.storage
-        )
         try:
+            options = RunOptions(
+                args.config,
+                mode,
+                args.duration,
+                args.dt,
+                args.integrator,
+                args.storage,
+                dict(args.overrides),
+            )
             result = run(options, out_dir, _progress_printer(mode))
+        except ParameterError as error:
+            print(f'grasp-demo: {error}', file=sys.stderr)
+            return 2
         except KeyboardInterrupt:
             print(
                 f'\n[{mode}] interrupted: the bag and summary of the partial run are in {out_dir}',

@@ -12,14 +12,17 @@ analysis ``grasp-analyze`` runs on any recording.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+import difflib
 import json
 from pathlib import Path
 import shutil
 import time
 from typing import Any
+
+from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.analysis.figures import plot_run
 from grasp_safety_filter.analysis.run_data import load_run
@@ -30,9 +33,11 @@ from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals, signal_name
 from grasp_safety_filter.io.messages import MessageNamespace
+from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
     load_node_parameters,
+    NODE_SCHEMAS,
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
 )
@@ -59,6 +64,8 @@ class RunOptions:
         time_step: Overrides ``time_step`` (s), if given.
         integrator: Overrides ``integrator`` (``"ode3"`` or ``"rk4"``), if given.
         storage: Bag storage, ``"mcap"`` (default, as ``ros2 bag record``) or ``"sqlite3"``.
+        overrides: ``{dotted name: value}`` replacing the scenario file's parameters, for
+            every node that declares the name (e.g. ``{"barrier.alpha1.gain": 10.0}``).
     """
 
     config: Path
@@ -67,10 +74,17 @@ class RunOptions:
     time_step: float | None = None
     integrator: str | None = None
     storage: str = 'mcap'
+    overrides: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f'mode: expected one of {list(MODES)}, got {self.mode!r}')
+        for name in self.overrides:
+            if not any(schema.get(name) for schema in NODE_SCHEMAS.values()):
+                known = sorted({n for schema in NODE_SCHEMAS.values() for n in schema.names})
+                close = difflib.get_close_matches(name, known, n=1)
+                hint = f" (did you mean '{close[0]}'?)" if close else ''
+                raise ParameterError(f"override '{name}': no node declares it{hint}")
 
 
 @dataclass(frozen=True)
@@ -131,7 +145,11 @@ def build_endpoints(
 ) -> tuple[HandSimEndpoint, NominalControllerEndpoint, SafetyFilterEndpoint]:
     """Build the three nodes' endpoints, each with its own model, as the launch file does."""
     params = {
-        node: load_node_parameters(options.config, node)
+        node: load_node_parameters(
+            options.config,
+            node,
+            overrides={k: v for k, v in options.overrides.items() if NODE_SCHEMAS[node].get(k)},
+        )
         for node in (HAND_SIM_NODE, NOMINAL_CONTROLLER_NODE, SAFETY_FILTER_NODE)
     }
     sim_config = SimConfig.from_parameters(params[HAND_SIM_NODE])
@@ -164,16 +182,22 @@ def build_endpoints(
 
 
 def record_run(options: RunOptions, bag_path: Path, progress: Progress | None = None) -> Recording:
-    """Run the scenario in lockstep and record every message to ``bag_path``.
+    """Run the scenario in lockstep and record every message to ``bag_path`` (replaced).
 
     The bag is closed and readable however the run ends; an interrupted one has
     ``interrupted`` in its custom data. An exception other than an interrupt propagates
     after the bag is closed.
     """
-    with interrupt_on_signals(), BagRecorder(bag_path, storage=options.storage) as bag:
-        typestore = bag.typestore
-        msgs = MessageNamespace.from_typestore(typestore)
-        sim, nominal, safety_filter = build_endpoints(options, msgs)
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    msgs = MessageNamespace.from_typestore(typestore)
+    # Bad parameters fail here, before an earlier bag is replaced.
+    sim, nominal, safety_filter = build_endpoints(options, msgs)
+    if bag_path.exists():
+        shutil.rmtree(bag_path)
+    with (
+        interrupt_on_signals(),
+        BagRecorder(bag_path, storage=options.storage, typestore=typestore) as bag,
+    ):
         graph = _Graph(sim, nominal, safety_filter)
         duration = sim.config.duration
         interrupted = None
@@ -220,8 +244,6 @@ def run(options: RunOptions, out_dir: Path, progress: Progress | None = None) ->
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_path = out_dir / BAG_DIRECTORY
-    if bag_path.exists():
-        shutil.rmtree(bag_path)
     start = time.perf_counter()
     recording = record_run(options, bag_path, progress)
     wall_time = time.perf_counter() - start

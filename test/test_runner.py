@@ -149,3 +149,34 @@ def test_a_run_killed_mid_way_leaves_a_readable_bag_and_says_so(tmp_path, signum
     summary = json.loads((tmp_path / 'summary.json').read_text())
     assert summary['interrupted'] == signal.Signals(signum).name
     assert not summary['completed'] and summary['stop_reason'] == 'interrupted'
+
+
+def test_overrides_reach_every_node_that_declares_them():
+    from grasp_safety_filter.io.messages import MessageNamespace
+    from grasp_safety_filter.runner import build_endpoints
+
+    options = RunOptions(
+        CONFIG,
+        'filtered',
+        overrides={'barrier.alpha1.gain': 10.0, 'model.friction_coefficient': 0.5},
+    )
+    sim, nominal, safety_filter = build_endpoints(options, MessageNamespace.from_typestore())
+    assert safety_filter.filter.config.alpha1_gain == 10.0
+    for endpoint in (sim, nominal, safety_filter):
+        assert endpoint.model.friction_coefficient == 0.5
+
+
+@pytest.mark.parametrize(
+    ('overrides', 'message'),
+    [
+        ({'barrier.alpha1.gian': 10.0}, "no node declares it.*did you mean 'barrier.alpha1.gain'"),
+        ({'barrier.alpha1.gain': 10}, 'ROS reads 10 as an integer; write 10.0'),
+        ({'barrier.alpha1.gain': -1.0}, "'barrier.alpha1.gain'.*expected > 0"),
+    ],
+)
+def test_bad_overrides_fail_before_anything_runs(tmp_path, overrides, message):
+    from grasp_safety_filter.io.parameters import ParameterError
+
+    with pytest.raises(ParameterError, match=message):
+        run(RunOptions(CONFIG, 'filtered', overrides=overrides), tmp_path)
+    assert not (tmp_path / 'bag').exists()

@@ -609,7 +609,12 @@ def check_node_parameters(
         check(values, source)
 
 
-def load_node_parameters(path: str | Path, node_name: str, namespace: str = '/') -> dict[str, Any]:
+def load_node_parameters(
+    path: str | Path,
+    node_name: str,
+    namespace: str = '/',
+    overrides: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
     """Load everything a node gets from a parameter file, as the ROS-free runner needs it.
 
     Reads the file, merges ``/**`` and the node's section, validates against the node's
@@ -620,6 +625,8 @@ def load_node_parameters(path: str | Path, node_name: str, namespace: str = '/')
         path: A ROS 2 parameter file, e.g. ``config/paper_scenario.yaml``.
         node_name: A key of :data:`NODE_SCHEMAS`.
         namespace: The node's namespace (for files that address namespaced nodes).
+        overrides: ``{dotted name: value}`` replacing the file's values (as ``--ros-args -p``
+            does); each must be a parameter of this node.
 
     Raises:
         ParameterError: The message names the file, the node and each bad parameter.
@@ -629,9 +636,14 @@ def load_node_parameters(path: str | Path, node_name: str, namespace: str = '/')
         raise KeyError(f"unknown node '{node_name}': expected one of {sorted(NODE_SCHEMAS)}")
     schema = NODE_SCHEMAS[node_name]
     source = f"parameter file '{path}' (node '{node_name}')"
+    if overrides:
+        source += f' with overrides {dict(overrides)}'
     values = validate_parameters(
         schema,
-        parameters_for_node(load_parameter_file(path), node_name, namespace),
+        {
+            **parameters_for_node(load_parameter_file(path), node_name, namespace),
+            **(overrides or {}),
+        },
         source,
         other_schemas=[other for name, other in NODE_SCHEMAS.items() if name != node_name],
     )
