@@ -41,6 +41,7 @@ setup(
             'flake8-builtins==3.1.0',
             'flake8-comprehensions==3.17.0',
         ],
+        # grasp-bench's comparison: the same QPs through cvxpy (OSQP, Clarabel) and daqp.
         'bench': ['cvxpy>=1.4', 'qpsolvers>=4.0', 'daqp>=0.6'],
     },
     python_requires='>=3.10',
@@ -54,6 +55,7 @@ setup(
         'console_scripts': [
             'grasp-demo = grasp_safety_filter.cli:demo_main',
             'grasp-analyze = grasp_safety_filter.cli:analyze_main',
+            'grasp-bench = grasp_safety_filter.bench:bench_main',
             'grasp-model-report = grasp_safety_filter.cli:model_report_main',
             'hand_sim_node = hand_sim_node.node:main',
             'nominal_controller_node = grasp_safety_filter.nodes.nominal_controller_node:main',

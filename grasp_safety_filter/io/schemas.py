@@ -449,7 +449,7 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'osqp.max_iter',
         INTEGER,
-        200,
+        50,
         'OSQP iteration limit per solve [-]',
         min_value=1,
     ),

@@ -1,0 +1,255 @@
+"""grasp-bench: the document's structure, the solver comparison, skipping missing solvers.
+
+No timing is asserted (the machine is shared); only structure, consistency and the
+agreement of the independent solvers with the filter's u*.
+"""
+
+import contextlib
+import importlib.util
+import io
+import json
+import sys
+
+import numpy as np
+import pytest
+
+from grasp_safety_filter.bench import (
+    bench_main,
+    COMPONENTS,
+    DenseQP,
+    EXTERNAL_SOLVERS,
+    external_solvers,
+    ExternalAnswer,
+    ExternalSolver,
+    format_report,
+    general_form,
+    run_external,
+    Scenario,
+)
+from grasp_safety_filter.io.paths import config_path
+
+DURATION = 0.05  # s: 50 ticks of 1 ms
+TICKS = 40
+EXTERNAL_TICKS = 12
+
+#: Solvers accurate enough to check our u* against: Clarabel with tight tolerances (an
+#: interior-point method at its default gap is only accurate to ~1e-4 N·m here) and daqp.
+ACCURATE = {'cvxpy_clarabel', 'daqp'}
+
+
+def installed(key):
+    """Whether the bench's external solver ``key`` can run here."""
+    if key.startswith('cvxpy'):
+        if importlib.util.find_spec('cvxpy') is None:
+            return False
+        import cvxpy
+
+        needed = {'cvxpy': None, 'cvxpy_osqp': 'OSQP', 'cvxpy_clarabel': 'CLARABEL'}[key]
+        return needed is None or needed in cvxpy.installed_solvers()
+    if importlib.util.find_spec('qpsolvers') is None:
+        return False
+    import qpsolvers
+
+    return 'daqp' in qpsolvers.available_solvers
+
+
+@pytest.fixture(scope='module')
+def bench(tmp_path_factory):
+    path = tmp_path_factory.mktemp('bench') / 'bench.json'
+    table = io.StringIO()
+    with contextlib.redirect_stdout(table), contextlib.redirect_stderr(io.StringIO()):
+        rc = bench_main(
+            [
+                '--duration',
+                str(DURATION),
+                '--ticks',
+                str(TICKS),
+                '--warmup',
+                '5',
+                '--external-ticks',
+                str(EXTERNAL_TICKS),
+                '--runner-duration',
+                '0.01',
+                '--json',
+                str(path),
+            ]
+        )
+    return rc, json.loads(path.read_text()), table.getvalue()
+
+
+def test_bench_exits_zero_and_prints_every_figure(bench):
+    rc, document, table = bench
+    assert rc == 0
+    for label in COMPONENTS.values():
+        assert label in table
+    for _, label, _ in EXTERNAL_SOLVERS:
+        assert label in table
+    assert 'real-time factor' in table
+    assert f'{document["machine"]["cpu_count"]} CPUs' in table
+
+
+def test_document_describes_machine_and_run(bench):
+    _, document, _ = bench
+    machine = document['machine']
+    assert machine['python'] == '.'.join(map(str, sys.version_info[:3]))
+    assert machine['cpu_count'] >= 1
+    assert machine['packages']['numpy'] == np.__version__
+    assert machine['packages']['osqp']
+    run = document['run']
+    assert run['ticks'] == round(DURATION / run['time_step_s'])
+    assert run['t_end_s'] == pytest.approx(DURATION)
+    assert run['stop_reason'] == 'duration'
+    assert sum(run['statuses'].values()) == run['ticks']
+    replay = document['replay']
+    assert replay['ticks'] == TICKS
+    assert sum(replay['statuses'].values()) == TICKS
+    # Fresh instances fed the same ticks reproduce the run's u* (warm starts included).
+    assert replay['max_deviation_from_run'] <= 1e-12
+
+
+def test_timings_have_median_and_p99_per_piece(bench):
+    _, document, _ = bench
+    timings = document['timings_us']
+    assert list(timings) == list(COMPONENTS)
+    nominal_ticks = document['replay']['statuses'].get('nominal', 0)
+    for key, s in timings.items():
+        expected = TICKS - nominal_ticks if key == 'filter_qp_solve' else TICKS
+        assert s['n'] == expected, key
+        assert 0.0 < s['median'] <= s['p99'] <= s['max'], key
+    # The node tick is timed as one block around the model terms and the filter step.
+    assert timings['node_tick']['median'] >= timings['filter_step']['median']
+    assert timings['node_tick']['median'] >= timings['model_state']['median']
+
+
+def test_real_time_factors_are_simulated_over_wall_seconds(bench):
+    _, document, _ = bench
+    rates = document['real_time_factor']
+    for key in ('nominal_loop', 'filtered_loop', 'runner_with_bag'):
+        rate = rates[key]
+        assert rate['simulated_s'] > 0.0 and rate['wall_s'] > 0.0, key
+        assert rate['real_time_factor'] == pytest.approx(rate['simulated_s'] / rate['wall_s'])
+    assert rates['filtered_loop']['simulated_s'] == pytest.approx(DURATION)
+    assert rates['runner_with_bag']['simulated_s'] == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize('key', [key for key, _, _ in EXTERNAL_SOLVERS])
+def test_external_solvers_agree_with_the_filter(bench, key):
+    _, document, _ = bench
+    external = document['external']
+    entry = external['solvers'][key]
+    assert entry['available'] == installed(key)
+    if not entry['available']:
+        assert 'not installed' in entry['reason']
+        return
+    assert entry['qps'] == external['qps'] == len(external['ticks']) == EXTERNAL_TICKS
+    assert sum(entry['statuses'].values()) == entry['qps']
+    assert entry['time_us']['n'] == entry['qps']
+    assert entry['ratio_to_filter_step']['median'] == pytest.approx(
+        entry['time_us']['median'] / external['filter_step_us']['median']
+    )
+    # Early in the run every hard QP is feasible and each solver returns a solution.
+    assert entry['infeasible'] == 0
+    assert entry['missing'] == 0
+    assert entry['compared'] == entry['qps']
+    if key in ACCURATE:
+        assert entry['max_abs_du'] <= 1e-5
+    else:
+        # OSQP through cvxpy stops at its own tolerances: reported, not held to 1e-5.
+        assert np.isfinite(entry['max_abs_du'])
+
+
+def test_json_to_stdout_with_a_filter_override():
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        rc = bench_main(
+            [
+                '--duration',
+                '0.01',
+                '--warmup',
+                '0',
+                '--external-ticks',
+                '0',
+                '--runner-duration',
+                '0',
+                '--set',
+                'osqp.eps_abs=1e-3',
+                '--json',
+            ]
+        )
+    assert rc == 0
+    document = json.loads(out.getvalue())  # stdout holds the JSON only
+    assert document['filter_parameters']['osqp.eps_abs'] == 1e-3
+    assert document['external']['qps'] == 0
+    assert document['real_time_factor']['runner_with_bag'] is None
+
+
+def test_unknown_filter_override_is_refused():
+    with pytest.raises(ValueError, match=r'osqp\.eps_absolute'):
+        Scenario.load(config_path(), {'osqp.eps_absolute': 1e-3})
+
+
+def test_missing_solvers_are_skipped_with_a_reason(monkeypatch, bench):
+    for module in ('cvxpy', 'qpsolvers'):
+        monkeypatch.setitem(sys.modules, module, None)  # import now raises ImportError
+    solvers = external_solvers()
+    assert [s.key for s in solvers] == [key for key, _, _ in EXTERNAL_SOLVERS]
+    for solver in solvers:
+        assert solver.solve is None
+        assert 'not installed' in solver.unavailable
+    _, document, _ = bench
+    for solver in solvers:
+        document['external']['solvers'][solver.key] = {
+            'label': solver.label,
+            'available': False,
+            'reason': solver.unavailable,
+        }
+    assert format_report(document).count('skipped: not installed') == len(solvers)
+
+
+def random_qp(rng, k=6, m=4):
+    A = rng.normal(size=(k, m))
+    C = np.vstack((A, np.eye(m)))
+    lower = np.concatenate((rng.normal(size=k), np.full(m, -1.0)))
+    upper = np.concatenate((np.full(k, np.inf), np.full(m, 2.0)))
+    upper[0] = lower[0] + 1.0  # one two-sided general row
+    return DenseQP(np.eye(m), rng.normal(size=m), C, lower, upper)
+
+
+def test_general_form_describes_the_same_feasible_set():
+    rng = np.random.default_rng(3)
+    qp = random_qp(rng)
+    form = general_form(qp)
+    np.testing.assert_array_equal(form.lb, -1.0)
+    np.testing.assert_array_equal(form.ub, 2.0)
+    assert form.G.shape == (6 + 1, 4)  # k lower sides and one upper side
+    for x in rng.uniform(-3.0, 3.0, size=(2000, 4)):
+        inside = np.all(qp.lower <= qp.C @ x) and np.all(qp.C @ x <= qp.upper)
+        general = np.all(form.G @ x <= form.h) and np.all(form.lb <= x) and np.all(x <= form.ub)
+        assert inside == general
+
+
+def test_run_external_counts_agreement_misses_and_infeasibility():
+    rng = np.random.default_rng(4)
+    qps = [random_qp(rng) for _ in range(4)]
+    ours = rng.normal(size=(4, 4))
+    answers = [ours[0] + 1e-3, None, None, ours[3] - 2e-3]
+
+    def fake(qp):
+        index = next(i for i, other in enumerate(qps) if np.array_equal(other.q, qp.q))
+        x = answers[index]
+        return ExternalAnswer(x, 'solved' if x is not None else 'infeasible', 'fake', 1e-6)
+
+    times, comparison = run_external(
+        ExternalSolver('fake', 'fake', fake),
+        qps,
+        ours,
+        certified=np.array([True, True, False, True]),
+    )
+    assert times.shape == (4,)
+    assert comparison['compared'] == 2
+    assert comparison['max_abs_du'] == pytest.approx(2e-3)
+    assert comparison['missing'] == 1
+    assert comparison['infeasible'] == 1
+    assert comparison['infeasible_agreed'] == 1
+    assert comparison['statuses'] == {'solved': 2, 'infeasible': 2}
+    assert comparison['solver_time_us']['median'] == pytest.approx(1.0)
