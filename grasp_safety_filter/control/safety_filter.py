@@ -40,7 +40,8 @@ one small QR factorisation when the guess is right and makes the answer exact ei
 OSQP settings (defaults): eps_abs = eps_rel = 1e-4, polishing on, max_iter = 50,
 convergence checked every 5 iterations, warm start on (measured with ``grasp-bench``).
 The tolerances only decide when ADMM hands its active set over (tighter ones add iterations
-without improving the guess on degenerate problems); exactness comes from step 4. Infeasibility is decided by the active-set method, not by OSQP's certificate.
+without improving the guess on degenerate problems); exactness comes from step 4.
+Infeasibility is decided by the active-set method, not by OSQP's certificate.
 
 Relaxation priorities (defaults): slack weights 1e6 on no-slip and joint-limit rows, 1e3 on
 fingertip-workspace rows. Slacks are normalised to torque-space distance (N·m), so the
