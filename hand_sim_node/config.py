@@ -14,22 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.io.parameters import ParameterError
+from grasp_safety_filter.io.parameters import flatten_parameters, ParameterError
 from grasp_safety_filter.io.schemas import HAND_SIM_PARAMETERS
 
 _SPECS = {spec.name: spec for spec in HAND_SIM_PARAMETERS}
-
-
-def flatten_parameters(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
-    """Flatten nested parameter dictionaries to dotted ROS names (``{"a": {"b": 1}}``: ``a.b``)."""
-    flat: dict[str, Any] = {}
-    for key, value in params.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, Mapping):
-            flat.update(flatten_parameters(value, prefix=f'{name}.'))
-        else:
-            flat[name] = value
-    return flat
 
 
 _ARRAY_FIELDS: dict[str, str] = {

@@ -38,20 +38,9 @@ from grasp_safety_filter.control.reference import (
     ReferenceSource,
     TopicReference,
 )
-from grasp_safety_filter.io.parameters import ParameterError
+from grasp_safety_filter.io.parameters import flatten_parameters, ParameterError
 from grasp_safety_filter.io.schemas import NOMINAL_CONTROLLER_PARAMETERS
 from grasp_safety_filter.model.grasp_state import GraspState
-
-
-def _flatten(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
-    flat: dict[str, Any] = {}
-    for key, value in params.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, Mapping):
-            flat.update(_flatten(value, f'{name}.'))
-        else:
-            flat[name] = value
-    return flat
 
 
 @dataclass(frozen=True)
@@ -104,7 +93,7 @@ class NominalConfig:
                 the parameter, what was expected and what was received.
 
         """
-        flat = _flatten(params)
+        flat = flatten_parameters(params)
         values = {
             spec.name: spec.validate(flat[spec.name]) if spec.name in flat else spec.default
             for spec in NOMINAL_CONTROLLER_PARAMETERS

@@ -367,6 +367,22 @@ def _collect_nodes(
                 _collect_nodes({sub_key: sub_section}, node, path, nodes)
 
 
+def flatten_parameters(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Flatten nested parameter mappings to dotted ROS names (``{"a": {"b": 1}}``: ``a.b``).
+
+    Lenient, for configs built in Python; files go through :func:`load_parameter_file`,
+    which also rejects empty sections and repeated names.
+    """
+    flat: dict[str, Any] = {}
+    for key, value in params.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(flatten_parameters(value, prefix=f'{name}.'))
+        else:
+            flat[name] = value
+    return flat
+
+
 def _flatten(parameters: dict[Any, Any], prefix: str, where: str) -> dict[str, Any]:
     flat: dict[str, Any] = {}
     for key, value in parameters.items():
