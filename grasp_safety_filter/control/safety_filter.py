@@ -52,12 +52,12 @@ or breaking a joint is worse than letting a contact roll towards the fingertip's
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import ItemsView, Iterator, Mapping, Sequence, ValuesView
 import dataclasses
 from dataclasses import dataclass, field
 from enum import Enum
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import osqp
@@ -77,7 +77,7 @@ from grasp_safety_filter.control.least_distance import (
     solve_least_distance,
 )
 from grasp_safety_filter.control.qp import SafetyQP
-from grasp_safety_filter.io.parameters import ParameterType
+from grasp_safety_filter.io.parameters import flatten_parameters
 from grasp_safety_filter.io.schemas import SAFETY_FILTER_QP_PARAMETERS
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -95,8 +95,6 @@ ACTIVE_SET_TOLERANCE = 1e-10
 #: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
 #: when u is within it of the bound).
 ACTIVE_TOLERANCE = 1e-6
-
-_D = ParameterType.DOUBLE
 
 
 #: Config field of each parameter.
@@ -118,17 +116,6 @@ _FIELDS: dict[str, str] = {
     'osqp.max_iter': 'max_iter',
     'osqp.polish': 'polish',
 }
-
-
-def _flatten(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
-    flat: dict[str, Any] = {}
-    for key, value in params.items():
-        name = f'{prefix}{key}'
-        if isinstance(value, Mapping):
-            flat.update(_flatten(value, f'{name}.'))
-        else:
-            flat[name] = value
-    return flat
 
 
 @dataclass(frozen=True)
@@ -185,7 +172,7 @@ class SafetyFilterConfig:
             ParameterError: A value has the wrong type or is out of range; the message names
                 the parameter, what was expected and what was received.
         """
-        flat = _flatten(params)
+        flat = flatten_parameters(params)
         return cls(
             **{
                 _FIELDS[spec.name]: spec.validate(flat[spec.name])
@@ -242,6 +229,91 @@ class FilterStatus(str, Enum):
     """No QP answer and no earlier u*: u_nom clipped to the box."""
 
 
+class Margins(Mapping[str, float]):
+    """Barrier value h per row name: a read-only mapping over a names tuple and a values array.
+
+    Reads like the ``dict`` it stands for (``margins[name]``, iteration in row order,
+    ``items()``, ``values()``, ``dict(margins)``, equality with a dict) without building
+    one entry per row every tick. :attr:`names` and :attr:`array` give the rows in order.
+    """
+
+    __slots__ = ('_array', '_index', '_names')
+
+    def __init__(
+        self, names: tuple[str, ...], array: np.ndarray, index: Mapping[str, int] | None = None
+    ) -> None:
+        """Wrap ``array`` (shape (len(names),), made read-only) under ``names``.
+
+        Args:
+            names: Row names, distinct, in row order.
+            array: The values, one per name.
+            index: Position of each name (shared between views of the same rows); built
+                from ``names`` when None.
+
+        Raises:
+            ValueError: ``array`` does not have one value per name.
+        """
+        if array.shape != (len(names),):
+            raise ValueError(
+                f'margins: expected {len(names)} values, got an array of shape {array.shape}'
+            )
+        array.setflags(write=False)
+        self._names = names
+        self._array = array
+        self._index = index if index is not None else {n: i for i, n in enumerate(names)}
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Row names, in row order."""
+        return self._names
+
+    @property
+    def array(self) -> np.ndarray:
+        """The values in row order, shape (len(names),) (read-only)."""
+        return self._array
+
+    def __getitem__(self, name: str) -> float:
+        return float(self._array[self._index[name]])
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._index
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._names)
+
+    def __len__(self) -> int:
+        return len(self._names)
+
+    def items(self) -> ItemsView[str, float]:
+        """Return the ``(name, h)`` pairs in row order."""
+        return _MarginItems(self)
+
+    def values(self) -> ValuesView[float]:
+        """Return the values h in row order."""
+        return _MarginValues(self)
+
+    def __repr__(self) -> str:
+        return f'{type(self).__name__}({dict(self.items())!r})'
+
+
+class _MarginItems(ItemsView[str, float]):
+    """``Margins.items()``, iterated without one lookup per row."""
+
+    _mapping: Margins
+
+    def __iter__(self) -> Iterator[tuple[str, float]]:
+        return zip(self._mapping.names, self._mapping.array.tolist(), strict=True)
+
+
+class _MarginValues(ValuesView[float]):
+    """``Margins.values()``, iterated without one lookup per row."""
+
+    _mapping: Margins
+
+    def __iter__(self) -> Iterator[float]:
+        return iter(self._mapping.array.tolist())
+
+
 @dataclass(frozen=True)
 class FilterResult:
     """The outcome of one filter step.
@@ -253,8 +325,9 @@ class FilterResult:
             a fallback); False for ``nominal``, ``solved`` and ``solved_active_set``.
         relaxed_families: Families with a row violated at u* by more than
             :data:`FEASIBILITY_TOLERANCE`, in stack order.
-        margins: Barrier value h per row name: rad (joint limits, fingertip workspace), N
-            (no slip, at the forces ``f_c(u*)``), N·m (actuator limits, at u*).
+        margins: Barrier value h per row name (a read-only :class:`Margins` mapping): rad
+            (joint limits, fingertip workspace), N (no slip, at the forces ``f_c(u*)``),
+            N·m (actuator limits, at u*).
         active: Names of the rows with ``A u* - lower <= ACTIVE_TOLERANCE`` (violated rows
             included) and of the actuator bounds u* touches.
         solve_time: Wall time spent solving (OSQP update and solve, the active-set step,
@@ -269,7 +342,7 @@ class FilterResult:
     status: FilterStatus
     relaxed: bool
     relaxed_families: tuple[str, ...]
-    margins: dict[str, float] = field(repr=False)
+    margins: Margins = field(repr=False)
     active: tuple[str, ...]
     solve_time: float
     iterations: int
@@ -290,6 +363,38 @@ _RELAXED_USABLE = (
     osqp.SolverStatus.OSQP_SOLVED_INACCURATE,
     osqp.SolverStatus.OSQP_MAX_ITER_REACHED,
 )
+
+
+class _OSQPSolution(NamedTuple):
+    """What the filter reads of an OSQP solve: status code, iterations, primal x, dual y."""
+
+    status: int
+    iterations: int
+    x: np.ndarray
+    y: np.ndarray
+
+
+class _OSQPProblem:
+    """One OSQP problem, set up once with the QP's fixed pattern, then updated and solved."""
+
+    def __init__(self, qp: SafetyQP, settings: dict[str, Any]) -> None:
+        self._solver = osqp.OSQP()
+        self._solver.setup(qp.P, qp.q, qp.C, qp.lower, qp.upper, **settings)
+
+    def warm_start(self, x: np.ndarray, y: np.ndarray) -> None:
+        """Start the next solve from the primal-dual pair ``(x, y)``."""
+        self._solver.warm_start(x=x, y=y)
+
+    def update(self, qp: SafetyQP) -> None:
+        """Hand over the QP's current ``q``, ``lower`` and ``C`` values (same pattern)."""
+        self._solver.update(q=qp.q, l=qp.lower, Ax=qp.C_data)
+
+    def solve(self) -> _OSQPSolution:
+        """Solve from the current warm start (never raises on a failed solve)."""
+        solution = self._solver.solve(raise_error=False)
+        return _OSQPSolution(
+            solution.info.status_val, int(solution.info.iter), solution.x, solution.y
+        )
 
 
 class SafetyFilter:
@@ -401,26 +506,10 @@ class SafetyFilter:
         self._relaxed_rows[k : k + 2 * m, :m] = self.actuator_limits.rows().A
         self._relaxed_rows[k + 2 * m :, m:] = np.eye(k)
         settings = config.osqp_settings()
-        self._hard_solver = osqp.OSQP()
-        self._hard_solver.setup(
-            self.hard_qp.P,
-            self.hard_qp.q,
-            self.hard_qp.C,
-            self.hard_qp.lower,
-            self.hard_qp.upper,
-            **settings,
-        )
-        self._relaxed_solver = osqp.OSQP()
-        self._relaxed_solver.setup(
-            self.relaxed_qp.P,
-            self.relaxed_qp.q,
-            self.relaxed_qp.C,
-            self.relaxed_qp.lower,
-            self.relaxed_qp.upper,
-            **settings,
-        )
+        self._hard_solver = _OSQPProblem(self.hard_qp, settings)
+        self._relaxed_solver = _OSQPProblem(self.relaxed_qp, settings)
         self._margin_names = (*self.row_names, *self.actuator_limits.names)
-        self._constraint_names = np.array(self._margin_names, dtype=object)
+        self._margin_index = {name: i for i, name in enumerate(self._margin_names)}
         self._state_fields = tuple(
             dict.fromkeys(name for family in self.families for name in family.state_fields)
         )
@@ -475,11 +564,12 @@ class SafetyFilter:
             self.hard_qp.A_rows.copy(), self.hard_qp.lower_rows.copy(), self.row_names
         )
 
-    def margins(self, state: GraspState, u: np.ndarray) -> dict[str, float]:
+    def margins(self, state: GraspState, u: np.ndarray) -> Margins:
         """Barrier values h per row name (families then actuator limits) at torque u."""
-        values = [family.values(state, u).h for family in self.families]
-        values.append(self.actuator_limits.values(state, u).h)
-        return dict(zip(self._margin_names, np.concatenate(values).tolist(), strict=True))
+        values = np.empty(len(self._margin_names))
+        with np.errstate(all='ignore'):
+            self._write_margins(state, np.asarray(u, dtype=float), values)
+        return Margins(self._margin_names, values, self._margin_index)
 
     def assemble(self, state: GraspState, u_nom: np.ndarray) -> tuple[np.ndarray, bool]:
         """Write this tick's hard QP into :attr:`hard_qp`: what :meth:`solve` does first.
@@ -542,10 +632,10 @@ class SafetyFilter:
         if self._pending_warm_start is not None:
             solver.warm_start(x=self._pending_warm_start[0], y=self._pending_warm_start[1])
             self._pending_warm_start = None
-        solver.update(q=hard.q, l=hard.lower, Ax=hard.C_data)
-        solution = solver.solve(raise_error=False)
-        iterations = int(solution.info.iter)
-        if solution.info.status_val in _CONVERGED:
+        solver.update(hard)
+        solution = solver.solve()
+        iterations = solution.iterations
+        if solution.status in _CONVERGED:
             u = self._certified(solution.x, solution.y, u_nom, A, lower)
             if u is not None:
                 solve_time = time.perf_counter() - start
@@ -553,7 +643,7 @@ class SafetyFilter:
                 return self._result(
                     state, u, FilterStatus.SOLVED, A, lower, solve_time, iterations
                 )
-        if solution.info.status_val in _INFEASIBLE or not np.isfinite(solution.y).all():
+        if solution.status in _INFEASIBLE or not np.isfinite(solution.y).all():
             guess: tuple[int, ...] = ()  # y is an infeasibility certificate, not multipliers
         else:
             guess = self._working_set_guess(solution.y)
@@ -585,9 +675,9 @@ class SafetyFilter:
         relaxed.set_nominal(u_nom)
         relaxed.normalise_slacks()
         start = time.perf_counter()
-        self._relaxed_solver.update(q=relaxed.q, l=relaxed.lower, Ax=relaxed.C_data)
-        solution = self._relaxed_solver.solve(raise_error=False)
-        iterations += int(solution.info.iter)
+        self._relaxed_solver.update(relaxed)
+        solution = self._relaxed_solver.solve()
+        iterations += solution.iterations
         # As for the hard QP, OSQP's active set is finished exactly: with s~ = sqrt(w) s the
         # relaxed QP is a least-distance problem in (u, s~) from (u_nom, 0).
         guess = self._working_set_guess(solution.y) if np.isfinite(solution.y).all() else ()
@@ -597,7 +687,7 @@ class SafetyFilter:
         u = None
         if exact_relaxed.status is LeastDistanceStatus.OPTIMAL:
             u = self._clip_finite(exact_relaxed.u)
-        elif solution.info.status_val in _RELAXED_USABLE:
+        elif solution.status in _RELAXED_USABLE:
             u = self._clip_finite(solution.x)
         if u is None:
             self._pending_warm_start = (self.actuator_limits.clip(u_nom), self._zero_duals)
@@ -781,6 +871,12 @@ class SafetyFilter:
             status = FilterStatus.FALLBACK_NOMINAL
         return self._result(state, u, status, A, lower, solve_time, iterations, active_set_steps)
 
+    def _write_margins(self, state: GraspState, u: np.ndarray, values: np.ndarray) -> None:
+        """Write every family's barrier values at u, then the box margins, into ``values``."""
+        for family, rows in zip(self.families, self._slices, strict=True):
+            values[rows] = family.values(state, u).h
+        np.subtract(self._box_rows @ u, self._box_lower, out=values[len(self.row_names) :])
+
     def _result(
         self,
         state: GraspState,
@@ -793,28 +889,31 @@ class SafetyFilter:
         active_set_steps: int = 0,
     ) -> FilterResult:
         u.setflags(write=False)
+        k = len(self.row_names)
+        values = np.empty(len(self._margin_names))
+        # Residuals then box margins, side by side, for the active-row test.
+        slack = np.empty(len(self._margin_names))
         with np.errstate(all='ignore'):
-            residual = A @ u - lower
-            values = [family.values(state, u).h for family in self.families]
-            box_margin = self._box_rows @ u - self._box_lower
-        values.append(box_margin)
-        margins = dict(zip(self._margin_names, np.concatenate(values).tolist(), strict=True))
-        violated = ~(residual >= -FEASIBILITY_TOLERANCE)
+            residual = np.subtract(A @ u, lower, out=slack[:k])
+            self._write_margins(state, u, values)
+        slack[k:] = values[k:]
         relaxed_families: tuple[str, ...] = ()
         worst = 0.0
-        if violated.any():
+        # min() is NaN when a row is: NaN rows count as violated, as in the test below.
+        if k and not residual.min() >= -FEASIBILITY_TOLERANCE:
+            violated = ~(residual >= -FEASIBILITY_TOLERANCE)
             relaxed_families = tuple(
                 self.families[i].family for i in np.unique(self._row_family[violated])
             )
             worst = float(np.max(-residual))
-        active_mask = np.concatenate((residual, box_margin)) <= ACTIVE_TOLERANCE
-        active = tuple(self._constraint_names[active_mask])
+        names = self._margin_names
+        active = tuple([names[i] for i in np.flatnonzero(slack <= ACTIVE_TOLERANCE).tolist()])
         return FilterResult(
             u=u,
             status=status,
             relaxed=status in _NOT_CERTIFIED,
             relaxed_families=relaxed_families,
-            margins=margins,
+            margins=Margins(names, values, self._margin_index),
             active=active,
             solve_time=solve_time,
             iterations=iterations,
