@@ -34,6 +34,7 @@ whole tick: model, filter, messages), ``iterations``, ``relaxed``, ``relaxed_fam
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 import math
 import time
@@ -312,7 +313,7 @@ class SafetyFilterEndpoint:
         t: float,
         now: float,
         result: FilterResult | None,
-        margins: dict[str, float],
+        margins: Mapping[str, float],
         step_time: float,
     ) -> Outgoing:
         values: dict[str, Any] = {'filter.enabled': self.enabled}
@@ -427,7 +428,7 @@ def _status_level_and_text(status: str, relaxed: bool) -> tuple[DiagnosticLevel,
     return level, _STATUS_TEXT.get(status, f'QP {status}')
 
 
-def _min_margin_per_family(margins: dict[str, float]) -> dict[str, float]:
+def _min_margin_per_family(margins: Mapping[str, float]) -> dict[str, float]:
     """Smallest barrier value per family (the first component of the row names)."""
     smallest: dict[str, float] = {}
     for name, h in margins.items():
