@@ -27,7 +27,8 @@ def _shade_outside(axes: Axes, low: float, high: float, values: np.ndarray) -> N
 
 
 def _stop_marker(axes: Axes, run: RunData) -> None:
-    if run.stop_reason:
+    """Mark where a run stopped early (nothing for a run that reached its duration)."""
+    if run.stop_reason not in (None, 'duration'):
         axes.axvline(run.t_end, color='k', linestyle=':', linewidth=1.0)
 
 
