@@ -2,7 +2,7 @@
 
 For contact i, with ``w = R_palm_to_contact (w_f - w_o)`` the angular velocity of the
 fingertip relative to the object in the contact frame (pure rolling: no relative linear
-velocity at the contact point), Montana's equations (Murray, Li & Sastry, eq. 5.x) read
+velocity at the contact point), Montana's equations (Murray, Li & Sastry 1994, Section 5.6) read
 
     xi_cf_dot = M_cf^-1 (K_cf + K~_co)^-1 [-w_y, w_x]
     xi_co_dot = M_co^-1 R_psi (K_cf + K~_co)^-1 [-w_y, w_x]
