@@ -20,6 +20,9 @@ step: it then certifies the guess exactly.
 The safety filter uses it after OSQP (a first-order method), whose iterates converge slowly
 on the filter's typical degenerate problems (several nearly dependent barrier rows active at
 once). The problem is small (m = 9 torques): dense linear algebra per step is cheap.
+Before OSQP, it tries the previous tick's active set with :func:`solve_on_working_set`
+(the start of this method without its rank reduction: one LU solve) and checks the
+optimality conditions this method stops on.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from enum import Enum
 
 import numpy as np
 import scipy.linalg
+import scipy.linalg.lapack
 
 #: A row whose normal has a component below this fraction of its norm outside the span of
 #: the working rows' normals is treated as linearly dependent on them.
@@ -121,20 +125,56 @@ class _WorkingSet:
 
 
 def _solve_triangular(T: np.ndarray, v: np.ndarray, lower: bool) -> np.ndarray:
-    """Solve ``T x = v`` for a small triangular T by substitution.
+    """Solve ``T x = v`` for a triangular T (LAPACK ``dtrtrs``, called directly).
 
-    The systems here have at most m = 9 unknowns, where this beats a LAPACK call's overhead.
+    The systems here are small (up to a few dozen unknowns), where scipy's and numpy's
+    wrappers would cost more than the solve; ``T`` may be a strided view.
     """
-    rows = T.tolist()
-    values = v.tolist()
-    q = len(values)
-    x = [0.0] * q
-    order = range(q) if lower else range(q - 1, -1, -1)
-    for i in order:
-        row = rows[i]
-        known = range(i) if lower else range(i + 1, q)
-        x[i] = (values[i] - sum(row[j] * x[j] for j in known)) / row[i]
-    return np.array(x)
+    if not v.size:
+        return np.zeros(0)
+    x, _ = scipy.linalg.lapack.dtrtrs(T, v, lower=int(lower))
+    return x
+
+
+def solve_on_working_set(
+    u0: np.ndarray, C: np.ndarray, b: np.ndarray, working_set: Sequence[int]
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """Minimise ``1/2 ||u - u0||^2`` subject to ``C_W u = b_W``: the optimum on a guessed set.
+
+    With ``d = u - u0`` and the multipliers lambda (``d = C_W^T lambda``), one LU solve of
+    the KKT system (no normal equations: C_W's conditioning is not squared)::
+
+        [ I    -C_W^T ] [ d      ]   [ 0               ]
+        [ C_W   0     ] [ lambda ] = [ b_W - C_W u0    ]
+
+    It is the optimum of :func:`solve_least_distance` when W is the optimal active set; the
+    multipliers may be negative and the other rows may be violated otherwise: the caller
+    checks both.
+
+    Args:
+        u0: Shape (m,).
+        C: Shape (k, m), finite.
+        b: Shape (k,), finite.
+        working_set: Row indices W, distinct, with linearly independent rows.
+
+    Returns:
+        ``(u, lambda)`` (lambda in the order of ``working_set``), or None when the system is
+        singular (dependent rows) or its solution is not finite.
+    """
+    rows = list(working_set)
+    m, q = C.shape[1], len(rows)
+    C_W = C.take(rows, axis=0)
+    kkt = np.zeros((m + q, m + q))
+    kkt.flat[: m * (m + q + 1) : m + q + 1] = 1.0  # the identity block
+    kkt[:m, m:] = -C_W.T
+    kkt[m:, :m] = C_W
+    rhs = np.zeros(m + q)
+    rhs[m:] = b.take(rows) - C_W @ u0
+    # LAPACK's LU directly: the system is small enough that numpy's wrapper would dominate.
+    _, _, solution, info = scipy.linalg.lapack.dgesv(kkt, rhs, overwrite_a=True, overwrite_b=True)
+    if info != 0 or not np.isfinite(solution).all():
+        return None
+    return u0 + solution[:m], solution[m:]
 
 
 def solve_least_distance(

@@ -12,35 +12,46 @@ The steps of :meth:`SafetyFilter.solve`:
    a non-finite state entry the rows read raises ValueError naming it, before any solver call.
 2. If u_nom is inside the box and satisfies every row exactly, ``u* = u_nom`` (it is the
    optimum; no solver call). Status ``nominal``.
-3. Otherwise OSQP solves the hard QP (set up once with a fixed sparsity pattern,
-   warm-started from the previous tick's primal-dual solution), with solution polishing.
-4. OSQP's multipliers name the rows it finds active. The exact active-set method
-   (:mod:`grasp_safety_filter.control.least_distance`) starts from that guess: it solves
-   the equality-constrained problem on those rows, checks every multiplier is nonnegative
-   and every other row holds, i.e. the KKT conditions. If they hold, the guess was optimal
-   and u* is certified exactly: status ``solved``. If not, it adds and drops rows until
-   they hold: status ``solved_active_set``. Either way every row is then checked here to
+3. Otherwise, first the previous tick's active set: the rows move little from one tick to
+   the next, so the rows active at last tick's u* are usually active at this one. The
+   optimum with those rows held as equalities is one small linear solve
+   (:func:`~grasp_safety_filter.control.least_distance.solve_on_working_set`); if it
+   satisfies the KKT conditions the active-set method of step 5 stops on (every row and
+   bound holds, multipliers nonnegative, same tolerance :data:`ACTIVE_SET_TOLERANCE`), it
+   is u* exactly and OSQP is not called: status ``solved`` with no OSQP iterations, and
+   OSQP's next warm start is this primal-dual pair. Otherwise the tick goes on as if the
+   guess had not been tried. (No guess after a relaxed or fallback tick.)
+4. OSQP solves the hard QP (set up once with a fixed sparsity pattern, warm-started from
+   the previous tick's primal-dual solution), with solution polishing. Its ``(x, y)`` is
+   accepted when it satisfies the KKT conditions to :data:`CERTIFICATE_TOLERANCE`; else
+   the active set its multipliers name is tried as in step 3. Status ``solved``.
+5. Otherwise the exact active-set method
+   (:mod:`grasp_safety_filter.control.least_distance`) starts from OSQP's active set: it
+   adds and drops rows until the KKT conditions hold: status ``solved`` if none was added
+   or dropped, else ``solved_active_set``. Either way every row is then checked here to
    :data:`FEASIBILITY_TOLERANCE` (not taken from a solver's status).
-5. If the hard QP is infeasible (the paper's Assumption 5 fails; proved by the active-set
+6. If the hard QP is infeasible (the paper's Assumption 5 fails; proved by the active-set
    method, whatever OSQP said), the relaxed QP (:mod:`grasp_safety_filter.control.qp`:
    one slack per barrier row, weighted per family, actuator box hard) is solved the same
    way: OSQP, then the active-set method from OSQP's active set (with the slacks scaled by
    ``sqrt(w)`` the relaxed QP is a least-distance problem too). Status ``relaxed``; the
    families whose rows are violated at u* are named.
-6. If nothing gives a finite answer: the last accepted u* (or u_nom if there is none),
+7. If nothing gives a finite answer: the last accepted u* (or u_nom if there is none),
    clipped to the box. Status ``fallback_last_good`` / ``fallback_nominal``.
 
-Why step 4: the filter's QPs are degenerate where it matters. Near a joint limit the
+Why steps 3 and 5: the filter's QPs are degenerate where it matters. Near a joint limit the
 barrier rows of the same joint on the three fingers are nearly linearly dependent (all are
 driven by the same 6-dof object motion), and OSQP's ADMM iterates then approach the optimum
 very slowly (thousands of iterations to 1e-5 on the paper's scenario) while its active-set
 guess is usually right after a few dozen. The dense active-set step on 9 variables costs
-one small QR factorisation when the guess is right and makes the answer exact either way.
+one small factorisation when the guess is right and makes the answer exact either way; and
+the previous tick's active set is right on almost every tick of a smooth run, so most ticks
+need no OSQP call at all.
 
 OSQP settings (defaults): eps_abs = eps_rel = 1e-4, polishing on, max_iter = 50,
 convergence checked every 5 iterations, warm start on (measured with ``grasp-bench``).
 The tolerances only decide when ADMM hands its active set over (tighter ones add iterations
-without improving the guess on degenerate problems); exactness comes from step 4.
+without improving the guess on degenerate problems); exactness comes from steps 3 to 5.
 Infeasibility is decided by the active-set method, not by OSQP's certificate.
 
 Relaxation priorities (defaults): slack weights 1e6 on no-slip and joint-limit rows, 1e3 on
@@ -75,6 +86,7 @@ from grasp_safety_filter.control.least_distance import (
     LeastDistanceSolution,
     LeastDistanceStatus,
     solve_least_distance,
+    solve_on_working_set,
 )
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.io.parameters import flatten_parameters
@@ -218,7 +230,9 @@ class FilterStatus(str, Enum):
     NOMINAL = 'nominal'
     """u_nom satisfies every row and the box: ``u* = u_nom``, no QP solved."""
     SOLVED = 'solved'
-    """The hard QP's optimum: OSQP's active set, certified exactly by the KKT check."""
+    """The hard QP's optimum, certified exactly by the KKT check: OSQP's answer, or the
+    optimum on a guessed active set (the previous tick's, with no OSQP call and
+    ``iterations == 0``, or OSQP's) satisfying the active-set method's KKT conditions."""
     SOLVED_ACTIVE_SET = 'solved_active_set'
     """The hard QP's optimum, reached by the active-set method from OSQP's guess."""
     RELAXED = 'relaxed'
@@ -332,9 +346,10 @@ class FilterResult:
             included) and of the actuator bounds u* touches.
         solve_time: Wall time spent solving (OSQP update and solve, the active-set step,
             the relaxed QP when needed), s; 0 when no QP was solved.
-        iterations: OSQP iterations (both QPs when relaxed); 0 when no QP was solved.
+        iterations: OSQP iterations (both QPs when relaxed); 0 when OSQP was not called
+            (no QP solved, or the previous tick's active set certified).
         active_set_steps: Add/drop steps of the active-set method after OSQP's guess
-            (0 when the guess was optimal).
+            (0 when a guess was optimal).
         max_violation: ``max(0, max_r (lower_r - A_r u*))``, in the rows' own units.
     """
 
@@ -517,6 +532,13 @@ class SafetyFilter:
         # OSQP keeps its last iterate as the next warm start; when a tick was settled
         # without it (nominal, active-set finisher), the exact primal-dual pair is set here.
         self._pending_warm_start: tuple[np.ndarray, np.ndarray] | None = None
+        # Active-set rows (barrier rows, then the box) of the last hard optimum, tried first
+        # next tick; None after a relaxed or fallback tick.
+        self._last_active: tuple[int, ...] | None = None
+        # The hard QP's rows for the active-set method: barrier rows (filled per tick), then
+        # the box as ``u_j >= u_min,j`` and ``-u_j >= -u_max,j``.
+        self._hard_rows = np.concatenate((np.zeros((k, m)), self._box_rows))
+        self._hard_lower = np.concatenate((np.zeros(k), self._box_lower))
 
     @classmethod
     def from_config(
@@ -553,6 +575,7 @@ class SafetyFilter:
         """Forget the last accepted u* and the solvers' warm starts (e.g. a new run)."""
         self._last_good_u = None
         self._pending_warm_start = None
+        self._last_active = None
         m, k = self.n_joints, len(self.row_names)
         self._hard_solver.warm_start(x=np.zeros(m), y=np.zeros(k + m))
         self._relaxed_solver.warm_start(x=np.zeros(m + k), y=np.zeros(2 * k + m))
@@ -624,11 +647,23 @@ class SafetyFilter:
             self._last_good_u = u_nom
             # Optimal multipliers are zero when u_nom is feasible.
             self._pending_warm_start = (u_nom, self._zero_duals)
+            self._last_active = ()
             return self._result(state, u_nom, FilterStatus.NOMINAL, A, lower, 0.0, 0)
+
+        k = lower.shape[0]
+        C, b = self._hard_rows, self._hard_lower
+        C[:k] = A
+        b[:k] = lower
+        start = time.perf_counter()
+        if self._last_active:
+            # The rows move little from one tick to the next: last tick's active set is
+            # usually this tick's, and then no OSQP call is needed.
+            result = self._solve_on_guess(state, u_nom, self._last_active, A, lower, start, 0)
+            if result is not None:
+                return result
 
         hard = self.hard_qp
         solver = self._hard_solver
-        start = time.perf_counter()
         if self._pending_warm_start is not None:
             solver.warm_start(x=self._pending_warm_start[0], y=self._pending_warm_start[1])
             self._pending_warm_start = None
@@ -640,6 +675,7 @@ class SafetyFilter:
             if u is not None:
                 solve_time = time.perf_counter() - start
                 self._last_good_u = u
+                self._last_active = self._working_set_guess(solution.y)
                 return self._result(
                     state, u, FilterStatus.SOLVED, A, lower, solve_time, iterations
                 )
@@ -647,27 +683,18 @@ class SafetyFilter:
             guess: tuple[int, ...] = ()  # y is an infeasibility certificate, not multipliers
         else:
             guess = self._working_set_guess(solution.y)
+            result = self._solve_on_guess(state, u_nom, guess, A, lower, start, iterations)
+            if result is not None:
+                return result
         exact = solve_least_distance(
-            u_nom,
-            np.concatenate((A, self._box_rows)),
-            np.concatenate((lower, self._box_lower)),
-            tolerance=ACTIVE_SET_TOLERANCE,
-            working_set=guess,
+            u_nom, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=guess
         )
-        solve_time = time.perf_counter() - start
         if exact.status is LeastDistanceStatus.OPTIMAL:
-            u = self._clip_finite(exact.u)
-            if u is not None and (A @ u - lower >= -FEASIBILITY_TOLERANCE).all():
-                self._last_good_u = u
-                self._pending_warm_start = (u, self._osqp_duals(exact.active, exact.multipliers))
-                status = (
-                    FilterStatus.SOLVED
-                    if exact.iterations == 0
-                    else (FilterStatus.SOLVED_ACTIVE_SET)
-                )
-                return self._result(
-                    state, u, status, A, lower, solve_time, iterations, exact.iterations
-                )
+            result = self._accept_exact(state, u_nom, exact, A, lower, start, iterations)
+            if result is not None:
+                return result
+        solve_time = time.perf_counter() - start
+        self._last_active = None
 
         relaxed = self.relaxed_qp
         relaxed.A_rows[:] = A
@@ -700,6 +727,79 @@ class SafetyFilter:
         )
 
     # -- internals ---------------------------------------------------------------------
+
+    def _solve_on_guess(
+        self,
+        state: GraspState,
+        u_nom: np.ndarray,
+        guess: tuple[int, ...],
+        A: np.ndarray,
+        lower: np.ndarray,
+        start: float,
+        iterations: int,
+    ) -> FilterResult | None:
+        """Return the result for the optimum on a guessed active set if it is optimal, else None.
+
+        The optimum with the guessed rows W held as equalities is one small linear solve
+        (:func:`solve_on_working_set`). It is the hard QP's optimum when it satisfies the
+        KKT conditions the active-set method stops on, to the same tolerance
+        (:data:`ACTIVE_SET_TOLERANCE`, a torque-space distance): with ``n_i = ||C_i||``,
+        every row and box bound holds (``(C_i u - b_i) / n_i >= -tol``), the rows of W hold
+        with equality (``|C_i u - b_i| / n_i <= tol``) and their multipliers are
+        nonnegative (``lambda_i n_i >= -tol``); stationarity holds by construction. Then
+        every row is checked to :data:`FEASIBILITY_TOLERANCE`, as for the active-set
+        method's answers. Status ``solved``.
+        """
+        if not guess:
+            return None
+        C, b = self._hard_rows, self._hard_lower
+        guessed = solve_on_working_set(u_nom, C, b, guess)
+        if guessed is None:
+            return None
+        u_guess, multipliers = guessed
+        norms = np.sqrt(np.einsum('ij,ij->i', C, C))
+        scale = np.where(norms > 1e-12 * max(1.0, float(norms.max())), norms, 1.0)
+        distance = (C @ u_guess - b) / scale
+        rows = list(guess)
+        if (
+            distance.min() < -ACTIVE_SET_TOLERANCE
+            or np.abs(distance[rows]).max() > ACTIVE_SET_TOLERANCE
+            or (multipliers * scale[rows]).min() < -ACTIVE_SET_TOLERANCE
+        ):
+            return None
+        u = self._clip_finite(u_guess)
+        if u is None or not (A @ u - lower >= -FEASIBILITY_TOLERANCE).all():
+            return None
+        solve_time = time.perf_counter() - start
+        self._last_good_u = u
+        self._last_active = guess
+        self._pending_warm_start = (u, self._osqp_duals(guess, multipliers))
+        return self._result(state, u, FilterStatus.SOLVED, A, lower, solve_time, iterations)
+
+    def _accept_exact(
+        self,
+        state: GraspState,
+        u_nom: np.ndarray,
+        exact: LeastDistanceSolution,
+        A: np.ndarray,
+        lower: np.ndarray,
+        start: float,
+        iterations: int,
+    ) -> FilterResult | None:
+        """Return the result for the active-set optimum, or None if u* fails a row check.
+
+        Every row is checked here to :data:`FEASIBILITY_TOLERANCE`; the accepted working set
+        is the next tick's first guess, and its multipliers OSQP's next warm start.
+        """
+        u = self._clip_finite(exact.u)
+        if u is None or not (A @ u - lower >= -FEASIBILITY_TOLERANCE).all():
+            return None
+        solve_time = time.perf_counter() - start
+        self._last_good_u = u
+        self._last_active = exact.active
+        self._pending_warm_start = (u, self._osqp_duals(exact.active, exact.multipliers))
+        status = FilterStatus.SOLVED if exact.iterations == 0 else FilterStatus.SOLVED_ACTIVE_SET
+        return self._result(state, u, status, A, lower, solve_time, iterations, exact.iterations)
 
     def _check_nominal(self, u_nom: np.ndarray) -> np.ndarray:
         try:
@@ -863,6 +963,7 @@ class SafetyFilter:
         iterations: int,
         active_set_steps: int = 0,
     ) -> FilterResult:
+        self._last_active = None
         if self._last_good_u is not None:
             u = self.actuator_limits.clip(self._last_good_u)
             status = FilterStatus.FALLBACK_LAST_GOOD
