@@ -8,30 +8,18 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
 
-PAPER_MODEL_PARAMETERS = {
-    'model.urdf_file': 'hand.urdf',
-    'model.joint_names': [f'finger{i}_joint{j}' for i in (1, 2, 3) for j in (1, 2, 3)],
-    'model.fingertip_frames': [f'finger{i}_tip' for i in (1, 2, 3)],
-    'model.contact_names': ['finger1', 'finger2', 'finger3'],
-    'model.fingertip_radius': 0.06,
-    'model.object.shape': 'cube',
-    'model.object.mass': 0.11,
-    'model.object.size': 0.2604,
-    'model.contact_faces': ['-x', '+x', '+y'],
-    'model.friction_coefficient': 0.9,
-    'model.gravity': [0.0, 0.0, -9.81],
-    'model.fingertip_workspace.a_min': -np.pi / 2 + 0.15,
-    'model.fingertip_workspace.a_max': np.pi / 2 - 0.15,
-    'model.fingertip_workspace.b_min': -np.pi,
-    'model.fingertip_workspace.b_max': 0.0,
-}
-Q_PAPER = np.array([3 * np.pi / 4, 0.75, np.pi / 2 - 0.75] * 3)
-P_OBJECT_PAPER = np.array([0.0, 0.0, 0.3 * np.cos(0.75)])
+# The scenario file is the one source of the paper's values (test_config_files checks them
+# against the paper); the tests build their model and initial grasp from it.
+_SCENARIO = load_node_parameters(CONFIG_DIR / 'paper_scenario.yaml', HAND_SIM_NODE)
+PAPER_MODEL_PARAMETERS = {k: v for k, v in _SCENARIO.items() if k.startswith('model.')}
+Q_PAPER = np.array(_SCENARIO['initial.joint_positions'])
+P_OBJECT_PAPER = np.array(_SCENARIO['initial.object_position'])
 
 
 def paper_model(**overrides: object) -> GraspModel:
