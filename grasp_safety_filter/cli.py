@@ -14,13 +14,7 @@ import yaml
 
 from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.io.paths import config_path
-
-
-def _quaternion_to_matrix(xyzw: np.ndarray) -> np.ndarray:
-    import pinocchio as pin
-
-    x, y, z, w = np.asarray(xyzw, dtype=float) / np.linalg.norm(xyzw)
-    return pin.Quaternion(w, x, y, z).toRotationMatrix()
+from grasp_safety_filter.model.quaternion import rotation_matrix
 
 
 def model_report_main(argv: list[str] | None = None) -> int:
@@ -36,7 +30,7 @@ def model_report_main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     model, params = GraspModel.from_parameter_file(args.config, 'hand_sim_node')
     p_object = np.asarray(params['initial.object_position'], dtype=float)
-    R_object = _quaternion_to_matrix(params['initial.object_orientation'])
+    R_object = rotation_matrix(params['initial.object_orientation'])
     model.check_grasp(params['initial.joint_positions'], p_object, R_object)
     q = model.project_to_contact(params['initial.joint_positions'], p_object, R_object)
     state = model.state(0.0, q, np.zeros(model.n_joints), p_object, R_object, np.zeros(6))

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.model.quaternion import normalized, quaternion_derivative, rotation_matrix
 from hand_sim_node.config import SimConfig
 from hand_sim_node.events import (
     ConstraintMargins,
@@ -48,7 +49,6 @@ from hand_sim_node.events import (
     SLIP,
 )
 from hand_sim_node.integrators import integrator
-from hand_sim_node.quaternion import normalized, quaternion_derivative, rotation_matrix
 
 NUMERICAL_FAILURE = 'numerical_failure'
 """Stop reason when the dynamics cannot be evaluated (singular B_ho or M_h, non-finite state)."""

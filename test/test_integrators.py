@@ -5,13 +5,13 @@ import itertools
 import numpy as np
 import pytest
 
-from hand_sim_node.integrators import ButcherTableau, integrator, INTEGRATORS, ODE3, RK4
-from hand_sim_node.quaternion import (
+from grasp_safety_filter.model.quaternion import (
     from_rotation_matrix,
     normalized,
     quaternion_derivative,
     rotation_matrix,
 )
+from hand_sim_node.integrators import ButcherTableau, integrator, INTEGRATORS, ODE3, RK4
 
 TABLEAUX = [ODE3, RK4]
 

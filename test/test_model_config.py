@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import yaml
 
-from grasp_safety_filter.cli import _quaternion_to_matrix
 from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.model.quaternion import rotation_matrix
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 
@@ -29,7 +29,7 @@ def load_with(tmp_path: Path, edit, urdf_edit=None) -> None:
     model.check_grasp(
         params['initial.joint_positions'],
         np.asarray(params['initial.object_position']),
-        _quaternion_to_matrix(params['initial.object_orientation']),
+        rotation_matrix(params['initial.object_orientation']),
     )
 
 

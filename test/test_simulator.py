@@ -15,6 +15,7 @@ import pytest
 
 from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.model.quaternion import from_rotation_matrix
 from hand_sim_node.config import flatten_parameters, SimConfig
 from hand_sim_node.events import (
     EventLog,
@@ -25,7 +26,6 @@ from hand_sim_node.events import (
     SEPARATION,
     SLIP,
 )
-from hand_sim_node.quaternion import from_rotation_matrix
 from hand_sim_node.simulator import (
     contact_velocity_residual,
     NUMERICAL_FAILURE,

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.model.quaternion import from_rotation_matrix, rotation_matrix
 
 PALM_FRAME = 'palm'
 OBJECT_FRAME = 'object'
@@ -340,9 +341,6 @@ def _shaped(what: str, values: Any, shape: tuple[int, ...]) -> np.ndarray:
 def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
     """Return the unit quaternion ``(x, y, z, w)``, ``w >= 0``, of a rotation matrix.
 
-    Shepperd's method: divides by the largest of ``4 w^2, 4 x^2, 4 y^2, 4 z^2`` for
-    accuracy near every rotation.
-
     Raises:
         MessageError: ``R`` is not 3x3 or not a rotation within 1e-6.
 
@@ -356,48 +354,12 @@ def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
             f'rotation matrix: expected orthonormal with det +1 (within '
             f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {np.linalg.det(R):.6g}'
         )
-    trace = R[0, 0] + R[1, 1] + R[2, 2]
-    candidates = (trace, R[0, 0], R[1, 1], R[2, 2])
-    k = int(np.argmax(candidates))
-    if k == 0:
-        s = 2.0 * math.sqrt(1.0 + trace)
-        w = 0.25 * s
-        x = (R[2, 1] - R[1, 2]) / s
-        y = (R[0, 2] - R[2, 0]) / s
-        z = (R[1, 0] - R[0, 1]) / s
-    elif k == 1:
-        s = 2.0 * math.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        w = (R[2, 1] - R[1, 2]) / s
-        x = 0.25 * s
-        y = (R[0, 1] + R[1, 0]) / s
-        z = (R[0, 2] + R[2, 0]) / s
-    elif k == 2:
-        s = 2.0 * math.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        w = (R[0, 2] - R[2, 0]) / s
-        x = (R[0, 1] + R[1, 0]) / s
-        y = 0.25 * s
-        z = (R[1, 2] + R[2, 1]) / s
-    else:
-        s = 2.0 * math.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        w = (R[1, 0] - R[0, 1]) / s
-        x = (R[0, 2] + R[2, 0]) / s
-        y = (R[1, 2] + R[2, 1]) / s
-        z = 0.25 * s
-    quaternion = np.array([x, y, z, w])
-    quaternion /= np.linalg.norm(quaternion)
-    return -quaternion if quaternion[3] < 0.0 else quaternion
+    return from_rotation_matrix(R)
 
 
 def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion ``(x, y, z, w)`` (normalised first)."""
-    x, y, z, w = np.asarray(quaternion, dtype=np.float64) / np.linalg.norm(quaternion)
-    return np.array(
-        [
-            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-            [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-            [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-        ]
-    )
+    return rotation_matrix(quaternion)
 
 
 def _quaternion_msg(msgs: MessageNamespace, R: np.ndarray) -> Any:

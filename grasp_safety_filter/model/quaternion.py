@@ -16,6 +16,7 @@ quaternion, so intermediate stages need not be unit.
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 
 
 def quaternion_derivative(quaternion_xyzw: np.ndarray, omega_in_palm: np.ndarray) -> np.ndarray:
@@ -55,53 +56,10 @@ def normalized(quaternion_xyzw: np.ndarray) -> np.ndarray:
 def rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
     """Return the rotation matrix of a quaternion ``(x, y, z, w)`` (normalised first), (3, 3)."""
     x, y, z, w = normalized(quaternion_xyzw)
-    return np.array(
-        [
-            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-            [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-            [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-        ]
-    )
+    return pin.Quaternion(w, x, y, z).toRotationMatrix()
 
 
 def from_rotation_matrix(R: np.ndarray) -> np.ndarray:
-    """Return the unit quaternion ``(x, y, z, w)``, ``w >= 0``, of a rotation (Shepperd)."""
-    R = np.asarray(R, dtype=float)
-    trace = R[0, 0] + R[1, 1] + R[2, 2]
-    # Pick the largest of 4w², 4x², 4y², 4z² as the pivot for numerical robustness.
-    pivots = np.array([trace, R[0, 0], R[1, 1], R[2, 2]])
-    k = int(np.argmax(pivots))
-    if k == 0:
-        s = 2.0 * np.sqrt(1.0 + trace)
-        quaternion = [
-            (R[2, 1] - R[1, 2]) / s,
-            (R[0, 2] - R[2, 0]) / s,
-            (R[1, 0] - R[0, 1]) / s,
-            0.25 * s,
-        ]
-    elif k == 1:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        quaternion = [
-            0.25 * s,
-            (R[0, 1] + R[1, 0]) / s,
-            (R[0, 2] + R[2, 0]) / s,
-            (R[2, 1] - R[1, 2]) / s,
-        ]
-    elif k == 2:
-        s = 2.0 * np.sqrt(1.0 - R[0, 0] + R[1, 1] - R[2, 2])
-        quaternion = [
-            (R[0, 1] + R[1, 0]) / s,
-            0.25 * s,
-            (R[1, 2] + R[2, 1]) / s,
-            (R[0, 2] - R[2, 0]) / s,
-        ]
-    else:
-        s = 2.0 * np.sqrt(1.0 - R[0, 0] - R[1, 1] + R[2, 2])
-        quaternion = [
-            (R[0, 2] + R[2, 0]) / s,
-            (R[1, 2] + R[2, 1]) / s,
-            0.25 * s,
-            (R[1, 0] - R[0, 1]) / s,
-        ]
-    result = normalized(np.array(quaternion))
-    return result if result[3] >= 0.0 else -result
+    """Return the unit quaternion ``(x, y, z, w)``, ``w >= 0``, of a rotation matrix."""
+    quaternion = normalized(pin.Quaternion(np.asarray(R, dtype=float)).coeffs())
+    return quaternion if quaternion[3] >= 0.0 else -quaternion
