@@ -104,6 +104,9 @@ CERTIFICATE_TOLERANCE = 1e-10
 #: Distance tolerance (N·m, in torque space) of the exact active-set method.
 ACTIVE_SET_TOLERANCE = 1e-10
 
+#: Norm floor of a row in the guessed-active-set check (a null row: all zero coefficients).
+_NULL_ROW_NORM = 1e-12
+
 #: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
 #: when u is within it of the bound).
 ACTIVE_TOLERANCE = 1e-6
@@ -365,6 +368,10 @@ class FilterResult:
     max_violation: float
 
 
+#: The multipliers of an empty active set.
+_NO_MULTIPLIERS = np.zeros(0)
+_NO_MULTIPLIERS.setflags(write=False)
+
 _NOT_CERTIFIED = frozenset(
     (FilterStatus.RELAXED, FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL)
 )
@@ -513,8 +520,6 @@ class SafetyFilter:
         self._box_rows, self._box_lower = box.A, box.lower
         self.hard_qp = SafetyQP(m, k, self._u_min, self._u_max)
         self.relaxed_qp = SafetyQP(m, k, self._u_min, self._u_max, row_weights=weights)
-        self._zero_duals = np.zeros(self.hard_qp.n_constraints)
-        self._zero_duals.setflags(write=False)
         # Rows of the relaxed QP for the active-set method, variables (u, s~): barrier rows
         # [A, diag(d / sqrt(w))] (filled per tick), the box on u, s~ >= 0.
         self._relaxed_rows = np.zeros((2 * k + 2 * m, m + k))
@@ -530,8 +535,9 @@ class SafetyFilter:
         )
         self._last_good_u: np.ndarray | None = None
         # OSQP keeps its last iterate as the next warm start; when a tick was settled
-        # without it (nominal, active-set finisher), the exact primal-dual pair is set here.
-        self._pending_warm_start: tuple[np.ndarray, np.ndarray] | None = None
+        # without it (nominal, active-set finisher), the exact primal-dual pair is kept here
+        # as (u, active rows, multipliers), converted to OSQP's y only if OSQP runs next.
+        self._pending_warm_start: tuple[np.ndarray, tuple[int, ...], np.ndarray] | None = None
         # Active-set rows (barrier rows, then the box) of the last hard optimum, tried first
         # next tick; None after a relaxed or fallback tick.
         self._last_active: tuple[int, ...] | None = None
@@ -646,7 +652,7 @@ class SafetyFilter:
         ):
             self._last_good_u = u_nom
             # Optimal multipliers are zero when u_nom is feasible.
-            self._pending_warm_start = (u_nom, self._zero_duals)
+            self._pending_warm_start = (u_nom, (), _NO_MULTIPLIERS)
             self._last_active = ()
             return self._result(state, u_nom, FilterStatus.NOMINAL, A, lower, 0.0, 0)
 
@@ -665,7 +671,8 @@ class SafetyFilter:
         hard = self.hard_qp
         solver = self._hard_solver
         if self._pending_warm_start is not None:
-            solver.warm_start(x=self._pending_warm_start[0], y=self._pending_warm_start[1])
+            u_start, active_start, multipliers_start = self._pending_warm_start
+            solver.warm_start(x=u_start, y=self._osqp_duals(active_start, multipliers_start))
             self._pending_warm_start = None
         solver.update(hard)
         solution = solver.solve()
@@ -717,11 +724,11 @@ class SafetyFilter:
         elif solution.status in _RELAXED_USABLE:
             u = self._clip_finite(solution.x)
         if u is None:
-            self._pending_warm_start = (self.actuator_limits.clip(u_nom), self._zero_duals)
+            self._pending_warm_start = (self.actuator_limits.clip(u_nom), (), _NO_MULTIPLIERS)
             return self._fallback(state, u_nom, A, lower, solve_time, iterations, steps)
         # The hard solver's iterate may have diverged on the infeasible problem: restart it
         # from this torque next tick.
-        self._pending_warm_start = (u, self._zero_duals)
+        self._pending_warm_start = (u, (), _NO_MULTIPLIERS)
         return self._result(
             state, u, FilterStatus.RELAXED, A, lower, solve_time, iterations, steps
         )
@@ -757,24 +764,30 @@ class SafetyFilter:
         if guessed is None:
             return None
         u_guess, multipliers = guessed
-        norms = np.sqrt(np.einsum('ij,ij->i', C, C))
-        scale = np.where(norms > 1e-12 * max(1.0, float(norms.max())), norms, 1.0)
+        # Row norms, with a floor for null rows (a null row's distance is then its residual
+        # scaled up: it holds only if its residual does).
+        scale = np.maximum(np.sqrt(np.einsum('ij,ij->i', C, C)), _NULL_ROW_NORM)
         distance = (C @ u_guess - b) / scale
         rows = list(guess)
         if (
             distance.min() < -ACTIVE_SET_TOLERANCE
-            or np.abs(distance[rows]).max() > ACTIVE_SET_TOLERANCE
-            or (multipliers * scale[rows]).min() < -ACTIVE_SET_TOLERANCE
+            or np.abs(distance.take(rows)).max() > ACTIVE_SET_TOLERANCE
+            or (multipliers * scale.take(rows)).min() < -ACTIVE_SET_TOLERANCE
         ):
             return None
         u = self._clip_finite(u_guess)
-        if u is None or not (A @ u - lower >= -FEASIBILITY_TOLERANCE).all():
+        if u is None:
+            return None
+        residual = A @ u - lower
+        if not residual.min(initial=0.0) >= -FEASIBILITY_TOLERANCE:
             return None
         solve_time = time.perf_counter() - start
         self._last_good_u = u
         self._last_active = guess
-        self._pending_warm_start = (u, self._osqp_duals(guess, multipliers))
-        return self._result(state, u, FilterStatus.SOLVED, A, lower, solve_time, iterations)
+        self._pending_warm_start = (u, guess, multipliers)
+        return self._result(
+            state, u, FilterStatus.SOLVED, A, lower, solve_time, iterations, residual=residual
+        )
 
     def _accept_exact(
         self,
@@ -797,7 +810,7 @@ class SafetyFilter:
         solve_time = time.perf_counter() - start
         self._last_good_u = u
         self._last_active = exact.active
-        self._pending_warm_start = (u, self._osqp_duals(exact.active, exact.multipliers))
+        self._pending_warm_start = (u, exact.active, exact.multipliers)
         status = FilterStatus.SOLVED if exact.iterations == 0 else FilterStatus.SOLVED_ACTIVE_SET
         return self._result(state, u, status, A, lower, solve_time, iterations, exact.iterations)
 
@@ -976,7 +989,10 @@ class SafetyFilter:
         """Write every family's barrier values at u, then the box margins, into ``values``."""
         for family, rows in zip(self.families, self._slices, strict=True):
             values[rows] = family.values(state, u).h
-        np.subtract(self._box_rows @ u, self._box_lower, out=values[len(self.row_names) :])
+        # The box rows, joint by joint: u_j - u_min,j then u_max,j - u_j.
+        k = len(self.row_names)
+        np.subtract(u, self._u_min, out=values[k::2])
+        np.subtract(self._u_max, u, out=values[k + 1 :: 2])
 
     def _result(
         self,
@@ -988,14 +1004,22 @@ class SafetyFilter:
         solve_time: float,
         iterations: int,
         active_set_steps: int = 0,
+        residual: np.ndarray | None = None,
     ) -> FilterResult:
+        """Build the result for u*: margins, active rows, violated families.
+
+        ``residual`` is ``A u - lower`` when the caller already has it.
+        """
         u.setflags(write=False)
         k = len(self.row_names)
         values = np.empty(len(self._margin_names))
         # Residuals then box margins, side by side, for the active-row test.
         slack = np.empty(len(self._margin_names))
         with np.errstate(all='ignore'):
-            residual = np.subtract(A @ u, lower, out=slack[:k])
+            if residual is None:
+                residual = np.subtract(A @ u, lower, out=slack[:k])
+            else:
+                slack[:k] = residual
             self._write_margins(state, u, values)
         slack[k:] = values[k:]
         relaxed_families: tuple[str, ...] = ()
