@@ -707,3 +707,32 @@ def test_an_infeasible_real_state_is_relaxed_and_the_families_named(model, case)
         if given_up is not None:
             assert residual[names.index(given_up)] < -1e-6
             assert given_up in result.active
+
+
+def test_a_run_of_infeasible_ticks_gives_each_ticks_own_relaxed_optimum(model):
+    """Relaxed ticks in a row start from the last one's active sets, not from OSQP.
+
+    A joint driven into its limit, u_nom drifting tick to tick: every tick is infeasible.
+    After the first, the filter proves infeasibility and solves the relaxed QP from the
+    last tick's sets (no OSQP iteration); each answer must still be that tick's own
+    optimum: equal to a filter without memory and to daqp on the relaxed QP.
+    """
+    model, c = joint_at_its_limit(1.0)(model)
+    state = c.state(model)
+    config = SafetyFilterConfig()
+    names, A, lower = independent_rows(model, config, state)
+    effort = np.asarray(model.effort_limits, dtype=float)
+    weights = row_weights(config, names)
+    filter_ = SafetyFilter.from_config(model, config)
+    rng = np.random.default_rng(5)
+    u_nom = state.gravity_torque.copy()
+    for tick in range(12):
+        u_nom = u_nom + rng.normal(0.0, 0.05, model.n_joints)
+        result = filter_.solve(state, u_nom)
+        memoryless = SafetyFilter.from_config(model, config).solve(state, u_nom)
+        assert result.status is FilterStatus.RELAXED, tick
+        if tick:
+            assert result.iterations == 0, tick  # settled without OSQP
+        assert np.abs(result.u - memoryless.u).max() <= 1e-9, tick
+        u_relaxed = daqp_relaxed_optimum(A, lower, weights, u_nom, effort)
+        assert np.abs(result.u - u_relaxed).max() <= 1e-5, tick

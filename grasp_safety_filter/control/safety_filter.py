@@ -35,7 +35,11 @@ The steps of :meth:`SafetyFilter.solve`:
    one slack per barrier row, weighted per family, actuator box hard) is solved the same
    way: OSQP, then the active-set method from OSQP's active set (with the slacks scaled by
    ``sqrt(w)`` the relaxed QP is a least-distance problem too). Status ``relaxed``; the
-   families whose rows are violated at u* are named.
+   families whose rows are violated at u* are named. Relaxed ticks come in runs (the
+   state that emptied the feasible set changes little in 1 ms): after a relaxed tick, the
+   next one skips OSQP, starts the infeasibility proof from the rows that gave the last
+   one, and the relaxed QP from its active set (OSQP runs only if that does not end
+   optimal).
 7. If nothing gives a finite answer: the last accepted u* (or u_nom if there is none),
    clipped to the box. Status ``fallback_last_good`` / ``fallback_nominal``.
 
@@ -541,6 +545,10 @@ class SafetyFilter:
         # Active-set rows (barrier rows, then the box) of the last hard optimum, tried first
         # next tick; None after a relaxed or fallback tick.
         self._last_active: tuple[int, ...] | None = None
+        # After a relaxed tick: the rows that proved the hard QP infeasible and the relaxed
+        # QP's active set, the next tick's starting points.
+        self._infeasible_rows: tuple[int, ...] | None = None
+        self._relaxed_active: tuple[int, ...] | None = None
         # The hard QP's rows for the active-set method: barrier rows (filled per tick), then
         # the box as ``u_j >= u_min,j`` and ``-u_j >= -u_max,j``.
         self._hard_rows = np.concatenate((np.zeros((k, m)), self._box_rows))
@@ -582,6 +590,8 @@ class SafetyFilter:
         self._last_good_u = None
         self._pending_warm_start = None
         self._last_active = None
+        self._infeasible_rows = None
+        self._relaxed_active = None
         m, k = self.n_joints, len(self.row_names)
         self._hard_solver.warm_start(x=np.zeros(m), y=np.zeros(k + m))
         self._relaxed_solver.warm_start(x=np.zeros(m + k), y=np.zeros(2 * k + m))
@@ -641,6 +651,9 @@ class SafetyFilter:
         u_nom, rows_finite = self.assemble(state, u_nom)
         A = self.hard_qp.A_rows
         lower = self.hard_qp.lower_rows
+        # What a relaxed last tick left (set again only if this tick is relaxed too).
+        infeasible_rows, self._infeasible_rows = self._infeasible_rows, None
+        relaxed_active, self._relaxed_active = self._relaxed_active, None
         if not rows_finite:
             # A finite state whose rows overflowed (absurd magnitudes): no QP can help.
             return self._fallback(state, u_nom, A, lower, 0.0, 0)
@@ -667,6 +680,19 @@ class SafetyFilter:
             result = self._solve_on_guess(state, u_nom, self._last_active, A, lower, start, 0)
             if result is not None:
                 return result
+
+        if infeasible_rows is not None:
+            # Last tick's hard QP was infeasible, and this one most likely is too: the
+            # active-set method starts from the rows that proved it, without OSQP.
+            exact = solve_least_distance(
+                u_nom, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=infeasible_rows
+            )
+            if exact.status is LeastDistanceStatus.OPTIMAL:
+                result = self._accept_exact(state, u_nom, exact, A, lower, start, 0)
+                if result is not None:
+                    return result
+            elif exact.status is LeastDistanceStatus.INFEASIBLE:
+                return self._solve_relaxed(state, u_nom, A, lower, exact, start, 0, relaxed_active)
 
         hard = self.hard_qp
         solver = self._hard_solver
@@ -700,28 +726,63 @@ class SafetyFilter:
             result = self._accept_exact(state, u_nom, exact, A, lower, start, iterations)
             if result is not None:
                 return result
-        solve_time = time.perf_counter() - start
+        return self._solve_relaxed(
+            state, u_nom, A, lower, exact, start, iterations, relaxed_active
+        )
+
+    # -- internals ---------------------------------------------------------------------
+
+    def _solve_relaxed(
+        self,
+        state: GraspState,
+        u_nom: np.ndarray,
+        A: np.ndarray,
+        lower: np.ndarray,
+        exact: LeastDistanceSolution,
+        start: float,
+        iterations: int,
+        relaxed_guess: tuple[int, ...] | None,
+    ) -> FilterResult:
+        """Solve the relaxed QP: the hard QP was not solved (``exact``: the attempt).
+
+        When the hard QP was proved infeasible and the last tick was relaxed too, the
+        active-set method first starts from that tick's relaxed active set
+        (``relaxed_guess``), without OSQP: relaxed ticks come in runs, over which the active
+        set changes little. Else, or when that does not end optimal, OSQP's relaxed
+        solution gives the start.
+        """
+        infeasible = exact.status is LeastDistanceStatus.INFEASIBLE
+        if not infeasible:
+            relaxed_guess = None
         self._last_active = None
+        # Next tick starts its infeasibility proof from the rows of this one.
+        self._infeasible_rows = exact.active if infeasible else None
 
         relaxed = self.relaxed_qp
         relaxed.A_rows[:] = A
         relaxed.lower_rows[:] = lower
         relaxed.set_nominal(u_nom)
         relaxed.normalise_slacks()
-        start = time.perf_counter()
-        self._relaxed_solver.update(relaxed)
-        solution = self._relaxed_solver.solve()
-        iterations += solution.iterations
-        # As for the hard QP, OSQP's active set is finished exactly: with s~ = sqrt(w) s the
-        # relaxed QP is a least-distance problem in (u, s~) from (u_nom, 0).
-        guess = self._working_set_guess(solution.y) if np.isfinite(solution.y).all() else ()
-        exact_relaxed = self._solve_relaxed_exactly(u_nom, guess)
-        solve_time += time.perf_counter() - start
+        exact_relaxed = None
+        solution = None
+        if relaxed_guess:
+            exact_relaxed = self._solve_relaxed_exactly(u_nom, relaxed_guess)
+        if exact_relaxed is None or exact_relaxed.status is not LeastDistanceStatus.OPTIMAL:
+            self._relaxed_solver.update(relaxed)
+            solution = self._relaxed_solver.solve()
+            iterations += solution.iterations
+            # As for the hard QP, OSQP's active set is finished exactly: with s~ = sqrt(w) s
+            # the relaxed QP is a least-distance problem in (u, s~) from (u_nom, 0).
+            guess = self._working_set_guess(solution.y) if np.isfinite(solution.y).all() else ()
+            exact_relaxed = self._solve_relaxed_exactly(u_nom, guess)
+        solve_time = time.perf_counter() - start
         steps = exact.iterations + exact_relaxed.iterations
         u = None
         if exact_relaxed.status is LeastDistanceStatus.OPTIMAL:
             u = self._clip_finite(exact_relaxed.u)
-        elif solution.status in _RELAXED_USABLE:
+            if u is not None:
+                self._relaxed_active = exact_relaxed.active
+        elif solution is not None and solution.status in _RELAXED_USABLE:
             u = self._clip_finite(solution.x)
         if u is None:
             self._pending_warm_start = (self.actuator_limits.clip(u_nom), (), _NO_MULTIPLIERS)
@@ -732,8 +793,6 @@ class SafetyFilter:
         return self._result(
             state, u, FilterStatus.RELAXED, A, lower, solve_time, iterations, steps
         )
-
-    # -- internals ---------------------------------------------------------------------
 
     def _solve_on_guess(
         self,
