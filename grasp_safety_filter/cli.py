@@ -118,13 +118,23 @@ def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> bool:
     print(f'  smallest margins: {margins}')
     if 'filter' in summary:
         f = summary['filter']
+        relaxed = ', '.join(f'{k} {v}' for k, v in f.get('relaxed_families', {}).items())
         print(
-            f'  filter: {f["steps"]} steps, {f["relaxed_steps"]} relaxed, {f["failed_steps"]} '
-            f'failed; QP {f["qp_solve_us"]["median"]:.0f} / {f["qp_solve_us"]["p99"]:.0f} us, '
-            f'step {f["step_us"]["median"]:.0f} / {f["step_us"]["p99"]:.0f} us (median / p99)'
+            f'  filter: {f["steps"]} steps, {f["relaxed_steps"]} relaxed'
+            f'{f" ({relaxed})" if relaxed else ""}, {f["failed_steps"]} failed'
         )
+        timing = ', '.join(
+            f'{label} {_us(f[key]["median"])} / {_us(f[key]["p99"])} us'
+            for label, key in (('QP', 'qp_solve_us'), ('step', 'step_us'), ('tick', 'tick_us'))
+            if key in f
+        )
+        print(f'  filter time (median / p99): {timing}')
     print(f'  paper outcome {verdict}')
     return ok
+
+
+def _us(value: float | None) -> str:
+    return 'n/a' if value is None else f'{value:.0f}'
 
 
 def _override(text: str) -> tuple[str, Any]:

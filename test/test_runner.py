@@ -105,8 +105,15 @@ def test_filtered_run_reports_the_filter(filtered_run):
     assert summary['mode'] == 'filtered'
     assert summary['completed'] and summary['t_end'] == pytest.approx(FILTERED_DURATION)
     assert summary['filter']['steps'] == round(FILTERED_DURATION / TIME_STEP) + 1
-    for key in ('qp_solve_us', 'step_us'):
-        assert summary['filter'][key]['median'] > 0.0
+    timing = summary['filter']
+    for percentile in ('median', 'p99'):
+        assert (
+            0.0
+            < timing['qp_solve_us'][percentile]
+            <= timing['step_us'][percentile]
+            <= timing['tick_us'][percentile]
+        )
+    assert sum(timing['relaxed_families'].values()) >= timing['relaxed_steps']
 
 
 def test_demo_both_writes_both_runs_and_a_verdict(tmp_path):

@@ -9,11 +9,15 @@ Keys (later additions never rename one)::
      "violations": {family: {"count", "first_t"}},
      "min_margin": {"fingertip_workspace", "joint_limits", "friction"},
      "max_required_friction", "mu",
-     "filter": {"steps", "relaxed_steps", "failed_steps",
-                "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"}}}
+     "filter": {"steps", "relaxed_steps", "failed_steps", "relaxed_families": {family: steps},
+                "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"},
+                "tick_us": {"median", "p99"}}}
 
 A margin is the smallest barrier value h over the run in its own units (negative =
-violated); infinite values (a separated contact) are written as null.
+violated); infinite values (a separated contact) are written as null. Filter times are the
+node's own, per tick: the QP solve, the whole filter step (``SafetyFilter.solve``) and the
+whole tick (model terms, filter step, messages); in a lockstep run they include the cache
+and allocator effects of the simulator sharing the process.
 """
 
 from __future__ import annotations
@@ -60,18 +64,28 @@ def constraint_log(run: RunData) -> EventLog:
 
 
 def filter_summary(run: RunData) -> dict[str, Any]:
-    """Count the filter's steps, relaxed and failed steps; QP and whole-step times."""
+    """Count the filter's steps, relaxed and failed steps; QP, filter-step and tick times.
+
+    ``relaxed_families`` counts, per family, the relaxed steps that gave up one of its rows.
+    """
     statuses = [values.get('status', '') for values in run.filter_values]
+    relaxed_families: dict[str, int] = {}
+    for values in run.filter_values:
+        if values.get('relaxed') == 'true':
+            for family in filter(None, values.get('relaxed_families', '').split(',')):
+                relaxed_families[family] = relaxed_families.get(family, 0) + 1
+
+    def times(key: str) -> dict[str, float | None]:
+        return _percentiles([float(v[key]) for v in run.filter_values if key in v])
+
     return {
         'steps': len(run.filter_values),
         'relaxed_steps': sum(values.get('relaxed') == 'true' for values in run.filter_values),
         'failed_steps': sum(status in FAILED_STATUSES for status in statuses),
-        'qp_solve_us': _percentiles(
-            [float(v['solve_time_us']) for v in run.filter_values if 'solve_time_us' in v]
-        ),
-        'step_us': _percentiles(
-            [float(v['step_time_us']) for v in run.filter_values if 'step_time_us' in v]
-        ),
+        'relaxed_families': relaxed_families,
+        'qp_solve_us': times('solve_time_us'),
+        'step_us': times('step_time_us'),
+        'tick_us': times('tick_time_us'),
     }
 
 

@@ -26,8 +26,10 @@ and publishes ``u* = u_nom`` on the same topic, with the margins at u_nom.
 
 Diagnostic values of the ``safety_filter`` status on every tick: ``filter.enabled``,
 ``status`` (``nominal``, ``solved``, ``relaxed``, ``fallback_last_good``,
-``fallback_nominal``, or ``disabled``), ``solve_time_us`` (OSQP), ``step_time_us`` (the
-whole tick: model, filter, messages), ``iterations``, ``relaxed``, ``relaxed_families``
+``fallback_nominal``, or ``disabled``), ``solve_time_us`` (the QP solve: OSQP and the
+active-set steps), ``step_time_us`` (the whole filter step, ``SafetyFilter.solve``: rows,
+QP, margins), ``tick_time_us`` (the whole tick: model terms, filter step, messages),
+``iterations``, ``relaxed``, ``relaxed_families``
 (comma-separated), ``max_violation``, ``active`` (comma-separated row names),
 ``min_margin.<family>`` per constraint family, and the hold policy's ``input.*`` values.
 """
@@ -280,10 +282,13 @@ class SafetyFilterEndpoint:
                 inputs.odometry.twist_object,
             )
             if self.enabled:
+                filter_start = time.perf_counter()
                 result = self.filter.solve(state, u_nom)
+                filter_time = time.perf_counter() - filter_start
                 u, margins = result.u, result.margins
             else:
                 result = None
+                filter_time = 0.0
                 u, margins = u_nom, self.filter.margins(state, u_nom)
         except (ValueError, np.linalg.LinAlgError) as error:
             return self._reject(
@@ -303,8 +308,8 @@ class SafetyFilterEndpoint:
                 MARGINS, margins_to_msg(self.msgs, t, names, np.array(list(margins.values())))
             ),
         ]
-        step_time = time.perf_counter() - start
-        outgoing.append(self._tick_status(t, now, result, margins, step_time))
+        tick_time = time.perf_counter() - start
+        outgoing.append(self._tick_status(t, now, result, margins, filter_time, tick_time))
         self._last_outputs = outgoing
         return list(outgoing)
 
@@ -315,6 +320,7 @@ class SafetyFilterEndpoint:
         result: FilterResult | None,
         margins: Mapping[str, float],
         step_time: float,
+        tick_time: float,
     ) -> Outgoing:
         values: dict[str, Any] = {'filter.enabled': self.enabled}
         if result is None:
@@ -336,6 +342,7 @@ class SafetyFilterEndpoint:
                 active=','.join(result.active),
             )
         values['step_time_us'] = step_time * 1e6
+        values['tick_time_us'] = tick_time * 1e6
         for family, h in _min_margin_per_family(margins).items():
             values[f'min_margin.{family}'] = h
         values.update(self.hold.diagnostic_values(now))
