@@ -27,6 +27,7 @@ from grasp_states import (
 import numpy as np
 import pinocchio as pin
 import pytest
+import scipy.linalg
 from scipy.optimize import linprog
 
 from grasp_safety_filter.control.class_k import ClassKFunction
@@ -495,6 +496,29 @@ def test_pyramid_margins_are_positive_inside_and_negative_outside(model, configu
 
 
 # -- 3. the filter on random real states ---------------------------------------------------
+
+
+def test_joint_and_workspace_rows_act_through_the_objects_six_dofs(model, configurations):
+    """The joint-limit and workspace rows constrain only the object's acceleration.
+
+    Three rolling contacts fix nine velocity components, as many as the hand has joints:
+    the hand moves with the object. So the torques that leave ``x_o_ddot`` unchanged (they
+    only squeeze the object) change no joint and no contact-coordinate acceleration either:
+    the thirty rows have rank 6 and vanish on that null space; the no-slip rows see it.
+    This is why too many nearly active barriers can leave no feasible torque (README).
+    """
+    config = SafetyFilterConfig()
+    for c in configurations:
+        state = c.state(model)
+        names, A, _ = independent_rows(model, config, state)
+        motion = np.array([not name.startswith('no_slip') for name in names])
+        object_map = state.object_acceleration.matrix
+        squeeze = scipy.linalg.null_space(object_map)
+        assert squeeze.shape == (model.n_joints, model.n_joints - 6)
+        scale = np.abs(A[motion]).max()
+        assert np.abs(A[motion] @ squeeze).max() <= 1e-9 * scale
+        assert np.linalg.matrix_rank(A[motion], tol=1e-9 * scale) == 6
+        assert np.abs(A[~motion] @ squeeze).max() > 1e-3 * np.abs(A[~motion]).max()
 
 
 @pytest.mark.parametrize('config_name', list(CONFIGS))
