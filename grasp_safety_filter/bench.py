@@ -799,6 +799,11 @@ def benchmark(
         runner_rate = runner_loop_rate(config, runner_duration, scenario.sim_config.time_step)
 
     statuses = Counter(status.value for status in measured.status)
+    status_values = np.array([status.value for status in measured.status])
+    step_by_status = {
+        status: statistics(measured.times['filter_step'][status_values == status])
+        for status in sorted(statuses)
+    }
     return {
         'machine': {**machine, 'load_average_after': machine_info()['load_average']},
         'config': str(config),
@@ -821,6 +826,7 @@ def benchmark(
             'osqp_statuses': dict(Counter(measured.osqp_status)),
             'filter_osqp_iterations': _counts(measured.filter_iterations),
             'filter_active_set_steps': _counts(measured.active_set_steps),
+            'filter_step_us_by_status': step_by_status,
         },
         'timings_us': timings,
         'external': {
@@ -871,6 +877,11 @@ def format_report(document: dict[str, Any]) -> str:
         f'  OSQP iterations (stand-alone) median {replayed["osqp_iterations"]["median"]:g}, '
         f'p99 {replayed["osqp_iterations"]["p99"]:g}, max {replayed["osqp_iterations"]["max"]}; '
         f'active-set steps max {replayed["filter_active_set_steps"]["max"]}',
+        '  filter step by status (median / p99 µs): '
+        + ', '.join(
+            f'{status} {_us(s["median"])} / {_us(s["p99"])}'
+            for status, s in replayed['filter_step_us_by_status'].items()
+        ),
         '',
         f'{"per tick":42s}{"median µs":>12s}{"p99 µs":>12s}{"max µs":>12s}{"ticks":>8s}',
     ]

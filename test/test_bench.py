@@ -116,6 +116,10 @@ def test_timings_have_median_and_p99_per_piece(bench):
         expected = TICKS - nominal_ticks if key == 'filter_qp_solve' else TICKS
         assert s['n'] == expected, key
         assert 0.0 < s['median'] <= s['p99'] <= s['max'], key
+    by_status = document['replay']['filter_step_us_by_status']
+    assert {k: v['n'] for k, v in by_status.items()} == document['replay']['statuses']
+    assert min(v['median'] for v in by_status.values()) <= timings['filter_step']['median']
+    assert max(v['median'] for v in by_status.values()) >= timings['filter_step']['median']
     # The node tick is timed as one block around the model terms and the filter step.
     assert timings['node_tick']['median'] >= timings['filter_step']['median']
     assert timings['node_tick']['median'] >= timings['model_state']['median']
