@@ -535,13 +535,13 @@ def test_from_parameters_reads_dotted_and_nested_names_and_ignores_others():
         {
             'no_slip.pyramid_faces': 6,
             'barrier': {'alpha1': {'kind': 'linear', 'gain': 3}},
-            'osqp': {'polish': False},
+            'osqp': {'polish': True},
             'model.friction_coefficient': 0.5,
         }
     )
     assert config.pyramid_faces == 6 and config.alpha1_kind == 'linear'
     assert config.alpha1_gain == 3.0 and isinstance(config.alpha1_gain, float)
-    assert config.polish is False
+    assert config.polish is True
     assert SafetyFilterConfig.from_parameters(config.to_parameters()) == config
 
 

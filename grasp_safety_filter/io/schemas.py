@@ -456,8 +456,8 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'osqp.polish',
         BOOL,
-        True,
-        'Polish the OSQP solution (active-set refinement to high accuracy)',
+        False,
+        'Polish the OSQP solution (active-set refinement; the filter refines it exactly anyway)',
     ),
 )
 """The safety filter's own parameters (read by ``SafetyFilterConfig``)."""
