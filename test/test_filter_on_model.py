@@ -30,6 +30,7 @@ import pytest
 import scipy.linalg
 from scipy.optimize import linprog
 
+from grasp_safety_filter.bench import record_filtered_run, Scenario
 from grasp_safety_filter.control.class_k import ClassKFunction
 from grasp_safety_filter.control.constraints import (
     FingertipWorkspaceBarrier,
@@ -41,6 +42,7 @@ from grasp_safety_filter.control.safety_filter import (
     SafetyFilter,
     SafetyFilterConfig,
 )
+from grasp_safety_filter.io.paths import config_path
 
 N_STATES = 20  # finite-difference checks
 N_RANDOM_STATES = 240  # optimality checks, per configuration
@@ -760,3 +762,37 @@ def test_a_run_of_infeasible_ticks_gives_each_ticks_own_relaxed_optimum(model):
         assert np.abs(result.u - memoryless.u).max() <= 1e-9, tick
         u_relaxed = daqp_relaxed_optimum(A, lower, weights, u_nom, effort)
         assert np.abs(result.u - u_relaxed).max() <= 1e-5, tick
+
+
+def test_the_paper_runs_first_relaxed_tick_is_a_conflict_of_joint_and_workspace_rows():
+    """Why the paper's scenario relaxes with alpha = h^3 (README), checked where it does.
+
+    Run the filtered scenario to its first relaxed tick. There, independently of the
+    filter: the joint-limit and workspace rows alone admit no torque (daqp), the joint
+    rows alone and every row but the workspace ones do; a second joint sits about 0.3 rad
+    below its upper limit, where alpha_2(alpha_1(h)) = h^9 allows almost no acceleration
+    towards it.
+    """
+    scenario = Scenario.load(config_path())
+    ticks, _, _ = record_filtered_run(scenario, 3.0)
+    first = next(i for i, tick in enumerate(ticks) if tick.status is FilterStatus.RELAXED)
+    tick = ticks[first]
+    model = scenario.model
+    state = model.state(
+        tick.t, tick.q, tick.dq, tick.p_object_in_palm, tick.R_object_to_palm, tick.twist_object
+    )
+    effort = np.asarray(model.effort_limits, dtype=float)
+
+    def feasible(*families):
+        config = only(*families)
+        _, A, lower = independent_rows(model, config, state)
+        return daqp_optimum(A, lower, tick.u_nom, effort)[0]
+
+    assert not feasible('joint_limits', 'fingertip_workspace')
+    assert not feasible('no_slip', 'joint_limits', 'fingertip_workspace')
+    assert feasible('joint_limits')
+    assert feasible('no_slip', 'joint_limits')
+    h = model.joint_upper_limits - state.q
+    second = [model.joint_names.index(f'finger{i}_joint2') for i in (1, 2, 3)]
+    assert 0.25 < h[second].min() < 0.35
+    assert h[second].min() ** 9 < 1e-4
