@@ -37,6 +37,7 @@ from grasp_safety_filter.control.constraints import (
     FrictionPyramid,
     JointLimitBarrier,
 )
+from grasp_safety_filter.control.least_distance import LeastDistanceStatus
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
@@ -762,6 +763,38 @@ def test_a_run_of_infeasible_ticks_gives_each_ticks_own_relaxed_optimum(model):
         assert np.abs(result.u - memoryless.u).max() <= 1e-9, tick
         u_relaxed = daqp_relaxed_optimum(A, lower, weights, u_nom, effort)
         assert np.abs(result.u - u_relaxed).max() <= 1e-5, tick
+
+
+def test_a_relaxed_tick_falls_back_to_osqp_when_the_active_set_start_fails(model, monkeypatch):
+    """A relaxed QP whose active-set start fails is solved from OSQP's solution instead.
+
+    The relaxed QP starts from the rows that proved infeasibility; if that start does not
+    end optimal (here: made to fail once), OSQP's relaxed solution is the start instead, and
+    the answer is still the relaxed optimum (daqp).
+    """
+    model, c = joint_at_its_limit(1.0)(model)
+    state = c.state(model)
+    config = SafetyFilterConfig()
+    names, A, lower = independent_rows(model, config, state)
+    effort = np.asarray(model.effort_limits, dtype=float)
+    filter_ = SafetyFilter.from_config(model, config)
+    exactly = filter_._solve_relaxed_exactly
+    calls = []
+
+    def first_start_fails(u_nom, guess):
+        solution = exactly(u_nom, guess)
+        calls.append(guess)
+        if len(calls) == 1:
+            return dataclasses.replace(solution, status=LeastDistanceStatus.ITERATION_LIMIT)
+        return solution
+
+    monkeypatch.setattr(filter_, '_solve_relaxed_exactly', first_start_fails)
+    u_nom = state.gravity_torque
+    result = filter_.solve(state, u_nom)
+    assert len(calls) == 2 and calls[0]  # the active-set start, then OSQP's
+    assert result.status is FilterStatus.RELAXED and result.iterations > 0
+    u_relaxed = daqp_relaxed_optimum(A, lower, row_weights(config, names), u_nom, effort)
+    assert np.abs(result.u - u_relaxed).max() <= 1e-5
 
 
 def test_the_paper_runs_first_relaxed_tick_is_a_conflict_of_joint_and_workspace_rows():

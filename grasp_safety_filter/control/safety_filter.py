@@ -35,11 +35,12 @@ The steps of :meth:`SafetyFilter.solve`:
    one slack per barrier row, weighted per family, actuator box hard) is solved the same
    way: OSQP, then the active-set method from OSQP's active set (with the slacks scaled by
    ``sqrt(w)`` the relaxed QP is a least-distance problem too). Status ``relaxed``; the
-   families whose rows are violated at u* are named. Relaxed ticks come in runs (the
-   state that emptied the feasible set changes little in 1 ms): after a relaxed tick, the
-   next one skips OSQP, starts the infeasibility proof from the rows that gave the last
-   one, and the relaxed QP from its active set (OSQP runs only if that does not end
-   optimal).
+   families whose rows are violated at u* are named. The relaxed QP is first solved by
+   the active-set method alone, from the rows that proved the hard QP infeasible (OSQP
+   runs only if that does not end optimal). Relaxed ticks come in runs (the state that
+   emptied the feasible set changes little in 1 ms): after a relaxed tick, the next one
+   skips OSQP altogether, starts the infeasibility proof from the rows that gave the last
+   one, and the relaxed QP from its active set.
 7. If nothing gives a finite answer: the last accepted u* (or u_nom if there is none),
    clipped to the box. Status ``fallback_last_good`` / ``fallback_nominal``.
 
@@ -748,15 +749,20 @@ class SafetyFilter:
     ) -> FilterResult:
         """Solve the relaxed QP: the hard QP was not solved (``exact``: the attempt).
 
-        When the hard QP was proved infeasible and the last tick was relaxed too, the
-        active-set method first starts from that tick's relaxed active set
-        (``relaxed_guess``), without OSQP: relaxed ticks come in runs, over which the active
-        set changes little. Else, or when that does not end optimal, OSQP's relaxed
-        solution gives the start.
+        When the hard QP was proved infeasible, the active-set method first starts without
+        OSQP: from the last tick's relaxed active set (``relaxed_guess``) if the last tick
+        was relaxed too (relaxed ticks come in runs, over which the active set changes
+        little), else from the rows that proved the hard QP infeasible (the rows in
+        conflict, which the relaxed optimum gives up). Else, or when that does not end
+        optimal, OSQP's relaxed solution gives the start.
         """
         infeasible = exact.status is LeastDistanceStatus.INFEASIBLE
         if not infeasible:
             relaxed_guess = None
+        elif not relaxed_guess:
+            # Hard rows and the relaxed QP's u-rows share their numbering (barrier rows,
+            # then the box).
+            relaxed_guess = exact.active
         self._last_active = None
         # Next tick starts its infeasibility proof from the rows of this one.
         self._infeasible_rows = exact.active if infeasible else None
