@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.rigid_object import object_surface, RigidObject
@@ -93,17 +94,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     Written as ``(a×) b``: np.cross costs ~20 µs of axis handling per call here.
     """
-    return _matvec(_skew(a), b)
-
-
-def _matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A[k] @ x[k]`` for stacked matrices (k, r, c) and vectors (k, c) (a batched matmul)."""
-    return (A @ x[..., None])[..., 0]
-
-
-def _frozen(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
+    return matvec(_skew(a), b)
 
 
 class GraspModel:
@@ -403,7 +394,7 @@ class GraspModel:
         R_pc = geometry.R_contact_to_palm
         R_cp = R_pc.transpose(0, 2, 1)
         w_relative = w_f - w_o
-        w_relative_in_contact = _matvec(R_cp, w_relative)
+        w_relative_in_contact = matvec(R_cp, w_relative)
         rates = self._contact_stack.rolling_rates(geometry, w_relative_in_contact)
 
         # ---- J_h,i = R_cp,i [I, -(p_fc,i)×] J_s,i  and  G_i = [R_pc,i; (p_oc,i)× R_pc,i].
@@ -422,19 +413,19 @@ class GraspModel:
         #   G_dot^T x_o_dot = R_cp (w_o × (p_c_dot - v_o) - w_c × v_co)
         # with v_cf = v_f + w_f × p_fc and v_co = v_o + w_o × p_oc the velocities of the
         # finger's and the object's material points at the contact.
-        skew_contact = _skew(w_f + _matvec(R_pc, rates.frame_angular_velocity))
-        v_cf = v_f - _matvec(skew_fc, w_f)
+        skew_contact = _skew(w_f + matvec(R_pc, rates.frame_angular_velocity))
+        v_cf = v_f - matvec(skew_fc, w_f)
         v_co = v_o - skew_oc @ w_o
-        p_c_dot = v_cf + _matvec(R_pc[:, :, :2], rates.sliding_velocity)
-        Jh_dot_dq = _matvec(
+        p_c_dot = v_cf + matvec(R_pc[:, :, :2], rates.sliding_velocity)
+        Jh_dot_dq = matvec(
             R_cp,
             a_f0
-            - _matvec(skew_fc, alpha_f0)
+            - matvec(skew_fc, alpha_f0)
             + _cross(w_f, p_c_dot - v_f)
-            - _matvec(skew_contact, v_cf),
+            - matvec(skew_contact, v_cf),
         ).reshape(3 * n)
-        G_dot_T_twist = _matvec(
-            R_cp, _cross(w_o, p_c_dot - v_o) - _matvec(skew_contact, v_co)
+        G_dot_T_twist = matvec(
+            R_cp, _cross(w_o, p_c_dot - v_o) - matvec(skew_contact, v_co)
         ).reshape(3 * n)
 
         # ---- object
@@ -467,45 +458,49 @@ class GraspModel:
         #            = H_cf_dot w + H_cf R_cp (alpha_f - alpha_o - w_c × (w_f - w_o)),
         # with alpha_f = J_w ddq + alpha_f0 per contact.
         alpha_relative = J_w @ ddq - x_ddot[3:]
-        alpha_relative[:, :, m] += alpha_f0 - _matvec(skew_contact, w_relative)
+        alpha_relative[:, :, m] += alpha_f0 - matvec(skew_contact, w_relative)
         xi_ddot = (rates.H_cf @ R_cp) @ alpha_relative
         xi_ddot[:, :, m] += rates.H_cf_dot_w
         xi_ddot = xi_ddot.reshape(2 * n, m + 1)
 
-        # Freeze the augmented matrices first: their column views are then read-only too.
-        for augmented in (force, ddq, x_ddot, xi_ddot):
-            augmented.setflags(write=False)
+        arrays = {
+            'q': q,
+            'dq': dq,
+            'p_object_in_palm': p_o,
+            'R_object_to_palm': R_o,
+            'twist_object': twist_o,
+            'p_fingertip_in_palm': p_f,
+            'R_fingertip_to_palm': R_pf,
+            'twist_fingertip': hand.twist_fingertip,
+            'xi_cf': geometry.xi_cf,
+            'xi_co': geometry.xi_co,
+            'psi': geometry.psi,
+            'xi_cf_dot': rates.xi_cf_dot,
+            'xi_co_dot': rates.xi_co_dot,
+            'psi_dot': rates.psi_dot,
+            'penetration': geometry.penetration,
+            'p_contact_in_palm': p_c,
+            'R_contact_to_palm': R_pc,
+            'M_h': hand.M_h,
+            'h_bias': hand.h_bias,
+            'gravity_torque': hand.gravity_torque,
+            'J_fingertip': J_s,
+            'J_h': J_h,
+            'G': G,
+            'Jh_dot_dq': Jh_dot_dq,
+            'G_dot_T_twist': G_dot_T_twist,
+            'M_o': M_o,
+            'C_o_twist': C_o_twist,
+            'w_e': w_e,
+            'B_ho': B_ho,
+        }
+        # Every array is handed out read-only; the augmented matrices are frozen before their
+        # column views are taken, so that the views are read-only too.
+        for array in (*arrays.values(), force, ddq, x_ddot, xi_ddot):
+            array.setflags(write=False)
         return GraspState(
             t=float(t),
-            q=_frozen(q),
-            dq=_frozen(dq),
-            p_object_in_palm=_frozen(p_o),
-            R_object_to_palm=_frozen(R_o),
-            twist_object=_frozen(twist_o),
-            p_fingertip_in_palm=_frozen(p_f),
-            R_fingertip_to_palm=_frozen(R_pf),
-            twist_fingertip=_frozen(hand.twist_fingertip),
-            xi_cf=_frozen(geometry.xi_cf),
-            xi_co=_frozen(geometry.xi_co),
-            psi=_frozen(geometry.psi),
-            xi_cf_dot=_frozen(rates.xi_cf_dot),
-            xi_co_dot=_frozen(rates.xi_co_dot),
-            psi_dot=_frozen(rates.psi_dot),
-            penetration=_frozen(geometry.penetration),
-            p_contact_in_palm=_frozen(p_c),
-            R_contact_to_palm=_frozen(R_pc),
-            M_h=_frozen(hand.M_h),
-            h_bias=_frozen(hand.h_bias),
-            gravity_torque=_frozen(hand.gravity_torque),
-            J_fingertip=_frozen(J_s),
-            J_h=_frozen(J_h),
-            G=_frozen(G),
-            Jh_dot_dq=_frozen(Jh_dot_dq),
-            G_dot_T_twist=_frozen(G_dot_T_twist),
-            M_o=_frozen(M_o),
-            C_o_twist=_frozen(C_o_twist),
-            w_e=_frozen(w_e),
-            B_ho=_frozen(B_ho),
+            **arrays,
             contact_force=AffineMap(force[:, :m], force[:, m]),
             joint_acceleration=AffineMap(ddq[:, :m], ddq[:, m]),
             object_acceleration=AffineMap(x_ddot[:, :m], x_ddot[:, m]),

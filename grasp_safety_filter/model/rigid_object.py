@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from grasp_safety_filter.model.arrays import read_only
 from grasp_safety_filter.model.surfaces import cube_face, SphereSurface, Surface
 
 
@@ -42,12 +43,12 @@ class RigidObject:
         # R (c I) R^T = c I, and has no gyroscopic torque, w × c w = 0: M_o, M_o^-1 and
         # C_o x_o_dot are then constants, computed once.
         self.isotropic = bool(np.all(inertia_in_body == inertia_in_body[0, 0] * np.eye(3)))
-        self._M_o = _read_only(self._block_diagonal(self.mass, inertia_in_body))
-        self._M_o_inv = _read_only(
+        self._M_o = read_only(self._block_diagonal(self.mass, inertia_in_body))
+        self._M_o_inv = read_only(
             self._block_diagonal(1.0 / self.mass, self.inverse_inertia_in_body)
         )
-        self._zero_wrench = _read_only(np.zeros(6))
-        self._external_wrench = _read_only(np.concatenate([self.mass * self.gravity, np.zeros(3)]))
+        self._zero_wrench = read_only(np.zeros(6))
+        self._external_wrench = read_only(np.concatenate([self.mass * self.gravity, np.zeros(3)]))
 
     @classmethod
     def cube(cls, mass: float, edge_length: float, gravity: np.ndarray) -> RigidObject:
@@ -122,11 +123,6 @@ class RigidObject:
         inertia = R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
         kinetic = 0.5 * self.mass * v @ v + 0.5 * w @ inertia @ w
         return float(kinetic - self.mass * self.gravity @ p_object_in_palm)
-
-
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
 
 
 def object_surface(shape: str, size: float, face: str) -> Surface:

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.surfaces import (
     FlatStack,
     FlatSurface,
@@ -194,11 +195,6 @@ class ContactPair:
 
 
 # ------------------------------------------------------------------------- stacked contacts
-def _matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``A[k] @ x[k]`` for stacked matrices (k, r, c) and vectors (k, c) (a batched matmul)."""
-    return (A @ x[..., None])[..., 0]
-
-
 def _reflections(psi: np.ndarray) -> np.ndarray:
     """:func:`reflection` of each angle, (k, 2, 2)."""
     c, s = np.cos(psi), np.sin(psi)
@@ -384,8 +380,8 @@ class ContactStack:
             K_co = self.object_surfaces.curvature(xi_co)
             A_inv = _inverse_2x2(self._K_cf + R_psi @ K_co @ R_psi)
         # sliding = A^-1 [-w_y, w_x] = M_cf xi_cf_dot, and R_psi sliding = M_co xi_co_dot.
-        sliding = _matvec(A_inv, w @ ROLL_SELECT.T)
-        sliding_on_object = _matvec(R_psi, sliding)
+        sliding = matvec(A_inv, w @ ROLL_SELECT.T)
+        sliding_on_object = matvec(R_psi, sliding)
         xi_cf_dot = sliding / M_cf
         xi_co_dot = sliding_on_object / self.object_surfaces.metric(xi_co)
         torsion_cf = np.einsum('ki,ki->k', self.fingertips.torsion(xi_cf), sliding)
@@ -400,8 +396,8 @@ class ContactStack:
             R_psi_dot = psi_dot[:, None, None] * np.array([[-s, -c], [-c, s]]).transpose(2, 0, 1)
             K_co_dot = self.object_surfaces.curvature_rate(xi_co, xi_co_dot)
             A_dot = R_psi_dot @ K_co @ R_psi + R_psi @ K_co_dot @ R_psi + R_psi @ K_co @ R_psi_dot
-            H_cf_dot_w = H_cf_dot_w - _matvec(A_inv, _matvec(A_dot, sliding)) / M_cf
-        K_sliding = _matvec(self._K_cf, sliding)
+            H_cf_dot_w = H_cf_dot_w - matvec(A_inv, matvec(A_dot, sliding)) / M_cf
+        K_sliding = matvec(self._K_cf, sliding)
         return StackedRollingRates(
             xi_cf_dot=xi_cf_dot,
             xi_co_dot=xi_co_dot,

@@ -27,6 +27,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from grasp_safety_filter.model.arrays import read_only
+
 
 class Surface(ABC):
     """A smooth, orthogonally parameterised surface in the frame of the body it bounds."""
@@ -270,11 +272,6 @@ def _sin_cos(xi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     return s[:, 0], c[:, 0], s[:, 1], c[:, 1]
 
 
-def _read_only(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
-
-
 class SurfaceStack(ABC):
     """k surfaces of one kind, evaluated together at stacked coordinates ``xi``, shape (k, 2).
 
@@ -328,9 +325,9 @@ class SphereStack(SurfaceStack):
     def __init__(self, spheres: Sequence[SphereSurface]) -> None:
         self.radius = np.array([sphere.radius for sphere in spheres])
         k = self.radius.size
-        self._zero = _read_only(np.zeros(k))
-        self._curvature = _read_only(np.eye(2) / self.radius[:, None, None])
-        self._zeros = _read_only(np.zeros((k, 2, 2)))
+        self._zero = read_only(np.zeros(k))
+        self._curvature = read_only(np.eye(2) / self.radius[:, None, None])
+        self._zeros = read_only(np.zeros((k, 2, 2)))
 
     def frame(self, xi: np.ndarray) -> np.ndarray:
         """Compute :meth:`SphereSurface.frame` of each sphere."""
@@ -383,11 +380,11 @@ class FlatStack(SurfaceStack):
 
     def __init__(self, planes: Sequence[FlatSurface]) -> None:
         self.origin = np.array([plane.origin for plane in planes])
-        self._frame = _read_only(np.array([plane.frame(np.zeros(2)) for plane in planes]))
+        self._frame = read_only(np.array([plane.frame(np.zeros(2)) for plane in planes]))
         k = len(planes)
-        self._ones = _read_only(np.ones((k, 2)))
-        self._zeros_2 = _read_only(np.zeros((k, 2)))
-        self._zeros_22 = _read_only(np.zeros((k, 2, 2)))
+        self._ones = read_only(np.ones((k, 2)))
+        self._zeros_2 = read_only(np.zeros((k, 2)))
+        self._zeros_22 = read_only(np.zeros((k, 2, 2)))
 
     def frame(self, xi: np.ndarray) -> np.ndarray:
         """Return the constant ``[e1, e2, n]`` of each plane."""

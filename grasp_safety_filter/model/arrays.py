@@ -1,0 +1,16 @@
+"""Small numpy helpers shared by the model modules."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def read_only(array: np.ndarray) -> np.ndarray:
+    """Make ``array`` read-only in place and return it (for arrays shared or handed out)."""
+    array.setflags(write=False)
+    return array
+
+
+def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A[k] @ x[k]`` for stacked matrices (k, r, c) and vectors (k, c) (a batched matmul)."""
+    return (A @ x[..., None])[..., 0]
