@@ -41,6 +41,23 @@ class Configuration:
         return model.state(t, self.q, self.dq, self.p_object, self.R_object, self.twist_object)
 
 
+def moved(
+    c: Configuration, t: float, ddq: np.ndarray | None = None, x_ddot: np.ndarray | None = None
+) -> Configuration:
+    """Return the configuration after time t (second order when accelerations are given)."""
+    ddq = np.zeros_like(c.dq) if ddq is None else ddq
+    x_ddot = np.zeros(6) if x_ddot is None else x_ddot
+    v, w = c.twist_object[:3], c.twist_object[3:]
+    a, alpha = x_ddot[:3], x_ddot[3:]
+    return Configuration(
+        q=c.q + t * c.dq + 0.5 * t * t * ddq,
+        dq=c.dq + t * ddq,
+        p_object=c.p_object + t * v + 0.5 * t * t * a,
+        R_object=pin.exp3(t * w + 0.5 * t * t * alpha) @ c.R_object,
+        twist_object=c.twist_object + t * x_ddot,
+    )
+
+
 def random_configuration(
     model: GraspModel, rng: np.random.Generator, spread: float = 0.25, speed: float = 0.5
 ) -> Configuration:

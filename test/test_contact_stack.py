@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from grasp_states import paper_model, random_configuration
 import numpy as np
+import pinocchio as pin
 import pytest
 
 from grasp_safety_filter.model.rolling import (
@@ -40,10 +41,6 @@ def _stacks(model):
     yield 'selected', contact_stack(model.contacts)
     yield 'general', ContactStack(model.contacts)
     yield 'one by one', ContactStack([_opaque(pair) for pair in model.contacts])
-
-
-def _skew(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 @pytest.mark.parametrize('shape', list(MODELS))
@@ -97,7 +94,7 @@ def test_stacks_match_the_per_contact_formulas(shape):
                 # d/dt R_fc = R_fc (Omega×), against the surface's closed-form frame rate.
                 R_fc_dot = pair.fingertip.frame_rate(expected.xi_cf, expected_rates.xi_cf_dot)
                 np.testing.assert_allclose(
-                    expected.R_contact_to_fingertip @ _skew(rates.frame_angular_velocity[i]),
+                    expected.R_contact_to_fingertip @ pin.skew(rates.frame_angular_velocity[i]),
                     R_fc_dot,
                     atol=1e-12,
                 )

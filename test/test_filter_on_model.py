@@ -18,6 +18,7 @@ import daqp
 from grasp_states import (
     CONFIG_DIR,
     Configuration,
+    moved,
     P_OBJECT_PAPER,
     paper_model,
     PAPER_MODEL_PARAMETERS,
@@ -25,7 +26,6 @@ from grasp_states import (
     random_configuration,
 )
 import numpy as np
-import pinocchio as pin
 import pytest
 import scipy.linalg
 from scipy.optimize import linprog
@@ -85,19 +85,6 @@ def configurations(model):
 
 
 # -- helpers -------------------------------------------------------------------------------
-
-
-def moved(c: Configuration, t: float, ddq: np.ndarray, x_ddot: np.ndarray) -> Configuration:
-    """Return the configuration after time t along ``(ddq, x_ddot)``, to second order."""
-    v, w = c.twist_object[:3], c.twist_object[3:]
-    a, angular = x_ddot[:3], x_ddot[3:]
-    return Configuration(
-        q=c.q + t * c.dq + 0.5 * t * t * ddq,
-        dq=c.dq + t * ddq,
-        p_object=c.p_object + t * v + 0.5 * t * t * a,
-        R_object=pin.exp3(t * w + 0.5 * t * t * angular) @ c.R_object,
-        twist_object=c.twist_object + t * x_ddot,
-    )
 
 
 def alpha(kind, gain, h):
@@ -389,7 +376,7 @@ def test_joint_limit_barrier_is_positive_inside_and_negative_outside(model, join
         for sign in (-1.0, 1.0):  # -1: inside, +1: outside
             q = c.q.copy()
             q[index] = bound + sign * outward * distance
-            state = model.state(0.0, q, c.dq, c.p_object, c.R_object, c.twist_object)
+            state = dataclasses.replace(c, q=q).state(model)
             margins = filter_.margins(state, u)
             assert np.sign(margins[row]) == -sign, (distance, sign, margins[row])
             assert margins[row] == pytest.approx(-sign * distance, abs=1e-12)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from grasp_states import Configuration, paper_model, random_configuration
+from grasp_states import Configuration, moved, paper_model, random_configuration
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -21,23 +21,6 @@ def model():
 def configurations(model):
     rng = np.random.default_rng(7)
     return [random_configuration(model, rng) for _ in range(N_STATES)]
-
-
-def moved(
-    c: Configuration, t: float, ddq: np.ndarray | None = None, x_ddot: np.ndarray | None = None
-) -> Configuration:
-    """Return the configuration after time t (second order when accelerations are given)."""
-    ddq = np.zeros_like(c.dq) if ddq is None else ddq
-    x_ddot = np.zeros(6) if x_ddot is None else x_ddot
-    v, w = c.twist_object[:3], c.twist_object[3:]
-    a, alpha = x_ddot[:3], x_ddot[3:]
-    return Configuration(
-        q=c.q + t * c.dq + 0.5 * t * t * ddq,
-        dq=c.dq + t * ddq,
-        p_object=c.p_object + t * v + 0.5 * t * t * a,
-        R_object=pin.exp3(t * w + 0.5 * t * t * alpha) @ c.R_object,
-        twist_object=c.twist_object + t * x_ddot,
-    )
 
 
 def central(f, c: Configuration, **kwargs) -> np.ndarray:
