@@ -162,10 +162,6 @@ class SafetyQP:
         self.set_nominal(u_nom)
         self.normalise_slacks()
 
-    def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(u, s)`` from a solution vector x (s is empty for the hard problem)."""
-        return x[: self.n_torques], x[self.n_torques :]
-
     def dense(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """``(P, q, C, lower, upper)`` as dense copies (P full, infinities as ``inf``).
 

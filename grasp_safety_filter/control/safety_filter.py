@@ -75,6 +75,7 @@ from collections.abc import ItemsView, Iterator, Mapping, Sequence, ValuesView
 import dataclasses
 from dataclasses import dataclass, field
 from enum import Enum
+import itertools
 import time
 from typing import Any, NamedTuple
 
@@ -196,9 +197,10 @@ class SafetyFilterConfig:
                 the parameter, what was expected and what was received.
         """
         flat = flatten_parameters(params)
+        # Validated (and converted) by __post_init__, in the same order.
         return cls(
             **{
-                _FIELDS[spec.name]: spec.validate(flat[spec.name])
+                _FIELDS[spec.name]: flat[spec.name]
                 for spec in SAFETY_FILTER_QP_PARAMETERS
                 if spec.name in flat
             }
@@ -504,35 +506,32 @@ class SafetyFilter:
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
         self.row_names: tuple[str, ...] = tuple(n for f in self.families for n in f.names)
         k = len(self.row_names)
-        self._slices: list[slice] = []
-        start = 0
-        for family in self.families:
-            self._slices.append(slice(start, start + len(family.names)))
-            start += len(family.names)
-        self._row_family = (
-            np.concatenate([np.full(len(f.names), i) for i, f in enumerate(self.families)]).astype(
-                np.intp
-            )
-            if self.families
-            else np.zeros(0, dtype=np.intp)
-        )
-        weights = (
-            np.concatenate([np.full(len(f.names), w) for f, w in chosen])
-            if chosen
-            else np.zeros(0)
-        )
+        sizes = [len(family.names) for family in self.families]
+        ends = list(itertools.accumulate(sizes))
+        self._slices = [slice(end - size, end) for size, end in zip(sizes, ends, strict=True)]
+        self._row_family = np.repeat(np.arange(len(sizes), dtype=np.intp), sizes)
+        weights = np.repeat(np.array([weight for _, weight in chosen], dtype=float), sizes)
 
         self._u_min = self.actuator_limits.lower
         self._u_max = self.actuator_limits.upper
         box = self.actuator_limits.rows()
-        self._box_rows, self._box_lower = box.A, box.lower
         self.hard_qp = SafetyQP(m, k, self._u_min, self._u_max)
         self.relaxed_qp = SafetyQP(m, k, self._u_min, self._u_max, row_weights=weights)
+        # The hard QP's rows for the active-set method: barrier rows (filled per tick), then
+        # the box as ``u_j >= u_min,j`` and ``-u_j >= -u_max,j``.
+        self._hard_rows = np.concatenate((np.zeros((k, m)), box.A))
+        self._hard_lower = np.concatenate((np.zeros(k), box.lower))
         # Rows of the relaxed QP for the active-set method, variables (u, s~): barrier rows
         # [A, diag(d / sqrt(w))] (filled per tick), the box on u, s~ >= 0.
         self._relaxed_rows = np.zeros((2 * k + 2 * m, m + k))
-        self._relaxed_rows[k : k + 2 * m, :m] = self.actuator_limits.rows().A
+        self._relaxed_rows[k : k + 2 * m, :m] = box.A
         self._relaxed_rows[k + 2 * m :, m:] = np.eye(k)
+        self._relaxed_lower = np.concatenate((np.zeros(k), box.lower, np.zeros(k)))
+        # The diagonal d / sqrt(w) of the barrier rows' slack block, a view (entry (r, m + r)).
+        self._relaxed_slack_diagonal = self._relaxed_rows.reshape(-1)[
+            m : m + k * (m + k + 1) : m + k + 1
+        ]
+        self._sqrt_row_weights = np.sqrt(self.relaxed_qp.row_weights)
         settings = config.osqp_settings()
         self._hard_solver = _OSQPProblem(self.hard_qp, settings)
         self._relaxed_solver = _OSQPProblem(self.relaxed_qp, settings)
@@ -553,10 +552,6 @@ class SafetyFilter:
         # QP's active set, the next tick's starting points.
         self._infeasible_rows: tuple[int, ...] | None = None
         self._relaxed_active: tuple[int, ...] | None = None
-        # The hard QP's rows for the active-set method: barrier rows (filled per tick), then
-        # the box as ``u_j >= u_min,j`` and ``-u_j >= -u_max,j``.
-        self._hard_rows = np.concatenate((np.zeros((k, m)), self._box_rows))
-        self._hard_lower = np.concatenate((np.zeros(k), self._box_lower))
 
     @classmethod
     def from_config(
@@ -768,10 +763,7 @@ class SafetyFilter:
         self._infeasible_rows = exact.active if infeasible else None
 
         relaxed = self.relaxed_qp
-        relaxed.A_rows[:] = A
-        relaxed.lower_rows[:] = lower
-        relaxed.set_nominal(u_nom)
-        relaxed.normalise_slacks()
+        relaxed.update(A, lower, u_nom)
         exact_relaxed = None
         solution = None
         if relaxed_guess:
@@ -1001,10 +993,10 @@ class SafetyFilter:
         """
         relaxed = self.relaxed_qp
         m, k = self.n_joints, len(self.row_names)
-        C = self._relaxed_rows
+        C, b = self._relaxed_rows, self._relaxed_lower
         C[:k, :m] = relaxed.A_rows
-        C[np.arange(k), m + np.arange(k)] = relaxed.slack_scale / np.sqrt(relaxed.row_weights)
-        b = np.concatenate((relaxed.lower_rows, self._box_lower, np.zeros(k)))
+        np.divide(relaxed.slack_scale, self._sqrt_row_weights, out=self._relaxed_slack_diagonal)
+        b[:k] = relaxed.lower_rows
         start = np.concatenate((u_nom, np.zeros(k)))
         solution = solve_least_distance(
             start, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=guess
