@@ -23,10 +23,9 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.control.pose_error import (
+    acceleration_from_euler,
     euler_from_matrix,
     euler_pose_error,
-    euler_rate_jacobian,
-    euler_rate_jacobian_dot,
     euler_rates_from_twist,
 )
 from grasp_safety_filter.control.reference import (
@@ -194,10 +193,7 @@ class NominalController:
         e = euler_pose_error(reference.r, r_object)
         e_dot = reference.r_dot - r_object_dot
         r_object_ddot = reference.r_ddot + self.config.kp * e + self.config.kd * e_dot
-        phi_dot = r_object_dot[3:]
-        E = euler_rate_jacobian(phi_object)
-        E_dot = euler_rate_jacobian_dot(phi_object, phi_dot)
-        x_ddot = np.concatenate((r_object_ddot[:3], E @ r_object_ddot[3:] + E_dot @ phi_dot))
+        x_ddot = acceleration_from_euler(phi_object, r_object_dot, r_object_ddot)
         return x_ddot, e, e_dot
 
     def compute(self, state: GraspState, reference: ReferenceSample) -> NominalOutput:
