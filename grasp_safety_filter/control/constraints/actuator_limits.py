@@ -8,6 +8,7 @@ import numpy as np
 
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
+    check_limits_ordered,
     ConstraintRows,
     finite_vector,
     validate_names,
@@ -51,14 +52,9 @@ class ActuatorLimits:
         m = len(self.joint_names)
         self.lower = finite_vector(u_min, m, 'u_min')
         self.upper = finite_vector(u_max, m, 'u_max')
-        bad = np.flatnonzero(self.upper < self.lower)
-        if bad.size:
-            j = int(bad[0])
-            raise ValueError(
-                f"'u_max': expected u_max >= u_min for every joint, got u_min = "
-                f'{self.lower[j]!r} and u_max = {self.upper[j]!r} for joint '
-                f'{self.joint_names[j]!r}'
-            )
+        check_limits_ordered(
+            self.lower, self.upper, self.joint_names, 'u_min', 'u_max', strict=False
+        )
         self.names = tuple(
             f'{self.family}/{joint}/{side}'
             for joint in self.joint_names

@@ -145,6 +145,31 @@ def finite_scalar(
     return number
 
 
+def check_limits_ordered(
+    lower: np.ndarray,
+    upper: np.ndarray,
+    joint_names: Sequence[str],
+    lower_name: str,
+    upper_name: str,
+    strict: bool,
+) -> None:
+    """Check per joint that ``upper > lower`` (``strict``) or ``upper >= lower``.
+
+    Raises:
+        ValueError: Naming ``upper_name``, the expected order and, for the first joint out
+            of order, its name and both limits.
+    """
+    bad = np.flatnonzero(upper <= lower if strict else upper < lower)
+    if bad.size:
+        j = int(bad[0])
+        relation = '>' if strict else '>='
+        raise ValueError(
+            f"'{upper_name}': expected {upper_name} {relation} {lower_name} for every joint, "
+            f'got {lower_name} = {lower[j]!r} and {upper_name} = {upper[j]!r} for joint '
+            f'{joint_names[j]!r}'
+        )
+
+
 def check_rows(state_value: np.ndarray, rows: int, field: str) -> None:
     """Raise ValueError if a state array does not have ``rows`` leading entries."""
     if state_value.shape[0] != rows:

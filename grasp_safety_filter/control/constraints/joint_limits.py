@@ -9,6 +9,7 @@ import numpy as np
 from grasp_safety_filter.control.class_k import ClassKFunction
 from grasp_safety_filter.control.constraints.base import (
     BoxBarrier,
+    check_limits_ordered,
     check_rows,
     finite_vector,
     validate_names,
@@ -62,14 +63,9 @@ class JointLimitBarrier(BoxBarrier):
         m = len(self.joint_names)
         self.q_min = finite_vector(q_min, m, 'q_min')
         self.q_max = finite_vector(q_max, m, 'q_max')
-        bad = np.flatnonzero(self.q_max <= self.q_min)
-        if bad.size:
-            j = int(bad[0])
-            raise ValueError(
-                f"'q_max': expected q_max > q_min for every joint, got q_min = "
-                f'{self.q_min[j]!r} and q_max = {self.q_max[j]!r} for joint '
-                f'{self.joint_names[j]!r}'
-            )
+        check_limits_ordered(
+            self.q_min, self.q_max, self.joint_names, 'q_min', 'q_max', strict=True
+        )
         names = tuple(
             f'{self.family}/{joint}/{side}'
             for joint in self.joint_names
