@@ -91,6 +91,38 @@ def _spd(rng: np.random.Generator, size: int, scale: float) -> np.ndarray:
     return scale * (B @ B.T / size + 0.2 * np.eye(size))
 
 
+def constrained_dynamics(
+    M_h: np.ndarray,
+    h_bias: np.ndarray,
+    J_h: np.ndarray,
+    Jh_dot_dq: np.ndarray,
+    G: np.ndarray,
+    G_dot_T_twist: np.ndarray,
+    M_o: np.ndarray,
+    C_o_twist: np.ndarray,
+    w_e: np.ndarray,
+) -> tuple[np.ndarray, AffineMap, AffineMap, AffineMap]:
+    """Solve the hand–object dynamics (module docstring) for the maps affine in u.
+
+    Returns:
+        ``B_ho`` and the maps ``u ↦ f_c``, ``u ↦ ddq`` and ``u ↦ x_o_ddot``.
+    """
+    M_h_inv = np.linalg.inv(M_h)
+    M_o_inv = np.linalg.inv(M_o)
+    B_ho = J_h @ M_h_inv @ J_h.T + G.T @ M_o_inv @ G
+    F = np.linalg.solve(B_ho, J_h @ M_h_inv)
+    f0 = np.linalg.solve(
+        B_ho,
+        -J_h @ M_h_inv @ h_bias + Jh_dot_dq - G_dot_T_twist + G.T @ M_o_inv @ (C_o_twist - w_e),
+    )
+    contact_force = AffineMap(F, f0)
+    joint_acceleration = AffineMap(
+        M_h_inv @ (np.eye(M_h.shape[0]) - J_h.T @ F), -M_h_inv @ (h_bias + J_h.T @ f0)
+    )
+    object_acceleration = AffineMap(M_o_inv @ G @ F, M_o_inv @ (G @ f0 + w_e - C_o_twist))
+    return B_ho, contact_force, joint_acceleration, object_acceleration
+
+
 def synthetic_state(
     rng: np.random.Generator,
     hand: SyntheticHand | None = None,
@@ -170,19 +202,9 @@ def synthetic_state(
     Jh_dot_dq = rng.normal(scale=0.05 * speed**2 + 1e-12, size=3 * n)
     G_dot_T_twist = rng.normal(scale=0.05 * speed**2 + 1e-12, size=3 * n)
 
-    M_h_inv = np.linalg.inv(M_h)
-    M_o_inv = np.linalg.inv(M_o)
-    B_ho = J_h @ M_h_inv @ J_h.T + G.T @ M_o_inv @ G
-    F = np.linalg.solve(B_ho, J_h @ M_h_inv)
-    f0 = np.linalg.solve(
-        B_ho,
-        -J_h @ M_h_inv @ h_bias + Jh_dot_dq - G_dot_T_twist + G.T @ M_o_inv @ (C_o_twist - w_e),
+    B_ho, contact_force, joint_acceleration, object_acceleration = constrained_dynamics(
+        M_h, h_bias, J_h, Jh_dot_dq, G, G_dot_T_twist, M_o, C_o_twist, w_e
     )
-    contact_force = AffineMap(F, f0)
-    joint_acceleration = AffineMap(
-        M_h_inv @ (np.eye(m) - J_h.T @ F), -M_h_inv @ (h_bias + J_h.T @ f0)
-    )
-    object_acceleration = AffineMap(M_o_inv @ G @ F, M_o_inv @ (G @ f0 + w_e - C_o_twist))
     rows_matrix = np.zeros((2 * n, m))
     rows_offset = np.zeros(2 * n)
     for i in range(n):

@@ -34,6 +34,12 @@ def alpha_slope(alpha, h):
     return 3.0 * alpha.gain * h**2 if alpha.kind == 'cubic' else alpha.gain
 
 
+def zcbf_residual(alpha1, alpha2, h, h_dot, h_ddot):
+    """Evaluate the documented ZCBF row ``h_ddot + alpha_1'(h) h_dot + alpha_2(B)``."""
+    B = h_dot + alpha_value(alpha1, h)
+    return h_ddot + alpha_slope(alpha1, h) * h_dot + alpha_value(alpha2, B)
+
+
 def make_families(alpha1=None, alpha2=None, faces=8, margin=0.05, mu=0.9):
     return {
         'no_slip': FrictionPyramid(HAND.contact_names, mu, faces, margin),
@@ -294,8 +300,7 @@ def test_joint_limit_rows_match_the_zcbf_inequality(rng, alpha1, alpha2):
                 (HAND.joint_upper_limits[j] - state.q[j], -state.dq[j], -ddq[j]),
                 (state.q[j] - HAND.joint_lower_limits[j], state.dq[j], ddq[j]),
             ):
-                B = h_dot + alpha_value(alpha1, h)
-                expected.append(h_ddot + alpha_slope(alpha1, h) * h_dot + alpha_value(alpha2, B))
+                expected.append(zcbf_residual(alpha1, alpha2, h, h_dot, h_ddot))
         assert np.allclose(rows.residual(u), expected, rtol=1e-10, atol=1e-9)
 
 
@@ -321,8 +326,7 @@ def test_workspace_rows_match_the_zcbf_inequality(rng, alpha1, alpha2):
                 (b - b_min, b_dot, b_ddot),
                 (b_max - b, -b_dot, -b_ddot),
             ):
-                B = h_dot + alpha_value(alpha1, h)
-                expected.append(h_ddot + alpha_slope(alpha1, h) * h_dot + alpha_value(alpha2, B))
+                expected.append(zcbf_residual(alpha1, alpha2, h, h_dot, h_ddot))
         assert np.allclose(rows.residual(u), expected, rtol=1e-10, atol=1e-9)
 
 

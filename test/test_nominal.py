@@ -7,6 +7,7 @@ from grasp_states import paper_model, random_configuration
 import numpy as np
 import pinocchio as pin
 import pytest
+from synthetic_state import constrained_dynamics, skew
 
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.pose_error import (
@@ -27,10 +28,6 @@ from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
 
-def skew(v):
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-
-
 def grasp_map(p_contact, R_contact, p_object):
     """G = [R_pc,i ; (p_c,i - p_o)x R_pc,i], built here independently of the model."""
     blocks = zip(p_contact, R_contact, strict=True)
@@ -40,9 +37,9 @@ def grasp_map(p_contact, R_contact, p_object):
 def synthetic_state(seed, n=3, m=9):
     """Build a random state whose affine maps solve the hand/object dynamics.
 
-    The maps obey the acceleration-level rolling constraint
-    J_h ddq + J_h_dot dq = G^T x_ddot + G_dot^T x_dot (DESIGN.md §3), written out
-    independently of the model.
+    The maps (``synthetic_state.constrained_dynamics``, written out independently of the
+    model) obey the acceleration-level rolling constraint
+    J_h ddq + J_h_dot dq = G^T x_ddot + G_dot^T x_dot (DESIGN.md §3).
     """
     rng = np.random.default_rng(seed)
     p_object = rng.normal(size=3) * 0.1
@@ -68,21 +65,8 @@ def synthetic_state(seed, n=3, m=9):
     C_o_twist = np.concatenate((np.zeros(3), np.cross(w, I_palm @ w)))
     w_e = np.array([0.0, 0.0, -9.81 * mass, 0.0, 0.0, 0.0])
 
-    M_h_inv = np.linalg.inv(M_h)
-    M_o_inv = np.linalg.inv(M_o)
-    B_ho = J_h @ M_h_inv @ J_h.T + G.T @ M_o_inv @ G
-    force_matrix = np.linalg.solve(B_ho, J_h @ M_h_inv)
-    force_offset = np.linalg.solve(
-        B_ho,
-        -J_h @ M_h_inv @ h_bias + Jh_dot_dq - G_dot_T_twist + G.T @ M_o_inv @ (C_o_twist - w_e),
-    )
-    contact_force = AffineMap(force_matrix, force_offset)
-    joint_acceleration = AffineMap(
-        M_h_inv @ (np.eye(m) - J_h.T @ force_matrix),
-        M_h_inv @ (-h_bias - J_h.T @ force_offset),
-    )
-    object_acceleration = AffineMap(
-        M_o_inv @ G @ force_matrix, M_o_inv @ (G @ force_offset + w_e - C_o_twist)
+    B_ho, contact_force, joint_acceleration, object_acceleration = constrained_dynamics(
+        M_h, h_bias, J_h, Jh_dot_dq, G, G_dot_T_twist, M_o, C_o_twist, w_e
     )
     zeros = np.zeros
     return GraspState(
