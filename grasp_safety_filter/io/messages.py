@@ -60,7 +60,6 @@ CONTACT_QUANTITIES: tuple[str, ...] = (
 )
 """Per-contact entries of ``/hand/contacts``, in publishing order."""
 
-_RATE_QUANTITIES = frozenset(('a', 'b', 'u', 'v', 'psi'))
 _QUATERNION_NORM_TOLERANCE = 1e-6
 _ROTATION_TOLERANCE = 1e-6
 _NANOSECONDS_PER_SECOND = 1_000_000_000
@@ -156,10 +155,7 @@ class MessageNamespace:
     @classmethod
     def from_rclpy(cls) -> MessageNamespace:
         """Classes of the installed ROS 2 Python message packages (needs a ROS 2 install)."""
-        classes = {}
-        for name, msgtype in _MESSAGE_TYPES.items():
-            package, _, type_name = msgtype.split('/')
-            classes[name] = getattr(importlib.import_module(f'{package}.msg'), type_name)
+        classes = {name: rclpy_message_class(msgtype) for name, msgtype in _MESSAGE_TYPES.items()}
         return cls(**classes, sequences_as_lists=True, byte_as_bytes=True)
 
     def float_array(self, values: np.ndarray) -> Any:
@@ -170,6 +166,17 @@ class MessageNamespace:
     def byte(self, value: int) -> Any:
         """Return a ``byte`` field value."""
         return bytes([value]) if self.byte_as_bytes else int(value)
+
+
+def rclpy_message_class(msgtype: str) -> Any:
+    """Return the rclpy class of a ``"pkg/msg/Type"`` message type (needs a ROS 2 install)."""
+    package, _, name = msgtype.split('/')
+    return getattr(importlib.import_module(f'{package}.msg'), name)
+
+
+def byte_value(raw: Any) -> int:
+    """Return the value of a ``byte`` field in either form (rclpy ``bytes``, rosbags ``int``)."""
+    return raw[0] if isinstance(raw, bytes | bytearray) else int(raw)
 
 
 # ----------------------------------------------------------------------------------------
@@ -795,10 +802,13 @@ class ReferenceTrajectory:
     time_from_start: np.ndarray
     points: tuple[ObjectReference, ...]
 
+    def active_index(self, t: float) -> int:
+        """Index of the last point with ``time_from_start <= t - self.t``, or 0 (the first)."""
+        return max(int(np.searchsorted(self.time_from_start, t - self.t, side='right')) - 1, 0)
+
     def sample(self, t: float) -> ObjectReference:
-        """Return the last point with ``time_from_start <= t - self.t``, or the first point."""
-        k = int(np.searchsorted(self.time_from_start, t - self.t, side='right')) - 1
-        return self.points[max(k, 0)]
+        """Return the point in force at ``t`` (:meth:`active_index`)."""
+        return self.points[self.active_index(t)]
 
 
 def reference_to_msg(
@@ -1083,8 +1093,7 @@ def diagnostics_from_msg(msg: Any, source: str = 'diagnostics') -> DiagnosticsDa
     """
     reports = []
     for status in msg.status:
-        raw_level = status.level
-        level = raw_level[0] if isinstance(raw_level, bytes | bytearray) else int(raw_level)
+        level = byte_value(status.level)
         if level not in {int(member) for member in DiagnosticLevel}:
             raise MessageError(
                 f'{source}: status {status.name!r} level must be 0..3, got {level!r}'

@@ -14,7 +14,6 @@ This module and the ``*_node.py`` modules are the only ones that import rclpy.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
-import importlib
 from pathlib import Path
 from typing import Any
 
@@ -23,7 +22,12 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from grasp_safety_filter.io.messages import DiagnosticLevel, MessageNamespace
+from grasp_safety_filter.io.messages import (
+    byte_value,
+    DiagnosticLevel,
+    MessageNamespace,
+    rclpy_message_class,
+)
 from grasp_safety_filter.io.parameters import (
     declare_node_parameters,
     ParameterError,
@@ -33,12 +37,6 @@ from grasp_safety_filter.io.paths import share_directory
 from grasp_safety_filter.io.schemas import check_node_parameters, NODE_SCHEMAS
 from grasp_safety_filter.io.topics import DIAGNOSTICS, topic_spec
 from grasp_safety_filter.nodes.outgoing import Outgoing
-
-
-def message_class(msgtype: str) -> Any:
-    """Return the rclpy class of a ``"pkg/msg/Type"`` message type."""
-    package, _, name = msgtype.split('/')
-    return getattr(importlib.import_module(f'{package}.msg'), name)
 
 
 class EndpointNode(Node):
@@ -64,10 +62,10 @@ class EndpointNode(Node):
         self.parameters = resolve_relative_paths(self.schema, values, self.config_directory)
         self.msgs = MessageNamespace.from_rclpy()
         self._publishers_by_topic = {
-            topic: self.create_publisher(
-                message_class(topic_spec(topic).msgtype), topic, topic_spec(topic).qos.to_rclpy()
+            spec.name: self.create_publisher(
+                rclpy_message_class(spec.msgtype), spec.name, spec.qos.to_rclpy()
             )
-            for topic in publishes
+            for spec in map(topic_spec, publishes)
         }
         self.add_post_set_parameters_callback(self._on_parameters_set)
 
@@ -80,7 +78,7 @@ class EndpointNode(Node):
         """Subscribe to a topic of the table with its type and QoS."""
         spec = topic_spec(topic)
         return self.create_subscription(
-            message_class(spec.msgtype), topic, callback, spec.qos.to_rclpy()
+            rclpy_message_class(spec.msgtype), topic, callback, spec.qos.to_rclpy()
         )
 
     def publisher(self, topic: str) -> Any:
@@ -117,8 +115,7 @@ class EndpointNode(Node):
 
     def _log_statuses(self, msg: Any) -> None:
         for status in msg.status:
-            raw = status.level
-            level = raw[0] if isinstance(raw, bytes | bytearray) else int(raw)
+            level = byte_value(status.level)
             text = f'{status.name}: {status.message}'
             if level == DiagnosticLevel.ERROR:
                 self.get_logger().error(text, throttle_duration_sec=1.0)

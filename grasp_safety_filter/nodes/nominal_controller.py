@@ -195,9 +195,7 @@ class NominalControllerEndpoint:
             self.reference = self.config.make_reference(self._initial_pose, t)
         if isinstance(self.reference, TopicReference) and self._trajectory is not None:
             trajectory = self._trajectory
-            k = max(
-                int(np.searchsorted(trajectory.time_from_start, t - trajectory.t, 'right')) - 1, 0
-            )
+            k = trajectory.active_index(t)
             point = trajectory.points[k]
             sample = ReferenceSample.from_pose(
                 Pose(point.p_object_in_palm, point.R_object_to_palm),
