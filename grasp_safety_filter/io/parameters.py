@@ -239,7 +239,7 @@ class NodeSchema:
         except KeyError:
             raise KeyError(
                 f"node '{self.node_name}' declares no parameter '{name}'"
-                + _suggestion(name, self.names)
+                + suggestion(name, self.names)
             ) from None
 
     def __contains__(self, name: object) -> bool:
@@ -252,7 +252,8 @@ class NodeSchema:
         return len(self.parameters)
 
 
-def _suggestion(name: str, candidates: Iterable[str]) -> str:
+def suggestion(name: str, candidates: Iterable[str]) -> str:
+    """Return `` (did you mean '<closest>'?)`` for a misspelt name, or '' if none is close."""
     close = difflib.get_close_matches(name, list(candidates), n=1, cutoff=0.6)
     return f" (did you mean '{close[0]}'?)" if close else ''
 
@@ -488,8 +489,7 @@ def validate_parameters(
         converted = _collect(errors, spec, value, strict_types)
         if converted is not None:
             result[name] = converted
-    if errors:
-        raise _combined_error(source, errors)
+    raise_parameter_errors(source, errors)
     return result
 
 
@@ -531,16 +531,28 @@ def _unknown_message(schema: NodeSchema, name: str, other_schemas: Iterable[Node
     hint = (
         f' (it is a parameter of {", ".join(owners)})'
         if owners
-        else _suggestion(name, schema.names)
+        else suggestion(name, schema.names)
     )
     return f"unknown parameter '{name}': node '{schema.node_name}' does not declare it{hint}"
 
 
-def _combined_error(source: str, errors: Sequence[str]) -> ParameterError:
+def raise_parameter_errors(source: str, errors: Sequence[str], kind: str = 'invalid') -> None:
+    """Raise one ParameterError listing every problem found; return if there is none.
+
+    Args:
+        source: Where the values come from (a file and node), prefixed to the message.
+        errors: One message per problem.
+        kind: What the problems make the parameters, in the message of several
+            (``"3 invalid parameters"``, ``"2 inconsistent parameters"``).
+
+    Raises:
+        ParameterError: ``errors`` is not empty.
+    """
     if len(errors) == 1:
-        return ParameterError(f'{source}: {errors[0]}', errors)
-    lines = '\n'.join(f'  - {error}' for error in errors)
-    return ParameterError(f'{source}: {len(errors)} invalid parameters:\n{lines}', errors)
+        raise ParameterError(f'{source}: {errors[0]}', errors)
+    if errors:
+        lines = '\n'.join(f'  - {error}' for error in errors)
+        raise ParameterError(f'{source}: {len(errors)} {kind} parameters:\n{lines}', errors)
 
 
 def resolve_relative_paths(

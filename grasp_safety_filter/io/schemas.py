@@ -25,10 +25,10 @@ from typing import Any
 from grasp_safety_filter.io.parameters import (
     load_parameter_file,
     NodeSchema,
-    ParameterError,
     parameters_for_node,
     ParameterSpec,
     ParameterType,
+    raise_parameter_errors,
     resolve_relative_paths,
     validate_parameters,
 )
@@ -557,7 +557,7 @@ def check_model_parameters(values: Mapping[str, Any], source: str = 'parameters'
                 f"parameter '{name}': expected one entry per contact in 'model.contact_names' "
                 f'({contacts}), got {len(values[name])}'
             )
-    _raise(source, errors)
+    raise_parameter_errors(source, errors, 'inconsistent')
 
 
 def check_hand_sim_parameters(values: Mapping[str, Any], source: str = 'parameters') -> None:
@@ -583,15 +583,7 @@ def check_hand_sim_parameters(values: Mapping[str, Any], source: str = 'paramete
             "parameter 'initial.object_orientation': expected a unit quaternion (norm 1 to "
             f'1e-6), got norm {norm!r}'
         )
-    _raise(source, errors)
-
-
-def _raise(source: str, errors: list[str]) -> None:
-    if len(errors) == 1:
-        raise ParameterError(f'{source}: {errors[0]}', errors)
-    if errors:
-        lines = '\n'.join(f'  - {error}' for error in errors)
-        raise ParameterError(f'{source}: {len(errors)} inconsistent parameters:\n{lines}', errors)
+    raise_parameter_errors(source, errors, 'inconsistent')
 
 
 _NODE_CHECKS: dict[str, tuple[Callable[[Mapping[str, Any], str], None], ...]] = {
