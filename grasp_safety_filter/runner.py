@@ -15,7 +15,6 @@ from collections import deque
 from collections.abc import Callable, Mapping
 import dataclasses
 from dataclasses import dataclass, field
-import difflib
 import json
 from pathlib import Path
 import shutil
@@ -33,7 +32,7 @@ from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals, signal_name
 from grasp_safety_filter.io.messages import MessageNamespace
-from grasp_safety_filter.io.parameters import ParameterError
+from grasp_safety_filter.io.parameters import ParameterError, suggestion
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
     load_node_parameters,
@@ -82,8 +81,7 @@ class RunOptions:
         for name in self.overrides:
             if not any(schema.get(name) for schema in NODE_SCHEMAS.values()):
                 known = sorted({n for schema in NODE_SCHEMAS.values() for n in schema.names})
-                close = difflib.get_close_matches(name, known, n=1)
-                hint = f" (did you mean '{close[0]}'?)" if close else ''
+                hint = suggestion(name, known)
                 raise ParameterError(f"override '{name}': no node declares it{hint}")
 
 
@@ -93,8 +91,8 @@ class Recording:
 
     Attributes:
         interrupted: None when the simulator finished (ran to its duration or stopped on a
-            violation), else the interruption (``"SIGINT"``, ``"SIGTERM"`` or an exception's
-            type name).
+            violation), else the signal that interrupted it (``"SIGINT"`` or ``"SIGTERM"``;
+            a run ended by another exception raises it instead).
         live_log: The simulator's own constraint record of the run.
         stop_reason: The simulator's stop reason (``"duration"`` when it ran to the end).
         t_end: Simulated time reached, s.
@@ -122,22 +120,19 @@ Progress = Callable[[float, float], None]
 """Called with (simulated time, duration) as the run advances."""
 
 
-class _Graph:
-    """The endpoints wired as the ROS graph wires the nodes."""
-
-    def __init__(
-        self,
-        sim: HandSimEndpoint,
-        nominal: NominalControllerEndpoint,
-        safety_filter: SafetyFilterEndpoint,
-    ) -> None:
-        self.subscribers: dict[str, list[Callable[[Any], list[Any]]]] = {
-            topics.JOINT_STATES: [nominal.on_joint_states, safety_filter.on_joint_states],
-            topics.OBJECT_ODOM: [nominal.on_odom, safety_filter.on_odom],
-            topics.OBJECT_REFERENCE: [nominal.on_reference],
-            topics.EFFORT_NOMINAL: [safety_filter.on_effort_nominal],
-            topics.EFFORT_COMMAND: [sim.on_command],
-        }
+def _subscribers(
+    sim: HandSimEndpoint,
+    nominal: NominalControllerEndpoint,
+    safety_filter: SafetyFilterEndpoint,
+) -> dict[str, list[Callable[[Any], list[Any]]]]:
+    """Return each topic's subscriber callbacks, wired as the ROS graph wires the nodes."""
+    return {
+        topics.JOINT_STATES: [nominal.on_joint_states, safety_filter.on_joint_states],
+        topics.OBJECT_ODOM: [nominal.on_odom, safety_filter.on_odom],
+        topics.OBJECT_REFERENCE: [nominal.on_reference],
+        topics.EFFORT_NOMINAL: [safety_filter.on_effort_nominal],
+        topics.EFFORT_COMMAND: [sim.on_command],
+    }
 
 
 def build_endpoints(
@@ -198,7 +193,7 @@ def record_run(options: RunOptions, bag_path: Path, progress: Progress | None = 
         interrupt_on_signals(),
         BagRecorder(bag_path, storage=options.storage, typestore=typestore) as bag,
     ):
-        graph = _Graph(sim, nominal, safety_filter)
+        subscribers = _subscribers(sim, nominal, safety_filter)
         duration = sim.config.duration
         interrupted = None
         try:
@@ -206,7 +201,7 @@ def record_run(options: RunOptions, bag_path: Path, progress: Progress | None = 
             while queue:
                 topic, stamp_ns, msg = queue.popleft()
                 data = bag.write(topic, stamp_ns, msg)
-                handlers = graph.subscribers.get(topic)
+                handlers = subscribers.get(topic)
                 if handlers:
                     received = typestore.deserialize_cdr(data, msg.__msgtype__)
                     for handler in handlers:
@@ -215,12 +210,10 @@ def record_run(options: RunOptions, bag_path: Path, progress: Progress | None = 
                     progress(sim.t, duration)
         except KeyboardInterrupt as interrupt:
             interrupted = signal_name(interrupt)
+            bag.set_custom_data('interrupted', interrupted)
         except Exception as error:
-            interrupted = type(error).__name__
-            bag.set_custom_data('interrupted', interrupted)
+            bag.set_custom_data('interrupted', type(error).__name__)
             raise
-        if interrupted is not None:
-            bag.set_custom_data('interrupted', interrupted)
         simulator = sim.simulator
         return Recording(interrupted, simulator.log, simulator.stop_reason, simulator.t)
 
