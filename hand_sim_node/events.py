@@ -31,6 +31,12 @@ FAMILIES: tuple[str, ...] = (FINGERTIP_WORKSPACE, JOINT_LIMITS, SLIP, SEPARATION
 WORKSPACE_SIDES: tuple[str, ...] = ('a_min', 'a_max', 'b_min', 'b_max')
 JOINT_SIDES: tuple[str, ...] = ('lower', 'upper')
 
+#: Bound of each margin column of the two-sided families (slip and separation have none).
+_SIDES: dict[str, tuple[str, ...]] = {
+    FINGERTIP_WORKSPACE: WORKSPACE_SIDES,
+    JOINT_LIMITS: JOINT_SIDES,
+}
+
 
 @dataclass(frozen=True)
 class Event:
@@ -75,6 +81,15 @@ class ConstraintMargins:
     required_friction: np.ndarray
     friction: np.ndarray
     normal_force: np.ndarray
+
+    def by_family(self) -> dict[str, np.ndarray]:
+        """Return the margins of each family, in :data:`FAMILIES` order (slip: ``mu - beta_i``)."""
+        return {
+            FINGERTIP_WORKSPACE: self.fingertip_workspace,
+            JOINT_LIMITS: self.joint_limits,
+            SLIP: self.friction,
+            SEPARATION: self.normal_force,
+        }
 
     def violated(self) -> dict[str, np.ndarray]:
         """Boolean violation masks per family, shaped like the margins."""
@@ -193,50 +208,21 @@ class EventMonitor:
         if not any(mask.any() for mask in violated.values()):
             return ()
         found: list[Event] = []
-        for row, side in zip(*np.nonzero(violated[FINGERTIP_WORKSPACE]), strict=True):
-            found.append(
-                Event(
-                    margins.t,
-                    FINGERTIP_WORKSPACE,
-                    int(row),
-                    self.contact_names[row],
-                    WORKSPACE_SIDES[side],
-                    float(margins.fingertip_workspace[row, side]),
+        for family, values in margins.by_family().items():
+            names = self.joint_names if family == JOINT_LIMITS else self.contact_names
+            sides = _SIDES.get(family)
+            for index in np.argwhere(violated[family]):
+                row = int(index[0])
+                found.append(
+                    Event(
+                        margins.t,
+                        family,
+                        row,
+                        names[row],
+                        sides[index[1]] if sides else '',
+                        float(values[tuple(index)]),
+                    )
                 )
-            )
-        for row, side in zip(*np.nonzero(violated[JOINT_LIMITS]), strict=True):
-            found.append(
-                Event(
-                    margins.t,
-                    JOINT_LIMITS,
-                    int(row),
-                    self.joint_names[row],
-                    JOINT_SIDES[side],
-                    float(margins.joint_limits[row, side]),
-                )
-            )
-        for row in np.flatnonzero(violated[SLIP]):
-            found.append(
-                Event(
-                    margins.t,
-                    SLIP,
-                    int(row),
-                    self.contact_names[row],
-                    '',
-                    float(margins.friction[row]),
-                )
-            )
-        for row in np.flatnonzero(violated[SEPARATION]):
-            found.append(
-                Event(
-                    margins.t,
-                    SEPARATION,
-                    int(row),
-                    self.contact_names[row],
-                    '',
-                    float(margins.normal_force[row]),
-                )
-            )
         return tuple(found)
 
 
@@ -286,13 +272,7 @@ class EventLog:
     def record(self, margins: ConstraintMargins, events: tuple[Event, ...]) -> None:
         """Add one instant: its margins and the events found in them."""
         self.n_evaluations += 1
-        worst = {
-            FINGERTIP_WORKSPACE: margins.fingertip_workspace,
-            JOINT_LIMITS: margins.joint_limits,
-            SLIP: margins.friction,
-            SEPARATION: margins.normal_force,
-        }
-        for family, values in worst.items():
+        for family, values in margins.by_family().items():
             record = self.families[family]
             record.min_margin = min(record.min_margin, _finite_or_inf_min(values))
         self.max_required_friction = max(
