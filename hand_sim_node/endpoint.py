@@ -98,7 +98,6 @@ class HandSimEndpoint:
 
     Attributes:
         simulator: The plant.
-        command_timeout: Lockstep wait for a command before a diagnostic, s (wall time).
 
     """
 
@@ -112,7 +111,6 @@ class HandSimEndpoint:
         self.model = model
         self.msgs = msgs
         self.simulator = Simulator(model, sim_config)
-        self.command_timeout = float(sim_config.command_timeout)
         self.scenario_text = (
             scenario_text
             if scenario_text is not None
@@ -131,6 +129,11 @@ class HandSimEndpoint:
     def config(self) -> SimConfig:
         """The simulator configuration in force."""
         return self.simulator.config
+
+    @property
+    def command_timeout(self) -> float:
+        """Lockstep wait for a command before a diagnostic, s (wall time)."""
+        return self.config.command_timeout
 
     @property
     def lockstep(self) -> bool:
@@ -295,7 +298,6 @@ class HandSimEndpoint:
                 f'HandSimEndpoint.update_config: {changed} are read-only while the simulator runs'
             )
         self.simulator.config = sim_config
-        self.command_timeout = float(sim_config.command_timeout)
 
     # ------------------------------------------------------------------------- internals
     def _step(self, effort: np.ndarray) -> list[Outgoing]:
