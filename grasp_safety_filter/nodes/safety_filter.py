@@ -301,12 +301,9 @@ class SafetyFilterEndpoint:
         self.last_result = result
         u = self.hold.accept(now, u)
         self._close(stamp)
-        names = list(margins)
         outgoing = [
             stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
-            stamped(
-                MARGINS, margins_to_msg(self.msgs, t, names, np.array(list(margins.values())))
-            ),
+            stamped(MARGINS, margins_to_msg(self.msgs, t, margins.names, margins.array)),
         ]
         tick_time = time.perf_counter() - start
         outgoing.append(self._tick_status(t, now, result, margins, filter_time, tick_time))
