@@ -23,9 +23,6 @@ The simulator exits when the run ends, which shuts the whole launch down (the re
 closes the bag on SIGINT).
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, ExecuteProcess, Shutdown, TimerAction
 from launch.conditions import IfCondition
@@ -33,6 +30,7 @@ from launch.substitutions import LaunchConfiguration, PythonExpression
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
+from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.topics import TOPICS
 
 PACKAGE = 'grasp_safety_filter'
@@ -42,9 +40,7 @@ RECORDER_WARM_UP = 3.0
 
 
 def generate_launch_description():
-    default_config = os.path.join(
-        get_package_share_directory(PACKAGE), 'config', 'paper_scenario.yaml'
-    )
+    default_config = str(config_path())
     filter_on = LaunchConfiguration('filter')
     config = LaunchConfiguration('config')
     record = LaunchConfiguration('record')

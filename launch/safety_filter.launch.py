@@ -22,9 +22,6 @@ Launch arguments:
   ``margins`` and ``diagnostics``.
 """
 
-import os
-
-from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
@@ -32,6 +29,7 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 from grasp_safety_filter.io import topics
+from grasp_safety_filter.io.paths import config_path
 
 PACKAGE = 'grasp_safety_filter'
 
@@ -47,9 +45,7 @@ REMAPPED_TOPICS = {
 
 
 def generate_launch_description():
-    default_config = os.path.join(
-        get_package_share_directory(PACKAGE), 'config', 'paper_scenario.yaml'
-    )
+    default_config = str(config_path())
     arguments = [
         DeclareLaunchArgument(
             'config', default_value=default_config, description='ROS 2 parameter file'
