@@ -63,7 +63,7 @@ from grasp_safety_filter.io.schemas import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from hand_sim_node.config import SimConfig
-from hand_sim_node.simulator import Simulator
+from hand_sim_node.simulator import SimState, Simulator
 
 #: Timed pieces of a tick, in table order: JSON key and label.
 COMPONENTS: dict[str, str] = {
@@ -136,10 +136,10 @@ class Scenario:
         """Build a fresh filter (no warm start)."""
         return SafetyFilter.from_config(self.model, self.filter_config)
 
-    def reference(self, tick: Tick) -> ReferenceSource:
-        """Build the nominal controller's reference, started at ``tick``'s pose and time."""
+    def reference(self, start: Tick | SimState) -> ReferenceSource:
+        """Build the nominal controller's reference, started at ``start``'s pose and time."""
         return self.nominal_config.make_reference(
-            Pose(tick.p_object_in_palm, tick.R_object_to_palm), tick.t
+            Pose(start.p_object_in_palm, start.R_object_to_palm), start.t
         )
 
 
@@ -174,6 +174,11 @@ class LoopRate:
     steps: int
     stop_reason: str
 
+    @classmethod
+    def of(cls, simulator: Simulator, wall: float) -> LoopRate:
+        """Return the rate of a loop that ran ``simulator`` from its start in ``wall`` s."""
+        return cls(simulator.t, wall, simulator.step_index, simulator.stop_reason or 'duration')
+
     @property
     def real_time_factor(self) -> float:
         """Simulated seconds per wall second (> 1: faster than real time)."""
@@ -190,8 +195,18 @@ class LoopRate:
         }
 
 
-def _n_steps(scenario: Scenario, duration: float) -> int:
-    return max(1, round(duration / scenario.sim_config.time_step))
+def _closed_loop(
+    scenario: Scenario, duration: float
+) -> tuple[Simulator, NominalController, ReferenceSource, int]:
+    """Build a closed loop's simulator (at the scenario's start), controller and reference.
+
+    Returns:
+        Them and the number of steps ``duration`` takes.
+    """
+    simulator = Simulator(scenario.model, scenario.sim_config)
+    controller = NominalController(scenario.nominal_config)
+    n_steps = max(1, round(duration / scenario.sim_config.time_step))
+    return simulator, controller, scenario.reference(simulator.state), n_steps
 
 
 def record_filtered_run(
@@ -204,16 +219,10 @@ def record_filtered_run(
         a few µs each) and the simulator step's wall time per tick, s.
     """
     model = scenario.model
-    simulator = Simulator(model, scenario.sim_config)
-    controller = NominalController(scenario.nominal_config)
+    simulator, controller, reference, n_steps = _closed_loop(scenario, duration)
     safety_filter = scenario.safety_filter()
-    start = simulator.state
-    reference = scenario.nominal_config.make_reference(
-        Pose(start.p_object_in_palm, start.R_object_to_palm), start.t
-    )
     ticks: list[Tick] = []
     step_times: list[float] = []
-    n_steps = _n_steps(scenario, duration)
     wall_start = time.perf_counter()
     while simulator.stop_reason is None and simulator.step_index < n_steps:
         s = simulator.state
@@ -236,28 +245,20 @@ def record_filtered_run(
         step_start = time.perf_counter()
         simulator.step(result.u)
         step_times.append(time.perf_counter() - step_start)
-    wall = time.perf_counter() - wall_start
-    rate = LoopRate(simulator.t, wall, simulator.step_index, simulator.stop_reason or 'duration')
+    rate = LoopRate.of(simulator, time.perf_counter() - wall_start)
     return ticks, rate, np.array(step_times)
 
 
 def nominal_loop_rate(scenario: Scenario, duration: float) -> LoopRate:
     """Real-time factor of simulator + nominal controller (the paper's unfiltered run)."""
     model = scenario.model
-    simulator = Simulator(model, scenario.sim_config)
-    controller = NominalController(scenario.nominal_config)
-    start = simulator.state
-    reference = scenario.nominal_config.make_reference(
-        Pose(start.p_object_in_palm, start.R_object_to_palm), start.t
-    )
-    n_steps = _n_steps(scenario, duration)
+    simulator, controller, reference, n_steps = _closed_loop(scenario, duration)
     wall_start = time.perf_counter()
     while simulator.stop_reason is None and simulator.step_index < n_steps:
         s = simulator.state
         state = model.state(s.t, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
         simulator.step(controller.compute(state, reference.sample(s.t)).u)
-    wall = time.perf_counter() - wall_start
-    return LoopRate(simulator.t, wall, simulator.step_index, simulator.stop_reason or 'duration')
+    return LoopRate.of(simulator, time.perf_counter() - wall_start)
 
 
 def runner_loop_rate(config: Path, duration: float, time_step: float) -> LoopRate:
