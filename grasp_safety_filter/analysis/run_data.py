@@ -129,10 +129,9 @@ def load_run(bag: Path | str) -> RunData:
         q_by_stamp[header_stamp_ns(msg)] = joint_state_from_msg(
             msg, joint_names, source=topics.JOINT_STATES
         ).position
-    contacts = [contacts_from_msg(msg, contact_names) for _, msg in messages[topics.CONTACTS]]
-    contacts.sort(key=lambda c: c.t)
-    stamps = [header_stamp_ns(msg) for _, msg in messages[topics.CONTACTS]]
-    stamps.sort()
+    contact_msgs = sorted((msg for _, msg in messages[topics.CONTACTS]), key=header_stamp_ns)
+    contacts = [contacts_from_msg(msg, contact_names) for msg in contact_msgs]
+    stamps = [header_stamp_ns(msg) for msg in contact_msgs]
     missing = [s for s in stamps if s not in q_by_stamp]
     if missing:
         raise RunDataError(
