@@ -101,7 +101,8 @@ def paper_verdict(mode: str, summary: dict[str, Any]) -> tuple[bool, str]:
     return True, 'reproduced: ' + '; '.join(checks)
 
 
-def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> bool:
+def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> tuple[bool, str]:
+    """Print a run's summary and its :func:`paper_verdict`; return the verdict."""
     ok, verdict = paper_verdict(mode, summary)
     stop = summary['stop_reason'] or 'none'
     print(f'\n[{mode}] {out_dir}')
@@ -130,7 +131,7 @@ def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> bool:
         )
         print(f'  filter time (median / p99): {timing}')
     print(f'  paper outcome {verdict}')
-    return ok
+    return ok, verdict
 
 
 def _us(value: float | None) -> str:
@@ -206,8 +207,8 @@ def demo_main(argv: list[str] | None = None) -> int:
                 file=sys.stderr,
             )
             return 130
-        ok = _print_summary(mode, result.summary, out_dir)
-        verdicts[mode] = {'reproduced': ok, 'verdict': paper_verdict(mode, result.summary)[1]}
+        ok, verdict = _print_summary(mode, result.summary, out_dir)
+        verdicts[mode] = {'reproduced': ok, 'verdict': verdict}
     (args.out / 'verdict.json').write_text(json.dumps(verdicts, indent=2) + '\n')
     return 0 if all(v['reproduced'] for v in verdicts.values()) else 1
 
