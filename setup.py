@@ -41,6 +41,20 @@ setup(
             'flake8-builtins==3.1.0',
             'flake8-comprehensions==3.17.0',
         ],
+        # Real ROS 2 Jazzy rclpy and the message packages from the package index: the nodes
+        # run and are tested over Fast DDS without a ROS install (no AMENT_PREFIX_PATH).
+        'ros': [
+            'ros-jazzy-rclpy[fastrtps]',
+            'ros-jazzy-builtin-interfaces',
+            'ros-jazzy-diagnostic-msgs',
+            'ros-jazzy-geometry-msgs',
+            'ros-jazzy-nav-msgs',
+            'ros-jazzy-rcl-interfaces',
+            'ros-jazzy-rosgraph-msgs',
+            'ros-jazzy-sensor-msgs',
+            'ros-jazzy-std-msgs',
+            'ros-jazzy-trajectory-msgs',
+        ],
         # grasp-bench's comparison: the same QPs through cvxpy (OSQP, Clarabel) and daqp.
         'bench': ['cvxpy>=1.4', 'qpsolvers>=4.0', 'daqp>=0.6'],
     },
