@@ -7,14 +7,19 @@ Publishes ``/grasp/scenario`` (once, latched), ``/clock``, ``/hand/joint_states`
 ``/object/odom``, ``/hand/contacts`` and ``/diagnostics``; subscribes to
 ``/hand/effort_command``. Everything else is :class:`hand_sim_node.endpoint.HandSimEndpoint`.
 
-Start-up: the run starts (scenario and state at t_0 published) once the command topic has
-a publisher and the state topics have subscribers, so the first state is not lost while
-the graph connects; then in lockstep (the default) each command stamped with the current
-state's stamp advances the simulation by one step, as fast as the controllers answer. A
-wall-clock watchdog reports a command missing for ``command_timeout`` s and publishes the
-state again. Without lockstep, a wall-clock timer steps every ``time_step`` s with the
-latest command. The node exits one second after the run ends (so that a launch file with
-``on_exit=Shutdown()`` ends the demo and a recorder closes its bag).
+Start-up: the run starts (scenario and state at t_0 published) once the controllers are
+connected (:func:`hand_sim_node.endpoint.start_blockers`: a node publishing the command,
+it and the nodes it reads from subscribed to the state) and, with
+``start.wait_for_recorder`` set to a recorder's node name (``rosbag2_recorder`` for
+``ros2 bag record``), once that recorder is subscribed to every published topic of the topic
+table, so that neither the controllers nor the bag miss the first tick. While it waits it
+logs what it waits for every ``WAITING_LOG_PERIOD`` s. Then in lockstep (the default) each
+command stamped with the current state's stamp advances the simulation by one step, as fast
+as the controllers answer. A wall-clock watchdog reports a command missing for
+``command_timeout`` s and publishes the state again. Without lockstep, a wall-clock timer
+steps every ``time_step`` s with the latest command. The node exits one second after the run
+ends (so that a launch file with ``on_exit=Shutdown()`` ends the demo and a recorder closes
+its bag).
 
 Live parameters: ``stop_on_slip``, ``stop_on_workspace_exit``,
 ``stabilization.position_gain``, ``stabilization.velocity_gain`` and ``command_timeout``
@@ -39,17 +44,24 @@ from grasp_safety_filter.io.topics import (
     JOINT_STATES,
     OBJECT_ODOM,
     SCENARIO,
+    TOPICS,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from hand_sim_node.config import SimConfig
-from hand_sim_node.endpoint import HandSimEndpoint
+from hand_sim_node.endpoint import GraphSnapshot, HandSimEndpoint, start_blockers
 
 #: Wall-clock period of the start-up and watchdog checks, s.
 CHECK_PERIOD = 0.05
 
 #: Wall-clock delay between the end of the run and the node's exit, s.
 EXIT_DELAY = 1.0
+
+#: Wall-clock period of the log line saying what the start waits for, s.
+WAITING_LOG_PERIOD = 2.0
+
+#: Parameter naming the recorder node to wait for (empty: none).
+RECORDER_PARAMETER = 'start.wait_for_recorder'
 
 
 class HandSimNode(EndpointNode):
@@ -76,11 +88,13 @@ class HandSimNode(EndpointNode):
             )
         self._exit_timer = None
         self._waiting_logged_at = time.monotonic()
+        self.recorder = str(self.parameters[RECORDER_PARAMETER])
+        recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
         self.get_logger().info(
             f'simulating {model.n_joints} joints, {model.n_contacts} contacts for '
             f'{self.endpoint.config.duration} s in steps of {self.endpoint.config.time_step} s '
             f'({"lockstep" if self.endpoint.lockstep else "free-running"}); waiting for a '
-            f'controller on {self._command_subscription.topic_name}'
+            f'controller on {self._command_subscription.topic_name}{recorder}'
         )
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
@@ -101,22 +115,32 @@ class HandSimNode(EndpointNode):
         if self.endpoint.started:
             self.publish(self.endpoint.timeout(now))
             return
-        if self._graph_connected():
-            self.get_logger().info('controller connected: starting the run')
+        blockers = start_blockers(self._graph_snapshot(), self.recorder)
+        if not blockers:
+            recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
+            self.get_logger().info(f'controllers{recorder} connected: starting the run')
             self.publish(self.endpoint.start(now=now))
-        elif now - self._waiting_logged_at > 5.0:
+        elif now - self._waiting_logged_at >= WAITING_LOG_PERIOD:
             self._waiting_logged_at = now
-            self.get_logger().info(
-                f'still waiting for a publisher on {self._command_subscription.topic_name} '
-                'and subscribers on the state topics'
-            )
+            self.get_logger().info(f'waiting to start the run for {"; ".join(blockers)}')
 
-    def _graph_connected(self) -> bool:
-        """Whether a controller is there: a command publisher and state subscribers."""
-        return (
-            self.count_publishers(self._command_subscription.topic_name) > 0
-            and self.publisher(JOINT_STATES).get_subscription_count() > 0
-            and self.publisher(OBJECT_ODOM).get_subscription_count() > 0
+    def _graph_snapshot(self) -> GraphSnapshot:
+        """Return the topic table's publishers and subscribers as this node sees them."""
+        me = self.get_fully_qualified_name()
+
+        def nodes(infos: list[Any]) -> frozenset[str]:
+            names = (f'{i.node_namespace.rstrip("/")}/{i.node_name}' for i in infos)
+            return frozenset(name for name in names if name != me)
+
+        return GraphSnapshot(
+            publishers={s.name: nodes(self.get_publishers_info_by_topic(s.name)) for s in TOPICS},
+            subscribers={
+                s.name: nodes(self.get_subscriptions_info_by_topic(s.name)) for s in TOPICS
+            },
+            matched={
+                topic: self.publisher(topic).get_subscription_count()
+                for topic in (JOINT_STATES, OBJECT_ODOM)
+            },
         )
 
     def _exit_if_finished(self) -> None:

@@ -283,6 +283,14 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         'Publish the simulation time on /clock (for nodes with use_sim_time)',
         read_only=True,
     ),
+    ParameterSpec(
+        'start.wait_for_recorder',
+        STRING,
+        '',
+        'Start only once this node (e.g. rosbag2_recorder) subscribes to every published '
+        'topic of the topic table; empty: do not wait',
+        read_only=True,
+    ),
 )
 
 NOMINAL_CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
