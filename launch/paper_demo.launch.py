@@ -14,70 +14,64 @@ Launch arguments:
   passes u_nom through unchanged (parameter ``enabled``), so ``/hand/effort_command`` is
   the nominal command and the topics are the same in both runs.
 - ``config``: the parameter file (default: the installed ``config/paper_scenario.yaml``).
-- ``record`` (``true``/``false``, default ``false``): record every topic to ``bag`` (mcap).
-  The simulator then starts 3 s after the recorder, which needs that long to discover and
-  subscribe to the topics; ``/grasp/scenario`` is latched, so it is recorded regardless.
+- ``duration``: simulated time, s (default: the parameter file's).
+- ``record`` (``true``/``false``, default ``false``): record every topic to ``bag`` (mcap)
+  with ``ros2 bag record``, whose node ``rosbag2_recorder`` the simulator waits for
+  (``start.wait_for_recorder``): the run starts once the recorder is subscribed to every
+  topic, so the bag holds it from t = 0. Without a ``ros2`` executable the launch stops
+  with a message instead of running without a bag.
 - ``bag``: the bag directory to create (must not exist; default ``grasp_demo_bag``).
 
 The simulator exits when the run ends, which shuts the whole launch down (the recorder
-closes the bag on SIGINT).
+closes the bag on SIGINT). What is started, with which parameters, is decided in
+:mod:`grasp_safety_filter.io.launch_arguments`.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, Shutdown, TimerAction
-from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch.actions import (
+    DeclareLaunchArgument,
+    ExecuteProcess,
+    LogInfo,
+    OpaqueFunction,
+    Shutdown,
+)
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
 
+from grasp_safety_filter.io.launch_arguments import (
+    paper_demo,
+    parse_bool,
+    recorder_command,
+    recorder_problem,
+)
 from grasp_safety_filter.io.paths import config_path
-from grasp_safety_filter.io.topics import TOPICS
 
-PACKAGE = 'grasp_safety_filter'
 
-#: Seconds between the recorder's start and the simulator's, when recording.
-RECORDER_WARM_UP = 3.0
+def _actions(context):
+    def value(name):
+        return LaunchConfiguration(name).perform(context)
+
+    record = parse_bool('record', value('record'))
+    problem = recorder_problem(record)
+    if problem is not None:
+        return [LogInfo(msg=problem), Shutdown(reason=problem)]
+    duration = value('duration').strip()
+    nodes = paper_demo(
+        value('config'),
+        filter_on=parse_bool('filter', value('filter')),
+        record=record,
+        duration=float(duration) if duration else None,
+    )
+    actions = []
+    if record:
+        actions.append(ExecuteProcess(cmd=recorder_command(value('bag')), output='screen'))
+    for node in nodes:
+        on_exit = Shutdown(reason=f'{node.name} exited') if node.ends_launch else None
+        actions.append(Node(**node.node_kwargs(), on_exit=on_exit))
+    return actions
 
 
 def generate_launch_description():
-    default_config = str(config_path())
-    filter_on = LaunchConfiguration('filter')
-    config = LaunchConfiguration('config')
-    record = LaunchConfiguration('record')
-    bag = LaunchConfiguration('bag')
-    sim_time = {'use_sim_time': True}
-
-    hand_sim = Node(
-        package=PACKAGE,
-        executable='hand_sim_node',
-        name='hand_sim_node',
-        parameters=[config, sim_time],
-        output='screen',
-        on_exit=Shutdown(reason='the simulation ended'),
-    )
-    nominal_controller = Node(
-        package=PACKAGE,
-        executable='nominal_controller_node',
-        name='nominal_controller_node',
-        parameters=[config, sim_time],
-        output='screen',
-    )
-    safety_filter = Node(
-        package=PACKAGE,
-        executable='safety_filter_node',
-        name='safety_filter_node',
-        parameters=[config, sim_time, {'enabled': ParameterValue(filter_on, value_type=bool)}],
-        output='screen',
-    )
-    recorder = ExecuteProcess(
-        cmd=['ros2', 'bag', 'record', '-s', 'mcap', '-o', bag, '--topics']
-        + [spec.name for spec in TOPICS],
-        condition=IfCondition(record),
-        output='screen',
-    )
-    start_delay = PythonExpression(
-        [f'{RECORDER_WARM_UP} if "', record, '".lower() == "true" else 0.0']
-    )
     return LaunchDescription(
         [
             DeclareLaunchArgument(
@@ -87,7 +81,12 @@ def generate_launch_description():
                 description='Run the safety filter (false: u* = u_nom, the nominal run)',
             ),
             DeclareLaunchArgument(
-                'config', default_value=default_config, description='ROS 2 parameter file'
+                'config', default_value=str(config_path()), description='ROS 2 parameter file'
+            ),
+            DeclareLaunchArgument(
+                'duration',
+                default_value='',
+                description="Simulated time, s (empty: the parameter file's)",
             ),
             DeclareLaunchArgument(
                 'record',
@@ -98,9 +97,6 @@ def generate_launch_description():
             DeclareLaunchArgument(
                 'bag', default_value='grasp_demo_bag', description='Bag directory to create'
             ),
-            recorder,
-            nominal_controller,
-            safety_filter,
-            TimerAction(period=start_delay, actions=[hand_sim]),
+            OpaqueFunction(function=_actions),
         ]
     )

@@ -20,35 +20,41 @@ Launch arguments:
   child frame ``object``), ``effort_nominal`` (``sensor_msgs/JointState``: u_nom),
   ``effort_command`` (``sensor_msgs/JointState``: u*, to the hand's torque interface),
   ``margins`` and ``diagnostics``.
+
+The node, its parameters and remappings come from
+:func:`grasp_safety_filter.io.launch_arguments.safety_filter_alone`.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
 
-from grasp_safety_filter.io import topics
+from grasp_safety_filter.io.launch_arguments import (
+    parse_bool,
+    REMAPPED_TOPICS,
+    safety_filter_alone,
+)
 from grasp_safety_filter.io.paths import config_path
 
-PACKAGE = 'grasp_safety_filter'
 
-#: Launch argument -> the topic it remaps.
-REMAPPED_TOPICS = {
-    'joint_states': topics.JOINT_STATES,
-    'object_odom': topics.OBJECT_ODOM,
-    'effort_nominal': topics.EFFORT_NOMINAL,
-    'effort_command': topics.EFFORT_COMMAND,
-    'margins': topics.MARGINS,
-    'diagnostics': topics.DIAGNOSTICS,
-}
+def _actions(context):
+    def value(name):
+        return LaunchConfiguration(name).perform(context)
+
+    node = safety_filter_alone(
+        value('config'),
+        use_sim_time=parse_bool('use_sim_time', value('use_sim_time')),
+        enabled=parse_bool('enabled', value('enabled')),
+        remaps={name: value(name) for name in REMAPPED_TOPICS},
+    )
+    return [Node(**node.node_kwargs())]
 
 
 def generate_launch_description():
-    default_config = str(config_path())
     arguments = [
         DeclareLaunchArgument(
-            'config', default_value=default_config, description='ROS 2 parameter file'
+            'config', default_value=str(config_path()), description='ROS 2 parameter file'
         ),
         DeclareLaunchArgument(
             'use_sim_time',
@@ -67,20 +73,4 @@ def generate_launch_description():
         DeclareLaunchArgument(name, default_value=topic, description=f'Topic used for {topic}')
         for name, topic in REMAPPED_TOPICS.items()
     ]
-    safety_filter = Node(
-        package=PACKAGE,
-        executable='safety_filter_node',
-        name='safety_filter_node',
-        parameters=[
-            LaunchConfiguration('config'),
-            {
-                'use_sim_time': ParameterValue(
-                    LaunchConfiguration('use_sim_time'), value_type=bool
-                ),
-                'enabled': ParameterValue(LaunchConfiguration('enabled'), value_type=bool),
-            },
-        ],
-        remappings=[(topic, LaunchConfiguration(name)) for name, topic in REMAPPED_TOPICS.items()],
-        output='screen',
-    )
-    return LaunchDescription([*arguments, safety_filter])
+    return LaunchDescription([*arguments, OpaqueFunction(function=_actions)])

@@ -139,13 +139,19 @@ def test_endpoints_import_without_any_ros_package():
 
 
 def test_paper_demo_records_every_topic_of_the_table_as_mcap():
+    from grasp_safety_filter.io.launch_arguments import recorder_command
+
     source = (REPO / 'launch' / 'paper_demo.launch.py').read_text(encoding='utf-8')
     constants = {
         node.value for node in ast.walk(ast.parse(source)) if isinstance(node, ast.Constant)
     }
-    assert {'ros2', 'bag', 'record', '-s', 'mcap', '-o', '--topics'} <= constants
-    assert 'from grasp_safety_filter.io.topics import TOPICS' in source
-    assert {'filter', 'config', 'record', 'bag', 'enabled', 'use_sim_time'} <= constants
+    command = recorder_command('bag')
+    assert command[:3] == ['ros2', 'bag', 'record'] and {'-s', 'mcap', '-o', '--topics'} <= set(
+        command
+    )
+    assert command[command.index('--topics') + 1 :] == [spec.name for spec in topics.TOPICS]
+    assert 'recorder_command(' in source
+    assert {'filter', 'config', 'record', 'bag'} <= constants
     assert len(topics.TOPICS) == len({spec.name for spec in topics.TOPICS})
 
 
