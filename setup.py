@@ -70,6 +70,7 @@ setup(
             'grasp-demo = grasp_safety_filter.cli:demo_main',
             'grasp-analyze = grasp_safety_filter.cli:analyze_main',
             'grasp-bench = grasp_safety_filter.bench:bench_main',
+            'grasp-bench-ros = grasp_safety_filter.bench_ros:bench_ros_main',
             'grasp-model-report = grasp_safety_filter.cli:model_report_main',
             'hand_sim_node = hand_sim_node.node:main',
             'nominal_controller_node = grasp_safety_filter.nodes.nominal_controller_node:main',
