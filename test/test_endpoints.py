@@ -16,15 +16,26 @@ from rosbags.typesys import get_typestore, Stores
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.reference import PaperReference, Pose, ReferenceSample
-from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
+from grasp_safety_filter.control.safety_filter import (
+    FilterStatus,
+    SafetyFilter,
+    SafetyFilterConfig,
+)
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
+from grasp_safety_filter.io.diagnostic_keys import (
+    FAILED_STATUSES,
+    INPUT_STATUSES,
+    Key,
+    silent_for,
+    TickStatus,
+)
 from grasp_safety_filter.io.messages import DiagnosticLevel, MessageNamespace, ObjectReference
 from grasp_safety_filter.io.schemas import load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.outgoing import Outgoing
-from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
 from grasp_safety_filter.nodes.scenario import scenario_from_msg, scenario_from_text, ScenarioError
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
@@ -206,7 +217,9 @@ def test_filter_off_passes_the_nominal_command_through_bit_for_bit(params):
     reports = statuses(graph.log, 'safety_filter')
     assert {r.values['status'] for r in reports} == {'disabled'}
     assert {r.values['filter.enabled'] for r in reports} == {'false'}
-    assert all(r.level is DiagnosticLevel.OK for r in reports)
+    # Nothing is enforced while the filter is off: every tick says so at WARN.
+    assert all(r.level is DiagnosticLevel.WARN for r in reports)
+    assert all('OFF' in r.message for r in reports)
 
 
 def test_scenario_message_describes_the_model_and_run(params):
@@ -508,6 +521,7 @@ def test_filter_holds_the_last_safe_command_on_bad_input(params, case):
     (report,) = statuses(outgoing, 'safety_filter')
     assert report.level is DiagnosticLevel.WARN
     assert report.values['input.mode'] == 'holding'
+    assert report.values[Key.STATUS] == TickStatus.INPUT_HELD.value
     assert match in report.message
     # The other inputs of that tick arrive afterwards: no command is computed from them.
     for other, handler in handlers.items():
@@ -535,6 +549,7 @@ def test_filter_rejects_stale_and_out_of_order_stamps(params):
     assert 'out-of-order' in report.message
     # Nothing was ever accepted: fallback (gravity compensation needs a joint state first).
     assert report.level is DiagnosticLevel.ERROR
+    assert report.values[Key.STATUS] == TickStatus.INPUT_FALLBACK.value
     (fallback,) = commands(out_of_order, sim.model.joint_names)
     np.testing.assert_array_equal(fallback, 0.0)
     assert 'zero torque' in report.message
@@ -608,3 +623,176 @@ def test_filter_can_be_switched_off_and_on_live(params):
     assert passed.tobytes() == u_nom.tobytes()
     assert safety_filter.filter.calls == 1
     assert math.isfinite(float(statuses(outgoing, 'safety_filter')[0].values['step_time_us']))
+
+
+def next_tick(safety_filter, inputs, t, wall=None, only=None):
+    """Deliver the inputs restamped to ``t`` (those of ``only``, else all); return the output."""
+    handlers = {
+        topics.JOINT_STATES: safety_filter.on_joint_states,
+        topics.OBJECT_ODOM: safety_filter.on_odom,
+        topics.EFFORT_NOMINAL: safety_filter.on_effort_nominal,
+    }
+    outgoing = []
+    for topic, msg in zip(handlers, inputs, strict=True):
+        if only is None or topic in only:
+            outgoing += handlers[topic](restamp(msg, t), wall=wall)
+    return outgoing
+
+
+class RestatingFilter(CountingFilter):
+    """A SafetyFilter whose answers carry the statuses given per call (else its own)."""
+
+    def __init__(self, core, statuses):
+        super().__init__(core)
+        self.statuses = statuses
+
+    def solve(self, state, u_nom):
+        result = super().solve(state, u_nom)
+        status = self.statuses.get(self.calls)
+        return result if status is None else dataclasses.replace(result, status=status)
+
+
+def test_every_qp_status_is_a_tick_status_and_a_failed_one_is_an_error(params):
+    assert {TickStatus.of(s).value for s in FilterStatus} == {s.value for s in FilterStatus}
+    assert FAILED_STATUSES == {
+        TickStatus.of(FilterStatus.FALLBACK_LAST_GOOD),
+        TickStatus.of(FilterStatus.FALLBACK_NOMINAL),
+    }
+    _, joints, odometry, effort_nominal = tick_inputs(params)
+    for status in FilterStatus:
+        safety_filter = make_filter(params)
+        safety_filter.filter = RestatingFilter(safety_filter.filter, {1: status})
+        outgoing = next_tick(safety_filter, (joints, odometry, effort_nominal), 0.0)
+        (report,) = statuses(outgoing, 'safety_filter')
+        assert report.values[Key.STATUS] == status.value
+        if TickStatus.of(status) in FAILED_STATUSES:
+            assert report.level is DiagnosticLevel.ERROR, status
+        else:
+            assert report.level is not DiagnosticLevel.ERROR, status
+
+
+# ----------------------------------------------------------------------------------------
+# The input watchdog (the steady clock is an argument)
+
+WALL = 1000.0  # an arbitrary steady-clock origin, s
+
+
+def filter_after_one_wall_tick(params):
+    """Return (sim, filter endpoint, its safe u*, the inputs) after a tick accepted at WALL."""
+    sim, joints, odometry, effort_nominal = tick_inputs(params)
+    safety_filter = make_filter(params)
+    safety_filter.filter = CountingFilter(safety_filter.filter)
+    assert safety_filter.on_joint_states(joints, wall=WALL - 0.0004) == []
+    assert safety_filter.on_odom(odometry, wall=WALL - 0.0002) == []
+    (safe,) = commands(
+        safety_filter.on_effort_nominal(effort_nominal, wall=WALL), sim.model.joint_names
+    )
+    return sim, safety_filter, safe, (joints, odometry, effort_nominal)
+
+
+def test_watchdog_sends_the_fallback_and_an_error_once_no_tick_came_for_the_hold_timeout(params):
+    sim, safety_filter, safe, (joints, _, _) = filter_after_one_wall_tick(params)
+    hold_timeout = safety_filter.hold.hold_timeout
+    # Within the hold timeout: the normal path, nothing to send.
+    for wall in (WALL + WATCHDOG_PERIOD, WALL + 0.999 * hold_timeout):
+        assert safety_filter.watchdog(wall, now=0.0) == []
+    # Past it: fallback and ERROR at every call. The node clock stood still (a dead
+    # simulator under use_sim_time): the command is stamped with it.
+    accepted = m.joint_state_from_msg(joints, sim.model.joint_names).position
+    g = sim.model.hand.terms(accepted, np.zeros(9)).gravity_torque
+    limits = sim.model.effort_limits
+    expected = np.clip(g, -limits, limits)
+    inputs = (topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL)
+    for k in range(1, 4):
+        wall = WALL + hold_timeout + k * WATCHDOG_PERIOD
+        outgoing = safety_filter.watchdog(wall, now=0.0)
+        assert [o.topic for o in outgoing] == [topics.EFFORT_COMMAND, topics.DIAGNOSTICS]
+        assert all(o.stamp_ns == 0 for o in outgoing)
+        (fallback,) = commands(outgoing, sim.model.joint_names)
+        np.testing.assert_allclose(fallback, expected, rtol=1e-12, atol=1e-12)
+        assert not np.allclose(fallback, safe)
+        (report,) = statuses(outgoing, 'safety_filter')
+        assert report.level is DiagnosticLevel.ERROR
+        assert report.values[Key.STATUS] == TickStatus.INPUT_FALLBACK.value
+        assert report.values[Key.INPUT_WATCHDOG] == 'true'
+        assert report.values[Key.INPUT_MODE] == 'fallback'
+        assert report.values[Key.INPUT_MISSING] == ','.join(inputs)
+        elapsed = float(report.values[Key.INPUT_WALL_TIME_SINCE_ACCEPTED])
+        assert elapsed == pytest.approx(wall - WALL)
+        assert float(report.values[silent_for(topics.JOINT_STATES)]) == pytest.approx(
+            wall - WALL + 0.0004
+        )
+        for topic in inputs:
+            assert f'nothing on {topic} for ' in report.message
+        assert 'gravity_compensation' in report.message
+    # The watchdog stamps with the node clock when it runs (not before the last tick).
+    (command, _) = safety_filter.watchdog(WALL + 1.0, now=2.5)
+    assert command.stamp_ns == m.seconds_to_nanoseconds(2.5)
+    assert safety_filter.hold.rejected_ticks == 0
+    assert safety_filter.filter.calls == 1
+
+
+def test_watchdog_names_the_input_that_stopped_and_ticks_say_when_they_resume(params):
+    _, safety_filter, _, inputs = filter_after_one_wall_tick(params)
+    dt = 0.001
+    alive = {topics.JOINT_STATES, topics.OBJECT_ODOM}
+    assert next_tick(safety_filter, inputs, dt, wall=WALL + 0.05, only=alive) == []
+    (_, diagnostics) = safety_filter.watchdog(WALL + 0.15, now=dt)
+    (report,) = statuses([diagnostics], 'safety_filter')
+    assert report.values[Key.INPUT_MISSING] == topics.EFFORT_NOMINAL
+    assert f'nothing on {topics.EFFORT_NOMINAL} for 0.150 s' in report.message
+    assert topics.JOINT_STATES not in report.message.split(':', 2)[-1]
+
+    # The nominal controller is back: a normal tick, which says how long it was away.
+    outgoing = next_tick(safety_filter, inputs, dt, wall=WALL + 0.3, only={topics.EFFORT_NOMINAL})
+    assert [o.topic for o in outgoing] == [
+        topics.EFFORT_COMMAND,
+        topics.MARGINS,
+        topics.DIAGNOSTICS,
+    ]
+    (report,) = statuses(outgoing, 'safety_filter')
+    assert report.values[Key.INPUT_MODE] == 'ok'
+    assert TickStatus(report.values[Key.STATUS]) not in INPUT_STATUSES
+    assert float(report.values[Key.INPUT_RESUMED_AFTER]) == pytest.approx(0.3)
+    assert 'inputs back after 0.300 s' in report.message
+    assert report.level >= DiagnosticLevel.WARN
+    assert safety_filter.watchdog(WALL + 0.35, now=dt) == []
+    (report,) = statuses(
+        next_tick(safety_filter, inputs, 2 * dt, wall=WALL + 0.301), 'safety_filter'
+    )
+    assert Key.INPUT_RESUMED_AFTER not in report.values
+
+
+def test_watchdog_waits_for_a_first_tick_with_wall_times(params):
+    fresh = make_filter(params)
+    assert fresh.watchdog(WALL + 100.0, now=0.0) == []
+    # Inputs but no complete tick yet: still nothing to take over from.
+    _, joints, _, _ = tick_inputs(params)
+    fresh.on_joint_states(joints, wall=WALL)
+    assert fresh.watchdog(WALL + 100.0, now=0.0) == []
+    # The runner passes no wall times: its watchdog never acts.
+    _, safety_filter, _, _ = filter_after_one_good_tick(params)
+    assert safety_filter.watchdog(WALL + 100.0, now=0.0) == []
+
+
+def test_switching_the_filter_is_reported_with_its_time(params):
+    _, safety_filter, _, inputs = filter_after_one_good_tick(params)
+    assert safety_filter.switch(True, now=0.2) is None  # already on
+    text = safety_filter.switch(False, now=0.25)
+    assert 'OFF' in text and 't = 0.250000 s' in text
+    assert safety_filter.switch(False, now=0.3) is None
+    dt = 0.001
+    (report,) = statuses(next_tick(safety_filter, inputs, dt), 'safety_filter')
+    assert report.level is DiagnosticLevel.WARN
+    assert report.values[Key.STATUS] == TickStatus.DISABLED.value
+    assert report.values[Key.FILTER_ENABLED] == 'false'
+    assert float(report.values[Key.FILTER_SWITCHED_AT]) == 0.25
+    text = safety_filter.switch(True, now=0.5)
+    assert 'ON' in text and 't = 0.500000 s' in text
+    (report,) = statuses(next_tick(safety_filter, inputs, 2 * dt), 'safety_filter')
+    assert report.values[Key.STATUS] != TickStatus.DISABLED.value
+    assert report.values[Key.FILTER_ENABLED] == 'true'
+    assert float(report.values[Key.FILTER_SWITCHED_AT]) == 0.5
+    assert report.level is (
+        DiagnosticLevel.WARN if report.values[Key.RELAXED] == 'true' else DiagnosticLevel.OK
+    )

@@ -13,6 +13,7 @@ from grasp_safety_filter.control.hold_policy import (
     InputMode,
     InputPolicyConfig,
 )
+from grasp_safety_filter.io.diagnostic_keys import Key
 from grasp_safety_filter.io.messages import DiagnosticLevel
 from grasp_safety_filter.io.schemas import NODE_SCHEMAS, SAFETY_FILTER_NODE
 
@@ -110,6 +111,40 @@ def test_diagnostic_values_report_mode_reason_and_age():
     assert values['input.rejected_ticks'] == 1
     assert values['input.fallback'] == 'zero'
     assert values['input.time_since_accepted'] == pytest.approx(0.04)
+
+
+@pytest.mark.parametrize('fallback', list(Fallback))
+def test_absent_input_holds_then_falls_back_on_the_callers_clock_without_a_rejection(fallback):
+    u_max = np.full(M, 2.0)
+    p = policy(fallback, u_min=-u_max, u_max=u_max)
+    p.accept(7.0, SAFE)  # node clock: its time does not matter to absent()
+    np.testing.assert_array_equal(p.absent(0.125, 'nothing on /hand/joint_states', GRAVITY), SAFE)
+    assert p.mode is InputMode.HOLDING
+    expected = np.zeros(M) if fallback is Fallback.ZERO else np.minimum(GRAVITY, 2.0)
+    for elapsed in (0.1251, 3.0):
+        u = p.absent(elapsed, 'nothing on /hand/joint_states for 3 s', GRAVITY)
+        np.testing.assert_array_equal(u, expected)
+        assert p.mode is InputMode.FALLBACK
+        assert p.diagnostic_level is DiagnosticLevel.ERROR
+    assert p.rejected_ticks == 0
+    assert p.last_reason == 'nothing on /hand/joint_states for 3 s'
+    # Before any safe command there is nothing to hold.
+    fresh = policy(fallback)
+    unclipped = np.zeros(M) if fallback is Fallback.ZERO else GRAVITY
+    np.testing.assert_array_equal(fresh.absent(0.0, 'x', GRAVITY), unclipped)
+    assert fresh.mode is InputMode.FALLBACK
+
+
+def test_diagnostic_values_use_the_shared_keys():
+    p = policy()
+    assert set(p.diagnostic_values(0.0)) == {
+        Key.INPUT_MODE,
+        Key.INPUT_FALLBACK,
+        Key.INPUT_REJECTED_TICKS,
+        Key.INPUT_LAST_REJECTION,
+        Key.INPUT_TIME_SINCE_ACCEPTED,
+    }
+    assert all(key.startswith('input.') for key in p.diagnostic_values(0.0))
 
 
 def test_config_reads_the_safety_filter_schema_defaults():

@@ -16,7 +16,12 @@ a tick it follows this policy:
    to the actuator limits when they are given.
 
 The first accepted tick returns to ``"ok"``. The mode, the last rejection reason and the
-rejection count go to ``/diagnostics`` (WARN while holding, ERROR in fallback).
+rejection count go to ``/diagnostics`` (WARN while holding, ERROR in fallback; the keys are
+:class:`grasp_safety_filter.io.diagnostic_keys.Key`).
+
+Input that does not arrive at all is the same case on another clock: the filter's input
+watchdog calls :meth:`HoldPolicy.absent` with the wall-clock time since the last accepted
+tick (under ``use_sim_time`` a dead simulator also stops the node clock).
 
 Parameters read (safety_filter_node): ``input.max_age`` (s, for the stamp guard),
 ``input.hold_timeout`` (s) and ``input.fallback`` (``"zero"`` or
@@ -33,19 +38,12 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.io.diagnostic_keys import InputMode, Key
 from grasp_safety_filter.io.messages import DiagnosticLevel
 
 MAX_AGE_PARAMETER = 'input.max_age'
 HOLD_TIMEOUT_PARAMETER = 'input.hold_timeout'
 FALLBACK_PARAMETER = 'input.fallback'
-
-
-class InputMode(Enum):
-    """How the last command was obtained."""
-
-    OK = 'ok'
-    HOLDING = 'holding'
-    FALLBACK = 'fallback'
 
 
 class Fallback(Enum):
@@ -132,6 +130,7 @@ class HoldPolicy:
 
     Call exactly one of :meth:`accept` (good input, with the filter's command) or
     :meth:`reject` (bad input, with the reason) per tick; both return the command to send.
+    :meth:`absent` answers a check that found no tick at all (the input watchdog).
     """
 
     def __init__(
@@ -229,12 +228,32 @@ class HoldPolicy:
 
         """
         self._rejected_ticks += 1
+        since = math.inf if self._last_good_time is None else t - self._last_good_time
+        return self._answer(since, reason, gravity_torque)
+
+    def absent(
+        self, elapsed: float, reason: str, gravity_torque: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Record that no tick came for ``elapsed`` s; return the held or fallback command.
+
+        Not a rejected tick (:attr:`rejected_ticks` is unchanged): the input watchdog's
+        answer when nothing arrives.
+
+        Args:
+            elapsed: Time since the last accepted tick, s, on the caller's clock (the
+                watchdog's wall clock); ``inf`` if there was none.
+            reason: Which input is missing and since when (reported on /diagnostics).
+            gravity_torque: As for :meth:`reject`.
+
+        """
+        return self._answer(float(elapsed), reason, gravity_torque)
+
+    def _answer(
+        self, since_accepted: float, reason: str, gravity_torque: np.ndarray | None
+    ) -> np.ndarray:
+        """Hold the last safe command up to ``hold_timeout`` s after it, else fall back."""
         self._last_reason = str(reason)
-        if (
-            self._last_command is not None
-            and self._last_good_time is not None
-            and t - self._last_good_time <= self.hold_timeout
-        ):
+        if self._last_command is not None and since_accepted <= self.hold_timeout:
             self._mode = InputMode.HOLDING
             return self._last_command.copy()
         self._mode = InputMode.FALLBACK
@@ -256,11 +275,11 @@ class HoldPolicy:
         """Key/values for /diagnostics at time ``t``, s."""
         since = math.inf if self._last_good_time is None else t - self._last_good_time
         return {
-            'input.mode': self._mode.value,
-            'input.fallback': self.fallback.value,
-            'input.rejected_ticks': self._rejected_ticks,
-            'input.last_rejection': self._last_reason,
-            'input.time_since_accepted': since,
+            Key.INPUT_MODE: self._mode.value,
+            Key.INPUT_FALLBACK: self.fallback.value,
+            Key.INPUT_REJECTED_TICKS: self._rejected_ticks,
+            Key.INPUT_LAST_REJECTION: self._last_reason,
+            Key.INPUT_TIME_SINCE_ACCEPTED: since,
         }
 
     def _command(self, name: str, value: np.ndarray) -> np.ndarray:

@@ -21,17 +21,31 @@ for that stamp goes on), else with ``now``; the tick of that stamp is then close
 complete, valid set arriving again for the last tick's stamp (a simulator that re-sent its
 state) gets the same messages again, without a new solve.
 
-With ``enabled=False`` (the paper's unfiltered run) the endpoint validates the same inputs
-and publishes ``u* = u_nom`` on the same topic, with the margins at u_nom.
+Input watchdog: :meth:`SafetyFilterEndpoint.watchdog`, called periodically on a steady
+clock (the node: every :data:`WATCHDOG_PERIOD` s), stands in for ticks that do not come at
+all (a dead simulator, nominal controller or driver). Once no tick has been accepted for
+more than ``input.hold_timeout`` s of wall-clock time, each call returns the hold policy's
+fallback on ``/hand/effort_command`` and an ERROR status naming the inputs that stopped and
+for how long; the first tick accepted afterwards says how long the inputs were missing.
+The wall-clock times come with the inputs (``wall``); without them (the ROS-free runner)
+the watchdog never acts.
 
-Diagnostic values of the ``safety_filter`` status on every tick: ``filter.enabled``,
-``status`` (``nominal``, ``solved``, ``relaxed``, ``fallback_last_good``,
-``fallback_nominal``, or ``disabled``), ``solve_time_us`` (the QP solve: OSQP and the
+With ``enabled=False`` (the paper's unfiltered run) the endpoint validates the same inputs
+and publishes ``u* = u_nom`` on the same topic, with the margins at u_nom; its status is
+then WARN (the grasp constraints are not enforced). :meth:`SafetyFilterEndpoint.switch`
+turns the filter on or off at run time and records when.
+
+Diagnostic values of the ``safety_filter`` status (keys and status values:
+:mod:`grasp_safety_filter.io.diagnostic_keys`) on every tick: ``filter.enabled``,
+``filter.switched_at`` (after a switch), ``status`` (a ``TickStatus``: ``nominal``,
+``solved``, ``solved_active_set``, ``relaxed``, ``fallback_last_good``,
+``fallback_nominal``, ``disabled``; ``input_held`` or ``input_fallback`` on a rejected
+input and on the watchdog's statuses), ``solve_time_us`` (the QP solve: OSQP and the
 active-set steps), ``step_time_us`` (the whole filter step, ``SafetyFilter.solve``: rows,
 QP, margins), ``tick_time_us`` (the whole tick: model terms, filter step, messages),
-``iterations``, ``relaxed``, ``relaxed_families``
-(comma-separated), ``max_violation``, ``active`` (comma-separated row names),
-``min_margin.<family>`` per constraint family, and the hold policy's ``input.*`` values.
+``iterations``, ``relaxed``, ``relaxed_families`` (comma-separated), ``max_violation``,
+``active`` (comma-separated row names), ``min_margin.<family>`` per constraint family, and
+the hold policy's ``input.*`` values.
 """
 
 from __future__ import annotations
@@ -47,14 +61,22 @@ import numpy as np
 from grasp_safety_filter.control.hold_policy import (
     Fallback,
     HoldPolicy,
-    InputMode,
     InputPolicyConfig,
 )
 from grasp_safety_filter.control.safety_filter import (
     FilterResult,
-    FilterStatus,
     SafetyFilter,
     SafetyFilterConfig,
+)
+from grasp_safety_filter.io.diagnostic_keys import (
+    FAILED_STATUSES,
+    FILTER_DIAGNOSTIC,
+    INPUT_MODE_STATUS,
+    InputMode,
+    Key,
+    min_margin,
+    silent_for,
+    TickStatus,
 )
 from grasp_safety_filter.io.messages import (
     DiagnosticLevel,
@@ -87,11 +109,12 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 
-#: Name of the safety filter's ``DiagnosticStatus``.
-DIAGNOSTIC_NAME = 'safety_filter'
-
-#: ``status`` value when the filter is switched off (pass-through).
-DISABLED = 'disabled'
+#: Period of the input watchdog, s (steady clock). The fallback goes out and /diagnostics
+#: say ERROR at most ``input.hold_timeout`` + this after the last accepted tick, and the
+#: fallback is repeated at this period while the inputs stay away: 50 Hz keeps a driver
+#: with a command timeout of 20 ms or more fed, and costs the 1 kHz loop one subtraction
+#: per call.
+WATCHDOG_PERIOD = 0.02
 
 #: Incomplete input sets kept waiting for their other inputs (older ones are dropped).
 MAX_PENDING = 64
@@ -129,7 +152,8 @@ class SafetyFilterEndpoint:
         filter: The safety filter core.
         hold: The input hold policy.
         guard: Stale and out-of-order stamp checks, per input topic.
-        enabled: Whether u* is filtered (True) or u_nom passed through (False).
+        enabled: Whether u* is filtered (True) or u_nom passed through (False); change it
+            with :meth:`switch`.
         last_result: The last tick's :class:`FilterResult` (None when disabled or before).
 
     """
@@ -158,24 +182,37 @@ class SafetyFilterEndpoint:
         self._last_tick_ns: int | None = None
         self._last_outputs: list[Outgoing] = []
         self._last_positions: np.ndarray | None = None
+        # Wall-clock (steady) times for the watchdog, s: last message per topic, last
+        # accepted tick, and when the watchdog took over (None while ticks come).
+        self._received_wall: dict[str, float] = {}
+        self._accepted_wall: float | None = None
+        self._watchdog_since: float | None = None
+        self._switched_at: float | None = None
 
     # -------------------------------------------------------------------------- inputs
-    def on_joint_states(self, msg: Any, now: float | None = None) -> list[Outgoing]:
-        """Handle ``/hand/joint_states`` (see :meth:`on_effort_nominal` for ``now``)."""
+    def on_joint_states(
+        self, msg: Any, now: float | None = None, wall: float | None = None
+    ) -> list[Outgoing]:
+        """Handle ``/hand/joint_states`` (see :meth:`on_effort_nominal`)."""
         return self._on_input(
             JOINT_STATES,
             msg,
             now,
+            wall,
             lambda: joint_state_from_msg(msg, self._joint_names, JOINT_STATES),
         )
 
-    def on_odom(self, msg: Any, now: float | None = None) -> list[Outgoing]:
-        """Handle ``/object/odom`` (see :meth:`on_effort_nominal` for ``now``)."""
+    def on_odom(
+        self, msg: Any, now: float | None = None, wall: float | None = None
+    ) -> list[Outgoing]:
+        """Handle ``/object/odom`` (see :meth:`on_effort_nominal`)."""
         return self._on_input(
-            OBJECT_ODOM, msg, now, lambda: odometry_from_msg(msg, source=OBJECT_ODOM)
+            OBJECT_ODOM, msg, now, wall, lambda: odometry_from_msg(msg, source=OBJECT_ODOM)
         )
 
-    def on_effort_nominal(self, msg: Any, now: float | None = None) -> list[Outgoing]:
+    def on_effort_nominal(
+        self, msg: Any, now: float | None = None, wall: float | None = None
+    ) -> list[Outgoing]:
         """Handle ``/hand/effort_nominal``; tick when all inputs of its stamp are in hand.
 
         Args:
@@ -183,6 +220,8 @@ class SafetyFilterEndpoint:
             now: The node's clock, s (simulation time under ``use_sim_time``). None: the
                 time of the last tick, so a runner without a clock still detects stale and
                 out-of-order input.
+            wall: The steady clock at receipt, s (the clock :meth:`watchdog` is called
+                with). None: the watchdog does not watch this input.
 
         Returns:
             Nothing while the tick's inputs are incomplete; on a tick, ``/hand/effort_command``,
@@ -194,7 +233,96 @@ class SafetyFilterEndpoint:
             EFFORT_NOMINAL,
             msg,
             now,
+            wall,
             lambda: effort_from_msg(msg, self._joint_names, EFFORT_NOMINAL),
+        )
+
+    def watchdog(self, now_wall: float, now: float) -> list[Outgoing]:
+        """Stand in for ticks that stopped coming: the fallback command and an ERROR.
+
+        Call it periodically (every :data:`WATCHDOG_PERIOD` s) from a steady clock: under
+        ``use_sim_time`` a dead simulator stops the node clock too.
+
+        Args:
+            now_wall: The steady clock, s (that of the handlers' ``wall``).
+            now: The node's clock, s: the stamp of the fallback command (not before the
+                last tick's stamp, so commands never go back in time).
+
+        Returns:
+            Nothing before the first accepted tick and while the last one is at most
+            ``input.hold_timeout`` s old; else the hold policy's fallback (zero torque or
+            ``g(q)`` at the last accepted joint positions, clipped to the actuator limits)
+            on ``/hand/effort_command`` and an ERROR ``/diagnostics`` status naming the
+            missing inputs and how long each has been silent.
+
+        """
+        if self._accepted_wall is None:
+            return []
+        elapsed = now_wall - self._accepted_wall
+        if elapsed <= self.hold.hold_timeout:
+            return []
+        missing = [
+            topic
+            for topic in _INPUTS
+            if self._received_wall.get(topic, -math.inf) <= self._accepted_wall
+        ]
+        silent = {topic: now_wall - self._received_wall.get(topic, -math.inf) for topic in _INPUTS}
+        last_tick = nanoseconds_to_seconds(self._last_tick_ns or 0)
+        if missing:
+            what = ', '.join(f'nothing on {topic} for {silent[topic]:.3f} s' for topic in missing)
+        else:
+            what = 'inputs arrive, but no complete valid set of one stamp'
+        reason = (
+            f'no tick accepted for {elapsed:.3f} s of wall-clock time (last at t = '
+            f'{last_tick:.6f} s): {what}'
+        )
+        gravity, note = self._fallback_gravity()
+        u = self.hold.absent(elapsed, reason, gravity)
+        if self._watchdog_since is None:
+            self._watchdog_since = now_wall
+        t = nanoseconds_to_seconds(self._clock_stamp(now))
+        values: dict[str, Any] = {
+            Key.FILTER_ENABLED: self.enabled,
+            Key.STATUS: INPUT_MODE_STATUS[self.hold.mode].value,
+            Key.INPUT_WATCHDOG: True,
+            Key.INPUT_MISSING: ','.join(missing),
+            Key.INPUT_WALL_TIME_SINCE_ACCEPTED: elapsed,
+        }
+        values.update({silent_for(topic): age for topic, age in silent.items()})
+        values.update(self.hold.diagnostic_values(now))
+        report = DiagnosticReport.create(
+            FILTER_DIAGNOSTIC,
+            self.hold.diagnostic_level,
+            f'inputs missing, fallback command: {self.hold.fallback.value}{note}: {reason}',
+            values,
+        )
+        return [
+            stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
+            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report)),
+        ]
+
+    def switch(self, enabled: bool, now: float | None = None) -> str | None:
+        """Switch the filter on or off from the next tick; say so (None if unchanged).
+
+        Args:
+            enabled: Filter on (True) or pass u_nom through (False).
+            now: The node's clock, s, recorded as ``filter.switched_at``. None: the last
+                tick's time.
+
+        Returns:
+            A line for the log (the node logs it at WARN when off, INFO when on).
+
+        """
+        enabled = bool(enabled)
+        if enabled == self.enabled:
+            return None
+        self.enabled = enabled
+        self._switched_at = self._now(None, now)
+        if enabled:
+            return f'safety filter switched ON at t = {self._switched_at:.6f} s (node clock)'
+        return (
+            f'safety filter switched OFF at t = {self._switched_at:.6f} s (node clock): '
+            'u* = u_nom, the grasp constraints are NOT enforced'
         )
 
     def update_config(
@@ -215,7 +343,7 @@ class SafetyFilterEndpoint:
             self.hold.hold_timeout = input_policy_config.hold_timeout
             self.hold.fallback = input_policy_config.fallback
         if enabled is not None:
-            self.enabled = bool(enabled)
+            self.switch(enabled)
 
     # ------------------------------------------------------------------------ internals
     def _now(self, msg: Any, now: float | None) -> float:
@@ -229,8 +357,12 @@ class SafetyFilterEndpoint:
         except (AttributeError, MessageError):
             return 0.0
 
-    def _on_input(self, topic: str, msg: Any, now: float | None, parse: Any) -> list[Outgoing]:
+    def _on_input(
+        self, topic: str, msg: Any, now: float | None, wall: float | None, parse: Any
+    ) -> list[Outgoing]:
         now_s = self._now(msg, now)
+        if wall is not None:
+            self._received_wall[topic] = wall
         try:
             data = parse()
             self.guard.accept(topic, data.t, now_s)
@@ -259,7 +391,7 @@ class SafetyFilterEndpoint:
             return []
         del self._pending[stamp]
         tick = TickInputs(inputs[JOINT_STATES], inputs[OBJECT_ODOM], inputs[EFFORT_NOMINAL])
-        return self._tick(stamp, tick, now_s)
+        return self._tick(stamp, tick, now_s, wall)
 
     def _close(self, stamp: int) -> None:
         """Mark the tick of ``stamp`` as done: drop every older or equal pending input."""
@@ -268,7 +400,9 @@ class SafetyFilterEndpoint:
         for old in [s for s in self._pending if s <= stamp]:
             del self._pending[old]
 
-    def _tick(self, stamp: int, inputs: TickInputs, now: float) -> list[Outgoing]:
+    def _tick(
+        self, stamp: int, inputs: TickInputs, now: float, wall: float | None
+    ) -> list[Outgoing]:
         start = time.perf_counter()
         t = inputs.joint_states.t
         u_nom = inputs.nominal.effort
@@ -301,12 +435,20 @@ class SafetyFilterEndpoint:
         self.last_result = result
         u = self.hold.accept(now, u)
         self._close(stamp)
+        resumed_after = None
+        if wall is not None:
+            if self._watchdog_since is not None and self._accepted_wall is not None:
+                resumed_after = wall - self._accepted_wall
+                self._watchdog_since = None
+            self._accepted_wall = wall
         outgoing = [
             stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
             stamped(MARGINS, margins_to_msg(self.msgs, t, margins.names, margins.array)),
         ]
         tick_time = time.perf_counter() - start
-        outgoing.append(self._tick_status(t, now, result, margins, filter_time, tick_time))
+        outgoing.append(
+            self._tick_status(t, now, result, margins, filter_time, tick_time, resumed_after)
+        )
         self._last_outputs = outgoing
         return list(outgoing)
 
@@ -318,32 +460,43 @@ class SafetyFilterEndpoint:
         margins: Mapping[str, float],
         step_time: float,
         tick_time: float,
+        resumed_after: float | None = None,
     ) -> Outgoing:
-        values: dict[str, Any] = {'filter.enabled': self.enabled}
+        values: dict[str, Any] = {Key.FILTER_ENABLED: self.enabled}
+        if self._switched_at is not None:
+            values[Key.FILTER_SWITCHED_AT] = self._switched_at
         if result is None:
-            level, text = DiagnosticLevel.OK, 'filter off: u* = u_nom'
-            values.update(status=DISABLED, solve_time_us=0.0, iterations=0, relaxed=False)
-            values.update(relaxed_families='', max_violation=0.0, active='')
+            # Not an error, but nothing is enforced: say so at WARN on every tick.
+            level, text = DiagnosticLevel.WARN, 'filter OFF: u* = u_nom, constraints not enforced'
+            values[Key.STATUS] = TickStatus.DISABLED.value
+            values[Key.SOLVE_TIME_US] = 0.0
+            values[Key.ITERATIONS] = 0
+            values[Key.RELAXED] = False
+            values[Key.RELAXED_FAMILIES] = ''
+            values[Key.MAX_VIOLATION] = 0.0
+            values[Key.ACTIVE] = ''
         else:
-            status = str(getattr(result.status, 'value', result.status))
+            status = TickStatus.of(result.status)
             level, text = _status_level_and_text(status, result.relaxed)
             if result.relaxed_families:
                 text += ': ' + ', '.join(result.relaxed_families)
-            values.update(
-                status=status,
-                solve_time_us=result.solve_time * 1e6,
-                iterations=result.iterations,
-                relaxed=result.relaxed,
-                relaxed_families=','.join(result.relaxed_families),
-                max_violation=result.max_violation,
-                active=','.join(result.active),
-            )
-        values['step_time_us'] = step_time * 1e6
-        values['tick_time_us'] = tick_time * 1e6
+            values[Key.STATUS] = status.value
+            values[Key.SOLVE_TIME_US] = result.solve_time * 1e6
+            values[Key.ITERATIONS] = result.iterations
+            values[Key.RELAXED] = result.relaxed
+            values[Key.RELAXED_FAMILIES] = ','.join(result.relaxed_families)
+            values[Key.MAX_VIOLATION] = result.max_violation
+            values[Key.ACTIVE] = ','.join(result.active)
+        values[Key.STEP_TIME_US] = step_time * 1e6
+        values[Key.TICK_TIME_US] = tick_time * 1e6
         for family, h in _min_margin_per_family(margins).items():
-            values[f'min_margin.{family}'] = h
+            values[min_margin(family)] = h
         values.update(self.hold.diagnostic_values(now))
-        report = DiagnosticReport.create(DIAGNOSTIC_NAME, level, text, values)
+        if resumed_after is not None:
+            values[Key.INPUT_RESUMED_AFTER] = resumed_after
+            text += f'; inputs back after {resumed_after:.3f} s without a tick (watchdog ended)'
+            level = max(level, DiagnosticLevel.WARN)
+        report = DiagnosticReport.create(FILTER_DIAGNOSTIC, level, text, values)
         return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))
 
     def _reject(
@@ -359,18 +512,8 @@ class SafetyFilterEndpoint:
             stamp = self._current_stamp(msg, now)
         if stamp is None:
             # The message's own stamp is unusable: stamp the command with the clock.
-            stamp = seconds_to_nanoseconds(max(now, 0.0))
-            if self._last_tick_ns is not None:
-                stamp = max(stamp, self._last_tick_ns)
-        gravity = None
-        note = ''
-        if self.hold.fallback is Fallback.GRAVITY_COMPENSATION:
-            if self._last_positions is not None:
-                q = self._last_positions
-                gravity = self.model.hand.terms(q, np.zeros_like(q)).gravity_torque
-            else:
-                gravity = np.zeros(len(self._joint_names))
-                note = ' (no joint state accepted yet: zero torque)'
+            stamp = self._clock_stamp(now)
+        gravity, note = self._fallback_gravity()
         u = self.hold.reject(now, f'{topic}: {error}', gravity)
         self._close(stamp)
         t = nanoseconds_to_seconds(stamp)
@@ -380,10 +523,14 @@ class SafetyFilterEndpoint:
             if mode is InputMode.HOLDING
             else f'fallback command: {self.hold.fallback.value}{note}'
         )
-        values: dict[str, Any] = {'filter.enabled': self.enabled, 'input.topic': topic}
+        values: dict[str, Any] = {
+            Key.FILTER_ENABLED: self.enabled,
+            Key.STATUS: INPUT_MODE_STATUS[mode].value,
+            Key.INPUT_TOPIC: topic,
+        }
         values.update(self.hold.diagnostic_values(now))
         report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
+            FILTER_DIAGNOSTIC,
             self.hold.diagnostic_level,
             f'input rejected, {action}: {error}',
             values,
@@ -394,6 +541,28 @@ class SafetyFilterEndpoint:
         ]
         self._last_outputs = outgoing
         return list(outgoing)
+
+    def _clock_stamp(self, now: float) -> int:
+        """Stamp from the node clock ``now`` (s), not before the last tick's stamp, ns."""
+        stamp = seconds_to_nanoseconds(max(now, 0.0))
+        if self._last_tick_ns is not None:
+            stamp = max(stamp, self._last_tick_ns)
+        return stamp
+
+    def _fallback_gravity(self) -> tuple[np.ndarray | None, str]:
+        """``g(q)`` for a gravity-compensation fallback, at the last accepted joint positions.
+
+        Returns:
+            The torque (None with the zero fallback) and a note for the status text (zero
+            torque when no joint state has been accepted yet).
+
+        """
+        if self.hold.fallback is not Fallback.GRAVITY_COMPENSATION:
+            return None, ''
+        if self._last_positions is None:
+            return np.zeros(len(self._joint_names)), ' (no joint state accepted yet: zero torque)'
+        q = self._last_positions
+        return self.model.hand.terms(q, np.zeros_like(q)).gravity_torque, ''
 
     def _current_stamp(self, msg: Any, now: float) -> int | None:
         """Return the message's stamp if readable, not before the last tick, not in the future.
@@ -412,24 +581,25 @@ class SafetyFilterEndpoint:
         return stamp
 
 
-_STATUS_TEXT: dict[str, str] = {
-    FilterStatus.NOMINAL.value: 'u* = u_nom: every constraint holds',
-    FilterStatus.SOLVED.value: 'QP solved',
-    FilterStatus.RELAXED.value: 'QP infeasible, relaxed',
-    FilterStatus.FALLBACK_LAST_GOOD.value: 'no QP solution: last good u*',
-    FilterStatus.FALLBACK_NOMINAL.value: 'no QP solution: u_nom clipped to the actuator limits',
+_STATUS_TEXT: dict[TickStatus, str] = {
+    TickStatus.NOMINAL: 'u* = u_nom: every constraint holds',
+    TickStatus.SOLVED: 'QP solved',
+    TickStatus.SOLVED_ACTIVE_SET: 'QP solved (active-set steps)',
+    TickStatus.RELAXED: 'QP infeasible, relaxed',
+    TickStatus.FALLBACK_LAST_GOOD: 'no QP solution: last good u*',
+    TickStatus.FALLBACK_NOMINAL: 'no QP solution: u_nom clipped to the actuator limits',
 }
 
 
-def _status_level_and_text(status: str, relaxed: bool) -> tuple[DiagnosticLevel, str]:
+def _status_level_and_text(status: TickStatus, relaxed: bool) -> tuple[DiagnosticLevel, str]:
     """Level and summary of a filter status: ERROR without a QP answer, WARN if relaxed."""
-    if status.startswith('fallback'):
+    if status in FAILED_STATUSES:
         level = DiagnosticLevel.ERROR
     elif relaxed:
         level = DiagnosticLevel.WARN
     else:
         level = DiagnosticLevel.OK
-    return level, _STATUS_TEXT.get(status, f'QP {status}')
+    return level, _STATUS_TEXT.get(status, f'QP {status.value}')
 
 
 def _min_margin_per_family(margins: Mapping[str, float]) -> dict[str, float]:

@@ -13,7 +13,17 @@ Input stamps are checked against the node's clock: with the simulator, run it wi
 ``use_sim_time:=true``; with a real hand, the driver's stamps must be on the same clock as
 this node.
 
-Live parameters: ``enabled`` (false passes u_nom through), the constraint switches,
+Input watchdog: a timer on the steady clock (every
+:data:`~grasp_safety_filter.nodes.safety_filter.WATCHDOG_PERIOD` s; under ``use_sim_time`` a
+dead simulator stops the node clock too) calls ``SafetyFilterEndpoint.watchdog``: once no
+tick has been accepted for ``input.hold_timeout`` s of wall-clock time, the hold policy's
+fallback goes to ``/hand/effort_command`` every period, stamped with the node clock's now
+(not before the last tick's stamp), with an ERROR status on ``/diagnostics``. A lockstep
+simulator that waits for that stamp applies the fallback and steps. Wall-clock times are
+``time.monotonic()``, the same clock as the steady timer's.
+
+Live parameters: ``enabled`` (false passes u_nom through; switching is logged, WARN when
+off, INFO when on, and the status stays WARN while off), the constraint switches,
 ``no_slip.normal_force_margin``, the class-K functions, the relaxation weights, the OSQP
 settings (these rebuild the filter) and ``input.*`` (the hold policy) apply from the next
 tick; ``no_slip.pyramid_faces`` and the model are read-only (read at start-up).
@@ -22,7 +32,10 @@ tick; ``no_slip.pyramid_faces`` and the model are read-only (read at start-up).
 from __future__ import annotations
 
 from collections.abc import Mapping
+import time
 from typing import Any
+
+from rclpy.clock import Clock, ClockType
 
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
@@ -37,7 +50,7 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
-from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
 
 #: Parameter switching the filter off (u* = u_nom) for the paper's unfiltered run.
 ENABLED_PARAMETER = 'enabled'
@@ -59,16 +72,30 @@ class SafetyFilterNode(EndpointNode):
             enabled=self.parameters[ENABLED_PARAMETER],
         )
         endpoint = self.endpoint
+        monotonic = time.monotonic
         self.subscribe(
             JOINT_STATES,
-            lambda msg: self.publish(endpoint.on_joint_states(msg, now=self.now_seconds())),
+            lambda msg: self.publish(
+                endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
+            ),
         )
         self.subscribe(
-            OBJECT_ODOM, lambda msg: self.publish(endpoint.on_odom(msg, now=self.now_seconds()))
+            OBJECT_ODOM,
+            lambda msg: self.publish(
+                endpoint.on_odom(msg, now=self.now_seconds(), wall=monotonic())
+            ),
         )
         self.subscribe(
             EFFORT_NOMINAL,
-            lambda msg: self.publish(endpoint.on_effort_nominal(msg, now=self.now_seconds())),
+            lambda msg: self.publish(
+                endpoint.on_effort_nominal(msg, now=self.now_seconds(), wall=monotonic())
+            ),
+        )
+        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
+        self._watchdog_timer = self.create_timer(
+            WATCHDOG_PERIOD,
+            lambda: self.publish(endpoint.watchdog(monotonic(), now=self.now_seconds())),
+            clock=self._steady_clock,
         )
         state = 'on' if endpoint.enabled else 'OFF (u* = u_nom)'
         self.get_logger().info(
@@ -76,7 +103,7 @@ class SafetyFilterNode(EndpointNode):
         )
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
-        """Rebuild the filter, update the hold policy or switch the filter on or off."""
+        """Rebuild the filter, update the hold policy or switch the filter on or off (logged)."""
         filter_changed = any(
             not name.startswith('input.') and name != ENABLED_PARAMETER for name in changed
         )
@@ -88,8 +115,16 @@ class SafetyFilterNode(EndpointNode):
             input_policy_config=(
                 InputPolicyConfig.from_parameters(self.parameters) if input_changed else None
             ),
-            enabled=self.parameters[ENABLED_PARAMETER] if ENABLED_PARAMETER in changed else None,
         )
+        if ENABLED_PARAMETER in changed:
+            switched = self.endpoint.switch(
+                self.parameters[ENABLED_PARAMETER], now=self.now_seconds()
+            )
+            # One call site per severity: rclpy refuses to change it between calls.
+            if switched is not None and self.endpoint.enabled:
+                self.get_logger().info(switched)
+            elif switched is not None:
+                self.get_logger().warning(switched)
 
 
 def main(args: list[str] | None = None) -> None:

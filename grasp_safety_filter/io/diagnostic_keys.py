@@ -1,0 +1,130 @@
+"""The safety filter's ``/diagnostics`` status, defined once: its name, keys and values.
+
+:class:`~grasp_safety_filter.nodes.safety_filter.SafetyFilterEndpoint` and
+:class:`~grasp_safety_filter.control.hold_policy.HoldPolicy` write them;
+:mod:`grasp_safety_filter.analysis` reads them back from a bag. Both sides use the names
+below, never the strings, so a status or key that one side writes and the other does not
+know cannot go unnoticed.
+
+Every ``safety_filter`` status that answers a tick (or stands in for a missing one) has a
+:attr:`Key.STATUS` whose value is a :class:`TickStatus`: how the published u* was obtained.
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+from grasp_safety_filter.control.safety_filter import FilterStatus
+
+#: Name of the safety filter's ``DiagnosticStatus``.
+FILTER_DIAGNOSTIC = 'safety_filter'
+
+
+class TickStatus(str, Enum):
+    """The :attr:`Key.STATUS` value: how the u* published for a tick was obtained.
+
+    The QP's own outcomes are the :class:`FilterStatus` values (the same strings); the
+    endpoint adds the pass-through and the hold policy's two answers to bad or missing input.
+    """
+
+    NOMINAL = FilterStatus.NOMINAL.value
+    SOLVED = FilterStatus.SOLVED.value
+    SOLVED_ACTIVE_SET = FilterStatus.SOLVED_ACTIVE_SET.value
+    RELAXED = FilterStatus.RELAXED.value
+    FALLBACK_LAST_GOOD = FilterStatus.FALLBACK_LAST_GOOD.value
+    FALLBACK_NOMINAL = FilterStatus.FALLBACK_NOMINAL.value
+    DISABLED = 'disabled'
+    """The filter is switched off: u* = u_nom (validated input)."""
+    INPUT_HELD = 'input_held'
+    """Input rejected or missing for at most ``input.hold_timeout``: the last safe u* again."""
+    INPUT_FALLBACK = 'input_fallback'
+    """Input rejected or missing for longer: the hold policy's fallback command."""
+
+    @classmethod
+    def of(cls, status: FilterStatus) -> TickStatus:
+        """Return the tick status of a QP outcome."""
+        return cls(status.value)
+
+
+#: The QP gave no usable answer: the filter's own fallback went out (an ERROR).
+FAILED_STATUSES = frozenset({TickStatus.FALLBACK_LAST_GOOD, TickStatus.FALLBACK_NOMINAL})
+
+#: The input was rejected or missing: no u* was computed, the hold policy answered.
+INPUT_STATUSES = frozenset({TickStatus.INPUT_HELD, TickStatus.INPUT_FALLBACK})
+
+
+class InputMode(Enum):
+    """The hold policy's mode (:attr:`Key.INPUT_MODE`): how the last command was obtained."""
+
+    OK = 'ok'
+    HOLDING = 'holding'
+    FALLBACK = 'fallback'
+
+
+#: The tick status of each answer of the hold policy to rejected or missing input.
+INPUT_MODE_STATUS: dict[InputMode, TickStatus] = {
+    InputMode.HOLDING: TickStatus.INPUT_HELD,
+    InputMode.FALLBACK: TickStatus.INPUT_FALLBACK,
+}
+
+
+class Key:
+    """Keys of the ``safety_filter`` status's values (units in the comments)."""
+
+    FILTER_ENABLED = 'filter.enabled'
+    """``true`` while the filter filters, ``false`` while it passes u_nom through."""
+    FILTER_SWITCHED_AT = 'filter.switched_at'
+    """Node-clock time of the last switch on or off at run time, s (absent before any)."""
+    STATUS = 'status'
+    """A :class:`TickStatus` value."""
+    SOLVE_TIME_US = 'solve_time_us'
+    """The QP solve (OSQP and the active-set steps), µs."""
+    STEP_TIME_US = 'step_time_us'
+    """The whole filter step (``SafetyFilter.solve``: rows, QP, margins), µs."""
+    TICK_TIME_US = 'tick_time_us'
+    """The whole tick (model terms, filter step, messages), µs."""
+    ITERATIONS = 'iterations'
+    """OSQP iterations."""
+    RELAXED = 'relaxed'
+    """Whether the relaxed QP gave u*."""
+    RELAXED_FAMILIES = 'relaxed_families'
+    """Constraint families with a row given up, comma-separated."""
+    MAX_VIOLATION = 'max_violation'
+    """Largest row violation at u*, in the rows' own units."""
+    ACTIVE = 'active'
+    """Rows active at u*, comma-separated."""
+    MIN_MARGIN_PREFIX = 'min_margin.'
+    """Followed by a family name: its smallest barrier value h at u* (:func:`min_margin`)."""
+
+    INPUT_MODE = 'input.mode'
+    """An :class:`InputMode` value."""
+    INPUT_FALLBACK = 'input.fallback'
+    """The configured fallback (``zero`` or ``gravity_compensation``)."""
+    INPUT_REJECTED_TICKS = 'input.rejected_ticks'
+    """Ticks with rejected input so far."""
+    INPUT_LAST_REJECTION = 'input.last_rejection'
+    """Why the last rejected (or missing) input was (empty if none was)."""
+    INPUT_TIME_SINCE_ACCEPTED = 'input.time_since_accepted'
+    """Node-clock time since the last accepted tick, s (``inf`` before any)."""
+    INPUT_TOPIC = 'input.topic'
+    """On a rejected tick: the topic whose message was rejected (or ``state``)."""
+    INPUT_WATCHDOG = 'input.watchdog'
+    """``true`` on the input watchdog's statuses (inputs missing), which answer no tick."""
+    INPUT_MISSING = 'input.missing'
+    """Watchdog: the topics with no message since the last accepted tick, comma-separated."""
+    INPUT_WALL_TIME_SINCE_ACCEPTED = 'input.wall_time_since_accepted'
+    """Watchdog: wall-clock time since the last accepted tick, s."""
+    INPUT_SILENT_PREFIX = 'input.silent_for.'
+    """Followed by a topic: wall-clock time since its last message, s (:func:`silent_for`)."""
+    INPUT_RESUMED_AFTER = 'input.resumed_after'
+    """On the first tick after the watchdog took over: wall-clock time without one, s."""
+
+
+def min_margin(family: str) -> str:
+    """Key of a constraint family's smallest barrier value."""
+    return Key.MIN_MARGIN_PREFIX + family
+
+
+def silent_for(topic: str) -> str:
+    """Key of the wall-clock time since a topic's last message."""
+    return Key.INPUT_SILENT_PREFIX + topic

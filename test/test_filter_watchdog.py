@@ -1,0 +1,460 @@
+"""The filter's input watchdog and its run-time switch, over real DDS.
+
+``safety_filter_node`` runs as an OS process (wall clock, ``use_sim_time`` false). This test
+publishes valid ticks of ``/hand/joint_states``, ``/object/odom`` and
+``/hand/effort_nominal`` (the paper's state at t_0 and its u_nom, stamped with the current
+time), watches ``/hand/effort_command`` and ``/diagnostics``, and then lets the inputs stop:
+by going quiet, and by SIGKILLing a separate publishing process.
+
+Run as a script (``python test_filter_watchdog.py publish``) this file is that publisher.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from grasp_safety_filter.control.nominal import NominalConfig
+from grasp_safety_filter.io import messages as m
+from grasp_safety_filter.io import topics
+from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key, TickStatus
+from grasp_safety_filter.io.schemas import load_node_parameters
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
+from grasp_safety_filter.nodes.safety_filter import WATCHDOG_PERIOD
+from hand_sim_node.config import SimConfig
+from hand_sim_node.endpoint import HandSimEndpoint
+
+REPO = Path(__file__).resolve().parent.parent
+CONFIG = REPO / 'config' / 'paper_scenario.yaml'
+BIN = Path(sys.executable).parent
+INPUTS = (topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL)
+
+#: Rate of the published ticks, Hz (a slow but steady hand driver and controller).
+TICK_RATE = 100.0
+#: Allowance for DDS delivery and scheduling on a shared 2-core machine, s.
+DDS_TOLERANCE = 0.05
+#: How long the node may take to start and to be discovered, s.
+START_TIMEOUT = 60.0
+
+
+class TickSource:
+    """Valid inputs of one tick, stamped on demand: the paper's state at t_0 and its u_nom."""
+
+    def __init__(self) -> None:
+        params = {
+            node: load_node_parameters(CONFIG, node)
+            for node in ('hand_sim_node', 'nominal_controller_node')
+        }
+        msgs = m.MessageNamespace.from_typestore(_typestore())
+        model = GraspModel.from_parameters(params['hand_sim_node'])
+        sim = HandSimEndpoint(model, SimConfig.from_parameters(params['hand_sim_node']), msgs)
+        values = params['nominal_controller_node']
+        nominal = NominalControllerEndpoint(
+            GraspModel.from_parameters(values), NominalConfig.from_parameters(values), msgs
+        )
+        state = {o.topic: o.msg for o in sim.start()}
+        nominal.on_joint_states(state[topics.JOINT_STATES])
+        (effort,) = nominal.on_odom(state[topics.OBJECT_ODOM])
+        self.model = model
+        self.names = list(model.joint_names)
+        self.joints = m.joint_state_from_msg(state[topics.JOINT_STATES], self.names)
+        self.odometry = m.odometry_from_msg(state[topics.OBJECT_ODOM])
+        self.u_nom = m.effort_from_msg(effort.msg, self.names).effort
+
+    def messages(self, msgs: m.MessageNamespace, t: float) -> dict[str, Any]:
+        """Return the three inputs stamped ``t`` (s), as messages of ``msgs``."""
+        joints, odometry = self.joints, self.odometry
+        return {
+            topics.JOINT_STATES: m.joint_state_to_msg(
+                msgs, t, self.names, joints.position, joints.velocity, joints.effort
+            ),
+            topics.OBJECT_ODOM: m.odometry_to_msg(
+                msgs,
+                t,
+                odometry.p_object_in_palm,
+                odometry.R_object_to_palm,
+                odometry.twist_object,
+            ),
+            topics.EFFORT_NOMINAL: m.effort_to_msg(msgs, t, self.names, self.u_nom),
+        }
+
+    def fallback(self) -> np.ndarray:
+        """Gravity compensation at the published joint positions, clipped to the limits, N·m."""
+        q = self.joints.position
+        g = self.model.hand.terms(q, np.zeros_like(q)).gravity_torque
+        limits = np.asarray(self.model.effort_limits)
+        return np.clip(g, -limits, limits)
+
+
+def _typestore() -> Any:
+    from rosbags.typesys import get_typestore, Stores
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _qos(topic: str) -> Any:
+    return topics.topic_spec(topic).qos.to_rclpy()
+
+
+def _message_class(topic: str) -> Any:
+    return m.rclpy_message_class(topics.topic_spec(topic).msgtype)
+
+
+def publish_ticks_forever(rate: float = TICK_RATE) -> None:
+    """Publish valid ticks at ``rate`` Hz until killed (this file run as a script)."""
+    import rclpy
+
+    rclpy.init()
+    node = rclpy.create_node('tick_publisher')
+    publishers = {t: node.create_publisher(_message_class(t), t, _qos(t)) for t in INPUTS}
+    source, msgs = TickSource(), m.MessageNamespace.from_rclpy()
+    print('publishing', flush=True)
+    while True:
+        t = node.get_clock().now().nanoseconds * 1e-9
+        for topic, msg in source.messages(msgs, t).items():
+            publishers[topic].publish(msg)
+        time.sleep(1.0 / rate)
+
+
+# ----------------------------------------------------------------------------------------
+# The probe: publishes ticks, records what the filter sends
+
+
+@dataclass
+class Received:
+    """A message from the filter: when it arrived (steady clock, s) and its stamp (s)."""
+
+    wall: float
+    stamp: float
+    msg: Any
+
+
+class Probe:
+    """An rclpy node in the test process: publishes ticks, records commands and statuses."""
+
+    def __init__(self, source: TickSource) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.rclpy = rclpy
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('watchdog_probe', context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.source = source
+        self.msgs = m.MessageNamespace.from_rclpy()
+        self.publishers = {
+            t: self.node.create_publisher(_message_class(t), t, _qos(t)) for t in INPUTS
+        }
+        self.commands: list[Received] = []
+        self.statuses: list[Received] = []
+        self.published: list[float] = []
+        for topic, record in (
+            (topics.EFFORT_COMMAND, self._on_command),
+            (topics.DIAGNOSTICS, self._on_diagnostics),
+        ):
+            self.node.create_subscription(_message_class(topic), topic, record, _qos(topic))
+
+    def _on_command(self, msg: Any) -> None:
+        effort = m.effort_from_msg(msg, self.source.names).effort
+        self.commands.append(Received(time.monotonic(), m.header_stamp_ns(msg) * 1e-9, effort))
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        data = m.diagnostics_from_msg(msg)
+        for report in data.reports:
+            if report.name == FILTER_DIAGNOSTIC:
+                self.statuses.append(Received(time.monotonic(), data.t, report))
+
+    def publish_tick(self) -> float:
+        """Publish one tick stamped now; return its stamp, s."""
+        t = self.node.get_clock().now().nanoseconds * 1e-9
+        for topic, msg in self.source.messages(self.msgs, t).items():
+            self.publishers[topic].publish(msg)
+        self.published.append(t)
+        return t
+
+    def spin(self, seconds: float, publish: bool = False) -> None:
+        """Spin for ``seconds``, publishing ticks at :data:`TICK_RATE` if asked."""
+        self.spin_until(lambda: False, seconds, publish)
+
+    def spin_until(self, done: Callable[[], bool], timeout: float, publish: bool = False) -> bool:
+        """Spin (publishing ticks if asked) until ``done()`` or ``timeout`` s; return done()."""
+        end = time.monotonic() + timeout
+        next_tick = time.monotonic()
+        while not done():
+            now = time.monotonic()
+            if now > end:
+                return False
+            if publish and now >= next_tick:
+                self.publish_tick()
+                next_tick = now + 1.0 / TICK_RATE
+            self.executor.spin_once(timeout_sec=0.001)
+        return True
+
+    def filter_connected(self) -> bool:
+        """Whether the filter subscribes to every input and publishes commands to us."""
+        return all(p.get_subscription_count() > 0 for p in self.publishers.values()) and (
+            self.node.count_publishers(topics.EFFORT_COMMAND) > 0
+        )
+
+    def ticks_answered(self, since: float) -> list[Received]:
+        """Return the normal tick statuses received after ``since`` (steady clock, s)."""
+        return [
+            s for s in self.statuses if s.wall > since and Key.INPUT_WATCHDOG not in s.msg.values
+        ]
+
+    def watchdog_statuses(self, since: float) -> list[Received]:
+        """Return the watchdog's statuses received after ``since``."""
+        return [
+            s
+            for s in self.statuses
+            if s.wall > since and s.msg.values.get(Key.INPUT_WATCHDOG) == 'true'
+        ]
+
+    def set_enabled(self, enabled: bool) -> None:
+        """Set the filter's ``enabled`` parameter through its parameter service."""
+        from rclpy.parameter import Parameter
+        from rclpy.parameter_client import AsyncParameterClient
+
+        client = AsyncParameterClient(self.node, 'safety_filter_node')
+        assert client.wait_for_services(timeout_sec=10.0)
+        future = client.set_parameters([Parameter('enabled', value=enabled)])
+        assert self.spin_until(future.done, 10.0)
+        (result,) = future.result().results
+        assert result.successful, result.reason
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.context)
+
+
+# ----------------------------------------------------------------------------------------
+# Fixtures
+
+
+@dataclass
+class FilterProcess:
+    """The ``safety_filter_node`` process, its log and the input policy it runs with."""
+
+    process: subprocess.Popen
+    log: Path
+    hold_timeout: float
+
+    def log_text(self) -> str:
+        return self.log.read_text(encoding='utf-8', errors='replace')
+
+
+def node_params_file(tmp_path: Path) -> tuple[Path, float]:
+    """Write the paper's parameters with ``use_sim_time: false`` in the filter's section."""
+    document = yaml.safe_load(CONFIG.read_text(encoding='utf-8'))
+    own = document['safety_filter_node']['ros__parameters']
+    own['use_sim_time'] = False
+    model = document['/**']['ros__parameters']['model']
+    model['urdf_file'] = str(CONFIG.parent / model['urdf_file'])
+    path = tmp_path / 'safety_filter.yaml'
+    path.write_text(yaml.safe_dump(document), encoding='utf-8')
+    return path, float(own['input']['hold_timeout'])
+
+
+@pytest.fixture(scope='module')
+def source() -> TickSource:
+    return TickSource()
+
+
+@pytest.fixture(scope='module')
+def safety_filter(tmp_path_factory) -> FilterProcess:
+    pytest.importorskip('rclpy')
+    tmp_path = tmp_path_factory.mktemp('safety_filter')
+    params, hold_timeout = node_params_file(tmp_path)
+    log = tmp_path / 'safety_filter_node.log'
+    with log.open('w') as out:
+        process = subprocess.Popen(
+            [str(BIN / 'safety_filter_node'), '--ros-args', '--params-file', str(params)],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=dict(os.environ, RCUTILS_LOGGING_BUFFERED_STREAM='0'),
+            cwd=tmp_path,
+        )
+    try:
+        yield FilterProcess(process, log, hold_timeout)
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+@pytest.fixture
+def probe(source, safety_filter):
+    probe = Probe(source)
+    try:
+        connected = probe.spin_until(probe.filter_connected, START_TIMEOUT)
+        assert connected, f'filter not discovered; its log:\n{safety_filter.log_text()}'
+        yield probe
+    finally:
+        probe.close()
+
+
+def answered_ticks(probe: Probe, since: float, count: int = 10) -> Received:
+    """Publish ticks until the filter has accepted ``count`` in a row; return the last answer.
+
+    Early ones may be rejected as stale while the node warms up (its first solves are slow).
+    """
+
+    def accepted_in_a_row() -> bool:
+        answers = probe.ticks_answered(since)[-count:]
+        return len(answers) == count and all(s.msg.values[Key.INPUT_MODE] == 'ok' for s in answers)
+
+    ok = probe.spin_until(accepted_in_a_row, 30.0, publish=True)
+    answers = probe.ticks_answered(since)
+    assert ok, f'the filter accepted no {count} ticks in a row: {answers[-1:]}'
+    return answers[-1]
+
+
+def assert_watchdog_takes_over(
+    probe: Probe, safety_filter: FilterProcess, last_answer: float, observe: float
+) -> list[Received]:
+    """Assert the fallback and ERROR arrive in time and repeat; return the watchdog statuses.
+
+    Args:
+        probe: The probe (not publishing any more).
+        safety_filter: The filter process.
+        last_answer: When the filter's answer to the last tick arrived (steady clock, s):
+            the filter accepted that tick shortly before.
+        observe: How long to watch after the first fallback, s.
+
+    """
+    hold_timeout = safety_filter.hold_timeout
+    deadline = hold_timeout + WATCHDOG_PERIOD + DDS_TOLERANCE
+    probe.spin_until(lambda: probe.watchdog_statuses(last_answer), deadline + 1.0)
+    watchdog = probe.watchdog_statuses(last_answer)
+    assert watchdog, f'no watchdog status within {deadline + 1.0} s'
+    first = watchdog[0]
+    delay = first.wall - last_answer
+    assert hold_timeout <= delay + DDS_TOLERANCE and delay <= deadline, delay
+    report = first.msg
+    assert report.level is m.DiagnosticLevel.ERROR
+    assert report.values[Key.STATUS] == TickStatus.INPUT_FALLBACK.value
+    assert report.values[Key.INPUT_MISSING] == ','.join(INPUTS)
+    assert float(report.values[Key.INPUT_WALL_TIME_SINCE_ACCEPTED]) > hold_timeout
+    for topic in INPUTS:
+        assert f'nothing on {topic}' in report.message
+    # The node clock at the watchdog's call is the stamp: hold_timeout after the last tick.
+    last_stamp = max(s.stamp for s in probe.ticks_answered(0.0))
+    assert hold_timeout < first.stamp - last_stamp <= deadline
+
+    probe.spin(observe)
+    fallbacks = [c for c in probe.commands if c.wall > last_answer]
+    assert fallbacks and fallbacks[0].wall <= last_answer + deadline
+    expected = probe.source.fallback()
+    for command in fallbacks:
+        np.testing.assert_allclose(command.msg, expected, rtol=1e-12, atol=1e-12)
+    # Repeated every watchdog period while the inputs stay away.
+    assert len(fallbacks) >= 0.7 * observe / WATCHDOG_PERIOD, len(fallbacks)
+    period = float(np.median(np.diff([c.wall for c in fallbacks])))
+    assert period == pytest.approx(WATCHDOG_PERIOD, rel=0.3)
+    watchdog = probe.watchdog_statuses(last_answer)
+    assert all(s.msg.level is m.DiagnosticLevel.ERROR for s in watchdog)
+    return watchdog
+
+
+# ----------------------------------------------------------------------------------------
+# Tests
+
+
+def test_inputs_that_stop_get_the_fallback_and_an_error_then_ticks_resume(probe, safety_filter):
+    start = time.monotonic()
+    last = answered_ticks(probe, start)
+    # Answers to ticks still in flight arrive shortly after the last publish.
+    probe.spin(0.02)
+    last_answer = probe.ticks_answered(start)[-1].wall
+    assert last_answer >= last.wall
+    assert_watchdog_takes_over(probe, safety_filter, last_answer, observe=0.3)
+
+    # The inputs come back: normal ticks, the first of which says how long they were away.
+    back = time.monotonic()
+    answered_ticks(probe, back, count=20)
+    resumed = [s for s in probe.ticks_answered(back) if Key.INPUT_RESUMED_AFTER in s.msg.values]
+    assert len(resumed) == 1
+    assert float(resumed[0].msg.values[Key.INPUT_RESUMED_AFTER]) > safety_filter.hold_timeout
+    assert 'inputs back after' in resumed[0].msg.message
+    # While ticks come, the watchdog is silent (one call may have been in flight).
+    probe.spin(0.2, publish=True)
+    assert len(probe.watchdog_statuses(back + 2 * WATCHDOG_PERIOD)) == 0
+
+
+def test_a_killed_publisher_gets_the_fallback_and_an_error(probe, safety_filter, tmp_path):
+    log = tmp_path / 'publisher.log'
+    with log.open('w') as out:
+        publisher = subprocess.Popen(
+            [sys.executable, __file__, 'publish'],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=dict(os.environ),
+            cwd=REPO,
+        )
+    try:
+        start = time.monotonic()
+        ok = probe.spin_until(lambda: len(probe.ticks_answered(start)) >= 20, START_TIMEOUT)
+        assert ok, f'no tick of the publisher answered; its log:\n{log.read_text()}'
+        publisher.send_signal(signal.SIGKILL)
+        publisher.wait(timeout=10.0)
+        probe.spin(0.02)
+        last_answer = probe.ticks_answered(start)[-1].wall
+        assert_watchdog_takes_over(probe, safety_filter, last_answer, observe=0.2)
+    finally:
+        if publisher.poll() is None:
+            publisher.kill()
+            publisher.wait()
+
+
+def test_switching_the_filter_off_and_on_is_logged_and_reported(probe, safety_filter):
+    answered_ticks(probe, time.monotonic())
+    probe.set_enabled(False)
+    off = time.monotonic()
+    answered_ticks(probe, off)
+    report = probe.ticks_answered(off)[-1].msg
+    assert report.level is m.DiagnosticLevel.WARN
+    assert report.values[Key.STATUS] == TickStatus.DISABLED.value
+    assert report.values[Key.FILTER_ENABLED] == 'false'
+    switched_off = float(report.values[Key.FILTER_SWITCHED_AT])
+    assert abs(switched_off - time.time()) < 30.0  # the node's wall clock, s
+    # u* = u_nom while off.
+    np.testing.assert_array_equal(probe.commands[-1].msg, probe.source.u_nom)
+
+    probe.set_enabled(True)
+    on = time.monotonic()
+    answered_ticks(probe, on)
+    report = probe.ticks_answered(on)[-1].msg
+    assert report.values[Key.STATUS] != TickStatus.DISABLED.value
+    assert float(report.values[Key.FILTER_SWITCHED_AT]) > switched_off
+
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and 'switched ON' not in safety_filter.log_text():
+        time.sleep(0.05)
+    lines = safety_filter.log_text().splitlines()
+    (off_line,) = [line for line in lines if 'safety filter switched OFF' in line]
+    (on_line,) = [line for line in lines if 'safety filter switched ON' in line]
+    assert off_line.startswith('[WARN]') and f't = {switched_off:.6f} s' in off_line
+    assert on_line.startswith('[INFO]')
+
+
+if __name__ == '__main__':
+    if sys.argv[1:] == ['publish']:
+        publish_ticks_forever()
