@@ -12,8 +12,9 @@ connected (:func:`hand_sim_node.endpoint.start_blockers`: a node publishing the 
 it and the nodes it reads from subscribed to the state) and, with
 ``start.wait_for_recorder`` set to a recorder's node name (``rosbag2_recorder`` for
 ``ros2 bag record``), once that recorder is subscribed to every published topic of the topic
-table, so that neither the controllers nor the bag miss the first tick. While it waits it
-logs what it waits for every ``WAITING_LOG_PERIOD`` s. Then in lockstep (the default) each
+table, so that neither the controllers nor the bag miss the first tick; the graph must stay
+so for ``START_SETTLE`` s. While it waits it logs what it waits for every
+``WAITING_LOG_PERIOD`` s. Then in lockstep (the default) each
 command stamped with the current state's stamp advances the simulation by one step, as fast
 as the controllers answer. A wall-clock watchdog reports a command missing for
 ``command_timeout`` s and publishes the state again. Without lockstep, a wall-clock timer
@@ -60,6 +61,12 @@ EXIT_DELAY = 1.0
 #: Wall-clock period of the log line saying what the start waits for, s.
 WAITING_LOG_PERIOD = 2.0
 
+#: Wall-clock time the graph must stay connected before the run starts, s. The simulator
+#: sees its own discovery only: the other nodes' participants may take a moment longer to
+#: discover each other (the filter and a recorder started last, say), and a reliable,
+#: volatile writer drops what it publishes before it has matched a reader.
+START_SETTLE = 1.0
+
 #: Parameter naming the recorder node to wait for (empty: none).
 RECORDER_PARAMETER = 'start.wait_for_recorder'
 
@@ -88,6 +95,7 @@ class HandSimNode(EndpointNode):
             )
         self._exit_timer = None
         self._waiting_logged_at = time.monotonic()
+        self._connected_since: float | None = None
         self.recorder = str(self.parameters[RECORDER_PARAMETER])
         recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
         self.get_logger().info(
@@ -117,10 +125,16 @@ class HandSimNode(EndpointNode):
             return
         blockers = start_blockers(self._graph_snapshot(), self.recorder)
         if not blockers:
+            if self._connected_since is None:
+                self._connected_since = now
+            if now - self._connected_since < START_SETTLE:
+                return
             recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
             self.get_logger().info(f'controllers{recorder} connected: starting the run')
             self.publish(self.endpoint.start(now=now))
-        elif now - self._waiting_logged_at >= WAITING_LOG_PERIOD:
+            return
+        self._connected_since = None
+        if now - self._waiting_logged_at >= WAITING_LOG_PERIOD:
             self._waiting_logged_at = now
             self.get_logger().info(f'waiting to start the run for {"; ".join(blockers)}')
 

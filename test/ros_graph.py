@@ -147,6 +147,20 @@ class Processes:
             self.stop(name, timeout=5.0)
 
 
+#: Test-only filter override. ``input.hold_timeout`` is also the wall-clock time without a
+#: tick after which the safety filter's input watchdog sends its fallback command, which a
+#: lockstep simulator waiting for that stamp applies: on this shared machine a scheduling
+#: stall of 0.1 s would put a fallback tick into the run. Above the simulator's own
+#: ``command_timeout`` (1 s), the simulator recovers a lost command first. Without rejected
+#: input the value changes no message of the run.
+STALL_TOLERANCE = {'input.hold_timeout': 2.0}
+
+
+def with_overrides(node: NodeLaunch, **values: Any) -> NodeLaunch:
+    """Return ``node`` with further overrides (test-only parameters)."""
+    return dataclasses.replace(node, overrides={**node.overrides, **values})
+
+
 def node_command(node: NodeLaunch, work_dir: Path) -> list[str]:
     """Return the ``ros2 run``-equivalent command line of a node (console script + ros args)."""
     overrides = work_dir / f'{node.name}_overrides.yaml' if OVERRIDES_AS_FILE else None
