@@ -306,6 +306,34 @@ _RosYamlLoader.add_implicit_resolver(
 )
 
 
+def parse_parameter_value(text: str) -> Any:
+    """Type a command-line value (``-p name:=value``) as rcl does: YAML, as in a file.
+
+    ``true`` is a bool, ``3`` an integer, ``3.0`` and ``1e-3`` doubles, ``[0.1, 0.2]`` a
+    double array, ``"3"`` a string. What rcl keeps as text (``null``, ``~``, dates, YAML
+    1.1's ``1:30`` and ``1_000``) stays the text as written.
+
+    Raises:
+        ParameterError: The value is empty, a mapping or not YAML.
+    """
+    try:
+        value = yaml.load(text, Loader=_RosYamlLoader)
+    except yaml.YAMLError as error:
+        raise ParameterError(f'expected a YAML value, got {text!r}: {error}') from None
+    if isinstance(value, dict) or not text.strip():
+        raise ParameterError(f'expected a value or a list of values, got {text!r}')
+    if isinstance(value, list):
+        return [v if isinstance(v, bool | int | float | str) else str(v) for v in value]
+    if isinstance(value, bool | str):
+        return value
+    number = isinstance(value, int | float) and not _YAML_11_NUMBER.search(text)
+    return value if number else text.strip()
+
+
+#: What YAML 1.1 (PyYAML) reads as a number and rcl does not: ``1:30`` (base 60), ``1_000``.
+_YAML_11_NUMBER = re.compile(r'[:_]')
+
+
 def load_parameter_file(path: str | Path) -> dict[str, dict[str, Any]]:
     """Read a ROS 2 parameter file without ROS.
 
@@ -444,6 +472,65 @@ def parameters_for_node(
     return merged
 
 
+#: Largest edit distance at which a node name counts as a misspelling of a known one.
+MISSPELLING_EDITS = 2
+
+
+def misspelt_node_sections(
+    file_parameters: Mapping[str, Mapping[str, Any]], node_names: Iterable[str]
+) -> list[str]:
+    """Find the sections of a file addressed to a misspelt ``node_names`` entry.
+
+    A section key's node name (its last token: ``/arm/safety_filtr_node`` gives
+    ``safety_filtr_node``) is misspelt when it differs from a known name by at most two
+    edits (letter case ignored) and does not merely extend it, as a renamed instance does
+    (``hand_sim_node_2``). Wildcards and the sections of other nodes are left alone.
+
+    Args:
+        file_parameters: The result of :func:`load_parameter_file`.
+        node_names: The names the file's sections should use, e.g. the package's nodes.
+
+    Returns:
+        One message per misspelt section, with the name it was probably meant to be.
+    """
+    known = list(node_names)
+    errors: list[str] = []
+    for key in file_parameters:
+        name = key.rsplit('/', 1)[-1]
+        if '*' in name or name in known:
+            continue
+        close = [
+            candidate
+            for candidate in known
+            if not (len(name) > len(candidate) and name.lower().startswith(candidate.lower()))
+            and _edit_distance(name.lower(), candidate.lower()) <= MISSPELLING_EDITS
+        ]
+        if close:
+            closest = min(close, key=lambda known: _edit_distance(name.lower(), known.lower()))
+            errors.append(
+                f"section '{key}' addresses no node of this package (did you mean '{closest}'?)"
+            )
+    return errors
+
+
+def _edit_distance(first: str, second: str) -> int:
+    """Return the optimal-string-alignment distance (a swap of neighbours is one edit)."""
+    rows = [list(range(len(second) + 1))]
+    for i in range(1, len(first) + 1):
+        row = [i] * (len(second) + 1)
+        for j in range(1, len(second) + 1):
+            row[j] = min(
+                rows[i - 1][j] + 1,
+                row[j - 1] + 1,
+                rows[i - 1][j - 1] + (first[i - 1] != second[j - 1]),
+            )
+            swapped = first[i - 1] == second[j - 2] and first[i - 2] == second[j - 1]
+            if i > 1 and j > 1 and swapped:
+                row[j] = min(row[j], rows[i - 2][j - 2] + 1)
+        rows.append(row)
+    return rows[-1][-1]
+
+
 # --------------------------------------------------------------------------------------------
 # Validation
 # --------------------------------------------------------------------------------------------
@@ -556,19 +643,24 @@ def raise_parameter_errors(source: str, errors: Sequence[str], kind: str = 'inva
 
 
 def resolve_relative_paths(
-    schema: NodeSchema, values: Mapping[str, Any], base_directory: str | Path
+    schema: NodeSchema,
+    values: Mapping[str, Any],
+    base_directory: str | Path,
+    base_directories: Mapping[str, str | Path] | None = None,
 ) -> dict[str, Any]:
     """Make every path parameter (``is_path``) absolute, relative ones against ``base_directory``.
 
-    The runner passes the parameter file's directory; a node passes its package's config
-    directory, where the installed parameter files live.
+    The runner passes the parameter file's directory. A node passes, per parameter in
+    ``base_directories``, the directory of the file that set it (the current directory for
+    a command-line value) and its package's config directory for the defaults.
     """
     resolved = dict(values)
     for spec in schema:
         value = resolved.get(spec.name)
         if spec.is_path and isinstance(value, str) and value:
             path = Path(value).expanduser()
-            resolved[spec.name] = str(path if path.is_absolute() else Path(base_directory) / path)
+            base = Path((base_directories or {}).get(spec.name, base_directory))
+            resolved[spec.name] = str(path if path.is_absolute() else base / path)
     return resolved
 
 
