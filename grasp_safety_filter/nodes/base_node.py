@@ -1,26 +1,40 @@
 """What the package's three rclpy nodes share: parameters, topic-table I/O, spinning.
 
-An :class:`EndpointNode` declares its node's parameter schema (descriptors, ranges, an
-on-set validation callback), runs the cross-parameter checks, resolves relative paths
-against the package's ``config/`` directory, creates its publishers and subscriptions with
-the QoS of the topic table (:mod:`grasp_safety_filter.io.topics`) and publishes the
+An :class:`EndpointNode` computes its start-up parameters from its ROS arguments with the
+precedence every ROS user expects (:mod:`grasp_safety_filter.io.ros_arguments`: later
+parameter files beat earlier ones, every ``-p`` beats every file), refuses unknown names
+and misspelt node sections, hands the values to rclpy as parameter overrides, declares its
+node's parameter schema (descriptors, ranges, an on-set validation callback), runs the
+cross-parameter checks and resolves a relative path against the directory of the file that
+set it. It creates its publishers and subscriptions with the QoS of the topic table
+(:mod:`grasp_safety_filter.io.topics`) and publishes the
 :class:`~grasp_safety_filter.nodes.outgoing.Outgoing` lists its endpoint returns.
 Parameters that are not read-only take effect when set: the post-set callback hands the
 changed values to :meth:`EndpointNode.apply_parameters`.
+
+:func:`spin_node` is a node process's body: a bad parameter ends it with one line on
+stderr and exit code 2; SIGINT and SIGTERM, once or repeatedly and at any moment, end it
+quietly with exit code 0.
 
 This module and the ``*_node.py`` modules are the only ones that import rclpy.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
+import signal
+import sys
+from types import FrameType
 from typing import Any
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.io.messages import (
     byte_value,
@@ -32,11 +46,41 @@ from grasp_safety_filter.io.parameters import (
     declare_node_parameters,
     ParameterError,
     resolve_relative_paths,
+    validate_parameters,
 )
 from grasp_safety_filter.io.paths import share_directory
+from grasp_safety_filter.io.ros_arguments import (
+    given_parameters,
+    GivenParameter,
+    parse_ros_arguments,
+    remapped_fully_qualified_name,
+)
 from grasp_safety_filter.io.schemas import check_node_parameters, NODE_SCHEMAS
 from grasp_safety_filter.io.topics import DIAGNOSTICS, topic_spec
+from grasp_safety_filter.model.grasp_model import GraspConfigError
+from grasp_safety_filter.model.hand import HandModelError
 from grasp_safety_filter.nodes.outgoing import Outgoing
+
+#: Errors that mean a node was configured wrongly (its parameters, its model, its ROS
+#: arguments): :func:`spin_node` reports them in one line and exits with EXIT_BAD_PARAMETERS.
+STARTUP_ERRORS: tuple[type[Exception], ...] = (
+    ParameterError,
+    GraspConfigError,
+    HandModelError,
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    rclpy_implementation.RCLInvalidROSArgsError,
+    rclpy_implementation.UnknownROSArgsError,
+)
+
+#: Exit code of a node that refused its configuration (as argparse's usage errors).
+EXIT_BAD_PARAMETERS = 2
+
+#: Longest wait of the spin loop before it checks for SIGINT or SIGTERM, s.
+SIGNAL_CHECK_PERIOD = 0.1
+
+#: Signals that end a node.
+TERMINATION_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class EndpointNode(Node):
@@ -45,21 +89,57 @@ class EndpointNode(Node):
     Args:
         node_name: The node's default name, a key of :data:`NODE_SCHEMAS`.
         publishes: Topics it publishes (their types and QoS from the topic table).
-        **kwargs: Passed to ``rclpy.node.Node`` (``cli_args``, ``parameter_overrides``...).
+        global_arguments: The arguments ``rclpy.init`` was given (default ``sys.argv``, as
+            rclpy's); ignored with ``use_global_arguments=False``.
+        **kwargs: Passed to ``rclpy.node.Node`` (``context``, ``cli_args``, ``namespace``...).
+            ``parameter_overrides`` beat every argument.
 
     Attributes:
         parameters: Every parameter of the node's schema, validated, paths absolute.
+        given_parameters: The names the arguments and overrides set, with their sources.
         msgs: The rclpy message classes, for the endpoint.
+
+    Raises:
+        ParameterError: A parameter file or ``-p`` rule gives an unknown or invalid
+            parameter, a file has a misspelt node section, or the values are inconsistent.
 
     """
 
-    def __init__(self, node_name: str, publishes: Iterable[str], **kwargs: Any) -> None:
-        super().__init__(node_name, **kwargs)
+    def __init__(
+        self,
+        node_name: str,
+        publishes: Iterable[str],
+        *,
+        global_arguments: Sequence[str] | None = None,
+        **kwargs: Any,
+    ) -> None:
         self.schema = NODE_SCHEMAS[node_name]
+        caller_overrides: list[Parameter] = list(kwargs.pop('parameter_overrides', None) or [])
+        expected_name, self.given_parameters = _start_up_parameters(
+            node_name, global_arguments, caller_overrides, kwargs
+        )
+        given = {name: parameter.value for name, parameter in self.given_parameters.items()}
+        source = f"node '{expected_name}'"
+        check_node_parameters(node_name, validate_parameters(self.schema, given, source), source)
+        # Converted by the schema (a double array as a list of floats); ROS's own as given.
+        overrides = [
+            Parameter(name, value=spec.validate(value) if spec is not None else value)
+            for name, value in given.items()
+            for spec in [self.schema.get(name)]
+        ]
+        super().__init__(node_name, parameter_overrides=overrides + caller_overrides, **kwargs)
+        if self.get_fully_qualified_name() != expected_name:
+            self.get_logger().warning(
+                f"parameters were computed for '{expected_name}': ROS arguments this node "
+                'does not understand renamed it'
+            )
         values = declare_node_parameters(self, self.schema)
-        check_node_parameters(node_name, values, f"node '{self.get_fully_qualified_name()}'")
-        # Relative paths (the URDF) resolve against the installed config/ directory.
-        self.parameters = resolve_relative_paths(self.schema, values, self.config_directory)
+        self.parameters = resolve_relative_paths(
+            self.schema,
+            values,
+            self.config_directory,
+            {name: parameter.directory for name, parameter in self.given_parameters.items()},
+        )
         self.msgs = MessageNamespace.from_rclpy()
         self._publishers_by_topic = {
             spec.name: self.create_publisher(
@@ -71,7 +151,7 @@ class EndpointNode(Node):
 
     @property
     def config_directory(self) -> Path:
-        """The package's installed ``config/`` directory."""
+        """The package's ``config/`` directory, base of relative paths left at their default."""
         return share_directory() / 'config'
 
     def subscribe(self, topic: str, callback: Callable[[Any], None]) -> Any:
@@ -123,16 +203,140 @@ class EndpointNode(Node):
                 self.get_logger().warning(text, throttle_duration_sec=1.0)
 
 
-def spin_node(node_factory: Callable[[], Node], args: list[str] | None = None) -> None:
-    """Initialise rclpy, spin one node until shutdown or Ctrl-C, and clean up (Jazzy)."""
-    rclpy.init(args=args)
+def _start_up_parameters(
+    node_name: str,
+    global_arguments: Sequence[str] | None,
+    caller_overrides: Sequence[Parameter],
+    node_kwargs: Mapping[str, Any],
+) -> tuple[str, dict[str, GivenParameter]]:
+    """Collect what the process's and the node's ROS arguments and the overrides set.
+
+    Returns:
+        The node's fully qualified name after remapping, and ``{name: GivenParameter}``
+        (:func:`~grasp_safety_filter.io.ros_arguments.given_parameters`, then the
+        overrides, based in the current directory).
+
+    Raises:
+        ParameterError: As ``given_parameters``, or an override is unknown or invalid.
+    """
+    argument_lists = [node_kwargs.get('cli_args') or []]
+    if node_kwargs.get('use_global_arguments', True):
+        argument_lists.insert(0, sys.argv if global_arguments is None else global_arguments)
+    argument_sets = [parse_ros_arguments(arguments) for arguments in argument_lists]
+    name = remapped_fully_qualified_name(node_name, node_kwargs.get('namespace'), argument_sets)
+    schema = NODE_SCHEMAS[node_name]
+    others = [other for other_name, other in NODE_SCHEMAS.items() if other_name != node_name]
+    given = given_parameters(
+        schema, name, argument_sets, other_schemas=others, node_names=NODE_SCHEMAS
+    )
+    source = 'parameter_overrides'
+    values = {parameter.name: parameter.value for parameter in caller_overrides}
+    validate_parameters(schema, values, source, other_schemas=others)
+    given.update({n: GivenParameter(v, source, Path.cwd()) for n, v in values.items()})
+    return name, given
+
+
+class _TerminationRequests:
+    """A signal handler that records SIGINT and SIGTERM instead of raising.
+
+    Python's default SIGINT handler raises KeyboardInterrupt wherever the main thread is,
+    e.g. inside ``destroy_node``; rclpy's own handlers shut the context down from another
+    thread, under a callback that may still be taking a message. Recording the request
+    and letting the spin loop end leaves no such moment.
+    """
+
+    def __init__(self) -> None:
+        self.received: list[int] = []
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        self.received.append(signum)
+
+    @property
+    def requested(self) -> bool:
+        """Whether SIGINT or SIGTERM arrived."""
+        return bool(self.received)
+
+
+def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) -> None:
+    """Initialise rclpy, spin one node until shutdown, SIGINT or SIGTERM, and clean up (Jazzy).
+
+    The body of a node process. SIGINT and SIGTERM (one, or a second while cleaning up, as
+    ``ros2 launch`` and ``timeout`` send them) end it quietly; so does shutting the context
+    down. It returns with both signals ignored, so that one arriving while the interpreter
+    exits cannot kill the process.
+
+    Args:
+        node_factory: Builds the node; called with ``global_arguments`` (an EndpointNode).
+        args: The process's arguments (default ``sys.argv``).
+
+    Raises:
+        SystemExit: With :data:`EXIT_BAD_PARAMETERS` after printing one line on stderr, when
+            the node refuses its parameters (one of :data:`STARTUP_ERRORS`).
+    """
+    arguments = list(sys.argv if args is None else args)
+    termination = _TerminationRequests()
+    for signum in TERMINATION_SIGNALS:
+        signal.signal(signum, termination)
+    context = rclpy.get_default_context()
     node = None
+    executor = None
+    error_line = None
     try:
-        node = node_factory()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        _init_rclpy(arguments)
+        if not termination.requested:
+            node = node_factory(global_arguments=arguments)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+        while not termination.requested and context.ok():
+            try:
+                executor.spin_once(timeout_sec=SIGNAL_CHECK_PERIOD)
+            except ExternalShutdownException:
+                break
+            except Exception:
+                if context.ok():
+                    raise
+                break  # a callback cut short by the node's own shutdown (the simulator's end)
+    except STARTUP_ERRORS as error:
+        program = Path(arguments[0]).name if arguments else 'node'
+        unknown = isinstance(error, rclpy_implementation.UnknownROSArgsError)
+        error_line = f'{program}: ' + (f'unknown ROS arguments {error}' if unknown else str(error))
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        _clean_up(executor, node)
+        for signum in TERMINATION_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
+    if error_line is not None:
+        print(error_line, file=sys.stderr)
+        raise SystemExit(EXIT_BAD_PARAMETERS)
+
+
+def _init_rclpy(arguments: list[str]) -> None:
+    """Initialise the default context without rclpy's signal handlers.
+
+    Raises:
+        ParameterError: rcl refuses the arguments (a malformed ``-p`` rule, a flag without
+            its value).
+    """
+    try:
+        rclpy.init(args=arguments, signal_handler_options=SignalHandlerOptions.NO)
+    except rclpy_implementation.RCLError as error:
+        raise ParameterError(f'ROS arguments refused: {error}') from None
+
+
+def _clean_up(executor: SingleThreadedExecutor | None, node: Node | None) -> None:
+    """Shut the executor down, destroy the node and shut rclpy down, whatever is left.
+
+    Once the context is shut down, rclpy may refuse to destroy what it already invalidated
+    (``RuntimeError``, e.g. ``InvalidHandle``): nothing is left to clean up then.
+    """
+    steps: list[Callable[[], Any]] = []
+    if executor is not None:
+        steps.append(executor.shutdown)
+    if node is not None:
+        steps.append(node.destroy_node)
+    for step in steps:
+        try:
+            step()
+        except RuntimeError:
+            if rclpy.ok():
+                raise
+    rclpy.try_shutdown()
