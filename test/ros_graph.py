@@ -50,9 +50,9 @@ HERE = Path(__file__).resolve()
 BIN = Path(sys.executable).parent
 
 #: Pass node overrides as a parameter file with the node's own section (as ``launch_ros``
-#: writes a ``parameters=[..., dict]`` entry) instead of ``-p``. ``-p name:=value`` does not
-#: yet beat a value in the node's section of the parameter file.
-OVERRIDES_AS_FILE = True
+#: writes a ``parameters=[..., dict]`` entry) instead of ``-p name:=value`` (as ``ros2 run``
+#: users do). Both beat the parameter file's node section.
+OVERRIDES_AS_FILE = False
 
 #: Diagnostic values that time the computation (wall clock): never equal between runs.
 TIMING_KEYS = frozenset({'solve_time_us', 'step_time_us', 'tick_time_us'})
@@ -161,9 +161,18 @@ def with_overrides(node: NodeLaunch, **values: Any) -> NodeLaunch:
     return dataclasses.replace(node, overrides={**node.overrides, **values})
 
 
-def node_command(node: NodeLaunch, work_dir: Path) -> list[str]:
-    """Return the ``ros2 run``-equivalent command line of a node (console script + ros args)."""
-    overrides = work_dir / f'{node.name}_overrides.yaml' if OVERRIDES_AS_FILE else None
+def node_command(
+    node: NodeLaunch, work_dir: Path, overrides_as_file: bool = OVERRIDES_AS_FILE
+) -> list[str]:
+    """Return the ``ros2 run``-equivalent command line of a node (console script + ros args).
+
+    Args:
+        node: The node.
+        work_dir: Where an overrides file goes.
+        overrides_as_file: Overrides as a parameter file (``launch_ros``), not ``-p``.
+
+    """
+    overrides = work_dir / f'{node.name}_overrides.yaml' if overrides_as_file else None
     return [str(BIN / node.executable), *node.ros_arguments(overrides_file=overrides)]
 
 
@@ -189,6 +198,7 @@ def run_graph(
     recorder: str = RECORDER_NODE,
     extra: Mapping[str, Sequence[str]] | None = None,
     recorder_delay: float = 0.0,
+    overrides_as_file: bool = OVERRIDES_AS_FILE,
 ) -> GraphRun:
     """Run a graph to the simulator's exit, recorded from the start; stop every process.
 
@@ -203,6 +213,8 @@ def run_graph(
         recorder: The recorder's node name.
         extra: Further processes, name -> command.
         recorder_delay: Start the recorder this long after the nodes, s (0: before them).
+        overrides_as_file: Give the nodes their overrides as ``launch_ros`` does, in a
+            parameter file with the node's section, instead of ``-p``.
 
     """
     work_dir = Path(work_dir)
@@ -215,7 +227,7 @@ def run_graph(
         for name, command in (extra or {}).items():
             processes.start(name, command)
         for node in nodes:
-            processes.start(node.name, node_command(node, work_dir))
+            processes.start(node.name, node_command(node, work_dir, overrides_as_file))
         if recorder_delay > 0.0:
             time.sleep(recorder_delay)
             processes.start('recorder', record)

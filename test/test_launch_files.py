@@ -282,10 +282,12 @@ def test_overrides_file_holds_the_node_section(tmp_path):
     path = safety_filter.write_overrides(tmp_path / 'filter.yaml')
     sections = load_parameter_file(path)
     assert sections == {'/safety_filter_node': {'use_sim_time': True, 'enabled': False}}
-    command = node_command(sim, tmp_path)
-    files = parse_ros_arguments(command[1:])[0]
-    assert files[0] == 'config.yaml'
-    if len(files) == 2:  # overrides as a file (ros_graph.OVERRIDES_AS_FILE)
-        overrides = load_parameter_file(files[1])['/hand_sim_node']
-        assert overrides == {'use_sim_time': True, WAIT_FOR_RECORDER: RECORDER_NODE}
+    expected = {'use_sim_time': True, WAIT_FOR_RECORDER: RECORDER_NODE}
+    command = node_command(sim, tmp_path, overrides_as_file=True)
+    files, values, _ = parse_ros_arguments(command[1:])
+    assert files[0] == 'config.yaml' and len(files) == 2 and values == {}
+    assert load_parameter_file(files[1]) == {'/hand_sim_node': expected}
+    command = node_command(sim, tmp_path, overrides_as_file=False)
+    files, values, _ = parse_ros_arguments(command[1:])
+    assert files == ['config.yaml'] and values == expected
     assert launch_arguments.PACKAGE == 'grasp_safety_filter'

@@ -204,6 +204,7 @@ def test_filtered_graph_records_the_runner_stream_from_the_first_tick(tmp_path):
     during, _ = run_stream(run.bag)
     assert len(during[topics.EFFORT_COMMAND]) == 301
     assert "recorder 'rosbag2_recorder' connected: starting the run" in run.logs
+    assert '-p' in run.logs.split()  # the overrides as ros2 run users give them
     summary = analyze(run.bag, tmp_path / 'analysis')
     assert summary['mode'] == 'filtered'
     assert summary['completed'] and summary['t_end'] == pytest.approx(0.3)
@@ -231,7 +232,12 @@ def test_nominal_graph_reproduces_the_paper_failure_tick_by_tick(tmp_path):
 
 
 def test_simulator_waits_for_a_recorder_that_starts_late(tmp_path):
-    run, reference = graph_and_runner(tmp_path, 'filtered', 0.05, recorder_delay=5.0)
+    # The overrides as launch_ros passes them: a parameter file with each node's section
+    # (duration: 0.05 beats the paper file's hand_sim_node section).
+    run, reference = graph_and_runner(
+        tmp_path, 'filtered', 0.05, recorder_delay=5.0, overrides_as_file=True
+    )
+    assert '_overrides.yaml' in run.logs and '-p' not in run.logs.split()
     assert f"waiting to start the run for recorder '{RECORDER_NODE}' subscribed to" in run.logs
     assert_bag_starts_at_the_first_tick(run.bag)
     assert_same_stream(run.bag, reference)
