@@ -72,9 +72,12 @@ setup(
             'grasp-bench = grasp_safety_filter.bench:bench_main',
             'grasp-bench-ros = grasp_safety_filter.bench_ros:bench_ros_main',
             'grasp-model-report = grasp_safety_filter.cli:model_report_main',
-            'hand_sim_node = hand_sim_node.node:main',
-            'nominal_controller_node = grasp_safety_filter.nodes.nominal_controller_node:main',
-            'safety_filter_node = grasp_safety_filter.nodes.safety_filter_node:main',
+            'hand_sim_node = grasp_safety_filter.nodes.entry_points:hand_sim_node',
+            (
+                'nominal_controller_node = '
+                'grasp_safety_filter.nodes.entry_points:nominal_controller_node'
+            ),
+            'safety_filter_node = grasp_safety_filter.nodes.entry_points:safety_filter_node',
         ],
     },
 )

@@ -19,12 +19,28 @@ CONFIG = REPO / 'config' / 'paper_scenario.yaml'
 PACKAGES = ('grasp_safety_filter', 'hand_sim_node')
 LAUNCH_FILES = sorted((REPO / 'launch').glob('*.launch.py'))
 
-#: The package's executables: ``ros2 run grasp_safety_filter <name>`` -> module:function.
+#: The nodes' modules: ``ros2 run grasp_safety_filter <name>`` runs ``<module>.main``
+#: (through ``grasp_safety_filter.nodes.entry_points``, see
+#: test_console_scripts_are_the_entry_points_of_every_node).
 CONSOLE_SCRIPTS = {
     'hand_sim_node': 'hand_sim_node.node:main',
     'nominal_controller_node': 'grasp_safety_filter.nodes.nominal_controller_node:main',
     'safety_filter_node': 'grasp_safety_filter.nodes.safety_filter_node:main',
 }
+
+
+def test_console_scripts_are_the_entry_points_of_every_node():
+    from importlib.metadata import entry_points as installed_entry_points
+
+    from grasp_safety_filter.nodes import entry_points
+
+    assert entry_points.NODE_MODULES == {
+        name: script.partition(':')[0] for name, script in CONSOLE_SCRIPTS.items()
+    }
+    installed = {ep.name: ep.value for ep in installed_entry_points(group='console_scripts')}
+    for name in CONSOLE_SCRIPTS:
+        assert installed[name] == f'grasp_safety_filter.nodes.entry_points:{name}'
+        assert callable(getattr(entry_points, name))
 
 #: The message-level endpoints (and what they use): importable without ROS.
 PURE_MODULES = (

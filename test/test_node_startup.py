@@ -471,3 +471,38 @@ def test_nodes_exit_quietly_on_two_sigints_while_they_are_built():
     finally:
         for node in nodes:
             node.kill()
+
+
+def wait_until_importing(
+    node: NodeProcess, library: str, timeout: float = PROCESS_TIMEOUT
+) -> None:
+    """Wait until the process has mapped a shared library that only the node's imports load."""
+    maps = Path(f'/proc/{node.process.pid}/maps')
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if library in maps.read_text(encoding='utf-8', errors='replace'):
+                return
+        except OSError:
+            break  # the process is gone: finish() reports it
+        time.sleep(0.001)
+    raise AssertionError(f'{library} never loaded\n{node.report()}')
+
+
+@pytest.mark.parametrize('library', ['_multiarray_umath', '_rclpy_pybind11', 'libpinocchio'])
+def test_nodes_exit_quietly_on_a_signal_while_they_import(library):
+    """Before spin_node runs, the console script's entry point already makes SIGINT quiet.
+
+    The entry point imports the node's module only after taking the signals over; numpy,
+    rclpy and Pinocchio are loaded by that import, so a signal sent once one of them is
+    mapped arrives in the middle of it.
+    """
+    nodes = start_graph()
+    try:
+        for node in nodes:
+            wait_until_importing(node, library)
+            node.process.send_signal(signal.SIGINT)
+        assert_quiet_exits(nodes)
+    finally:
+        for node in nodes:
+            node.kill()

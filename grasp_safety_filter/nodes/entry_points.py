@@ -1,0 +1,47 @@
+"""Console entry points of the three node processes: quiet on Ctrl-C from their first instant.
+
+A node process spends its first few tenths of a second importing rclpy, Pinocchio and numpy
+before :func:`~grasp_safety_filter.nodes.base_node.spin_node` takes SIGINT and SIGTERM
+over. A signal in that time (``ros2 launch`` started and stopped at once) would end it with
+a ``KeyboardInterrupt`` traceback; through these entry points it exits 0 without a word,
+as it does later. This module imports nothing heavy itself.
+"""
+
+from __future__ import annotations
+
+import importlib
+import signal
+from types import FrameType
+
+#: Console script name -> the module whose ``main(args)`` runs that node.
+NODE_MODULES: dict[str, str] = {
+    'hand_sim_node': 'hand_sim_node.node',
+    'nominal_controller_node': 'grasp_safety_filter.nodes.nominal_controller_node',
+    'safety_filter_node': 'grasp_safety_filter.nodes.safety_filter_node',
+}
+
+
+def _exit_quietly(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(0)
+
+
+def run_node(name: str, args: list[str] | None = None) -> None:
+    """Import the node's module with SIGINT and SIGTERM ending the process quietly, run it."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _exit_quietly)
+    importlib.import_module(NODE_MODULES[name]).main(args)
+
+
+def hand_sim_node(args: list[str] | None = None) -> None:
+    """Run ``hand_sim_node``."""
+    run_node('hand_sim_node', args)
+
+
+def nominal_controller_node(args: list[str] | None = None) -> None:
+    """Run ``nominal_controller_node``."""
+    run_node('nominal_controller_node', args)
+
+
+def safety_filter_node(args: list[str] | None = None) -> None:
+    """Run ``safety_filter_node``."""
+    run_node('safety_filter_node', args)
