@@ -25,6 +25,7 @@ from grasp_safety_filter.io.parameters import (
     resolve_relative_paths,
     validate_parameters,
 )
+from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import (
     check_hand_sim_parameters,
     check_model_parameters,
@@ -855,3 +856,29 @@ def test_declare_on_a_real_rclpy_node():
         bad.destroy_node()
     finally:
         rclpy.try_shutdown()
+
+
+@pytest.mark.parametrize(
+    'section', ['safety_filtr_node', 'Hand_Sim_Node', 'nominal_controler_node']
+)
+def test_the_ros_free_loader_refuses_a_misspelt_node_section(tmp_path, section):
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(
+        config_path().read_text(encoding='utf-8')
+        + f'\n{section}:\n  ros__parameters:\n    enabled: false\n',
+        encoding='utf-8',
+    )
+    expected = f"section '/{section}' addresses no node.*did you mean"
+    with pytest.raises(ParameterError, match=expected):
+        load_node_parameters(path, 'safety_filter_node')
+
+
+def test_the_ros_free_loader_accepts_sections_for_other_nodes_of_a_system(tmp_path):
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(
+        config_path().read_text(encoding='utf-8')
+        + '\nmy_hand_driver:\n  ros__parameters:\n    rate: 1000\n'
+        + '\nhand_sim_node_2:\n  ros__parameters:\n    duration: 1.0\n',
+        encoding='utf-8',
+    )
+    assert load_node_parameters(path, 'safety_filter_node')['enabled'] is True

@@ -24,6 +24,7 @@ from typing import Any
 
 from grasp_safety_filter.io.parameters import (
     load_parameter_file,
+    misspelt_node_sections,
     NodeSchema,
     parameters_for_node,
     ParameterSpec,
@@ -638,10 +639,13 @@ def load_node_parameters(
     source = f"parameter file '{path}' (node '{node_name}')"
     if overrides:
         source += f' with overrides {dict(overrides)}'
+    file_parameters = load_parameter_file(path)
+    # A misspelt section would leave its node at the defaults unseen: refused, as by the nodes.
+    raise_parameter_errors(source, misspelt_node_sections(file_parameters, NODE_SCHEMAS))
     values = validate_parameters(
         schema,
         {
-            **parameters_for_node(load_parameter_file(path), node_name, namespace),
+            **parameters_for_node(file_parameters, node_name, namespace),
             **(overrides or {}),
         },
         source,
