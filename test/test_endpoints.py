@@ -796,3 +796,58 @@ def test_switching_the_filter_is_reported_with_its_time(params):
     assert report.level is (
         DiagnosticLevel.WARN if report.values[Key.RELAXED] == 'true' else DiagnosticLevel.OK
     )
+
+
+class CountingModel:
+    """Wraps a GraspModel and records the stamps whose state it computed."""
+
+    def __init__(self, core):
+        self.core = core
+        self.stamps = []
+
+    def state(self, t, *args, **kwargs):
+        self.stamps.append(t)
+        return self.core.state(t, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self.core, name)
+
+
+ARRIVAL_ORDERS = [
+    ('joints', 'odometry', 'nominal'),
+    ('odometry', 'joints', 'nominal'),
+    ('nominal', 'joints', 'odometry'),
+    ('joints', 'nominal', 'odometry'),
+]
+
+
+@pytest.mark.parametrize('order', ARRIVAL_ORDERS, ids='-'.join)
+def test_filter_computes_the_model_terms_once_the_state_is_complete(params, order):
+    """The model terms need not wait for u_nom; the answer is the same in any arrival order."""
+    _, joints, odometry, effort_nominal = tick_inputs(params)
+    reference = make_filter(params)
+    reference.on_joint_states(joints)
+    reference.on_odom(odometry)
+    expected = reference.on_effort_nominal(effort_nominal)
+    safety_filter = make_filter(params)
+    safety_filter.model = CountingModel(safety_filter.model)
+    handlers = {
+        'joints': lambda: safety_filter.on_joint_states(joints),
+        'odometry': lambda: safety_filter.on_odom(odometry),
+        'nominal': lambda: safety_filter.on_effort_nominal(effort_nominal),
+    }
+    state_done = order.index('nominal') == 2
+    outgoing = []
+    for position, name in enumerate(order):
+        outgoing = handlers[name]()
+        if position == 1:
+            # Both state messages in, u_nom not yet: computed already; else not yet.
+            assert len(safety_filter.model.stamps) == (1 if state_done else 0)
+    assert len(safety_filter.model.stamps) == 1
+    assert [o.topic for o in outgoing] == [o.topic for o in expected]
+    names = safety_filter.model.joint_names
+    np.testing.assert_array_equal(commands(outgoing, names), commands(expected, names))
+    np.testing.assert_array_equal(
+        m.margins_from_msg(outgoing[1].msg).h, m.margins_from_msg(expected[1].msg).h
+    )
+    assert safety_filter._states == {}

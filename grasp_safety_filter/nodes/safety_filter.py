@@ -107,6 +107,7 @@ from grasp_safety_filter.io.topics import (
     MARGINS,
     OBJECT_ODOM,
 )
+from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 
 #: Period of the input watchdog, s (steady clock). The fallback goes out and /diagnostics
@@ -120,6 +121,7 @@ WATCHDOG_PERIOD = 0.02
 MAX_PENDING = 64
 
 _INPUTS = (JOINT_STATES, OBJECT_ODOM, EFFORT_NOMINAL)
+_STATE_INPUTS = (JOINT_STATES, OBJECT_ODOM)
 
 
 @dataclass(frozen=True)
@@ -178,6 +180,8 @@ class SafetyFilterEndpoint:
         self.last_result: FilterResult | None = None
         self._joint_names = list(model.joint_names)
         self._pending: dict[int, dict[str, Any]] = {}
+        # Model terms (or the model's error) of pending stamps whose state is complete.
+        self._states: dict[int, tuple[GraspState | Exception, float]] = {}
         self._replay: dict[str, Any] = {}
         self._last_tick_ns: int | None = None
         self._last_outputs: list[Outgoing] = []
@@ -386,12 +390,36 @@ class SafetyFilterEndpoint:
         inputs = self._pending.setdefault(stamp, {})
         inputs[topic] = data
         if len(inputs) < len(_INPUTS):
+            if topic in _STATE_INPUTS and all(name in inputs for name in _STATE_INPUTS):
+                # The state is complete before u_nom, which the nominal controller computes
+                # from the same state meanwhile: the model terms need not wait for it.
+                self._states[stamp] = self._timed_state(inputs[JOINT_STATES], inputs[OBJECT_ODOM])
             while len(self._pending) > MAX_PENDING:
-                del self._pending[min(self._pending)]
+                oldest = min(self._pending)
+                del self._pending[oldest]
+                self._states.pop(oldest, None)
             return []
         del self._pending[stamp]
         tick = TickInputs(inputs[JOINT_STATES], inputs[OBJECT_ODOM], inputs[EFFORT_NOMINAL])
         return self._tick(stamp, tick, now_s, wall)
+
+    def _timed_state(
+        self, joint_states: JointStateData, odometry: ObjectStateData
+    ) -> tuple[GraspState | Exception, float]:
+        """Compute a state's model terms (or the model's refusal of it), timed in s."""
+        start = time.perf_counter()
+        try:
+            state: GraspState | Exception = self.model.state(
+                joint_states.t,
+                joint_states.position,
+                joint_states.velocity,
+                odometry.p_object_in_palm,
+                odometry.R_object_to_palm,
+                odometry.twist_object,
+            )
+        except (ValueError, np.linalg.LinAlgError) as error:
+            state = error
+        return state, time.perf_counter() - start
 
     def _close(self, stamp: int) -> None:
         """Mark the tick of ``stamp`` as done: drop every older or equal pending input."""
@@ -399,6 +427,8 @@ class SafetyFilterEndpoint:
         self._replay = {}
         for old in [s for s in self._pending if s <= stamp]:
             del self._pending[old]
+        for old in [s for s in self._states if s <= stamp]:
+            del self._states[old]
 
     def _tick(
         self, stamp: int, inputs: TickInputs, now: float, wall: float | None
@@ -406,15 +436,13 @@ class SafetyFilterEndpoint:
         start = time.perf_counter()
         t = inputs.joint_states.t
         u_nom = inputs.nominal.effort
+        state, model_time = self._states.pop(stamp, None) or self._timed_state(
+            inputs.joint_states, inputs.odometry
+        )
+        start -= model_time  # the tick's time includes its model terms, whenever computed
         try:
-            state = self.model.state(
-                t,
-                inputs.joint_states.position,
-                inputs.joint_states.velocity,
-                inputs.odometry.p_object_in_palm,
-                inputs.odometry.R_object_to_palm,
-                inputs.odometry.twist_object,
-            )
+            if isinstance(state, Exception):
+                raise state
             if self.enabled:
                 filter_start = time.perf_counter()
                 result = self.filter.solve(state, u_nom)
