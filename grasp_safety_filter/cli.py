@@ -122,7 +122,9 @@ def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> tuple[b
         relaxed = ', '.join(f'{k} {v}' for k, v in f.get('relaxed_families', {}).items())
         print(
             f'  filter: {f["steps"]} steps, {f["relaxed_steps"]} relaxed'
-            f'{f" ({relaxed})" if relaxed else ""}, {f["failed_steps"]} failed'
+            f'{f" ({relaxed})" if relaxed else ""}, {f["failed_steps"]} failed, '
+            f'{f.get("rejected_steps", 0)} with rejected input, '
+            f'{f.get("watchdog_fallbacks", 0)} watchdog fallbacks (inputs missing)'
         )
         timing = ', '.join(
             f'{label} {_us(f[key]["median"])} / {_us(f[key]["p99"])} us'

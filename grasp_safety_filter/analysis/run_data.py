@@ -14,6 +14,7 @@ import numpy as np
 
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import read_bag
+from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
 from grasp_safety_filter.io.messages import (
     contacts_from_msg,
     diagnostics_from_msg,
@@ -22,9 +23,7 @@ from grasp_safety_filter.io.messages import (
     joint_state_from_msg,
 )
 from grasp_safety_filter.nodes.scenario import scenario_from_msg
-
-SIM_STATUS = 'hand_sim'
-FILTER_STATUS = 'safety_filter'
+from hand_sim_node.endpoint import DIAGNOSTIC_NAME as SIM_DIAGNOSTIC
 
 
 class RunDataError(ValueError):
@@ -45,7 +44,9 @@ class RunData:
         required_friction: ``beta_i``, shape (K, n).
         t_command: Stamps of the commands, shape (C,), s.
         u_nominal, u_command: Nominal and commanded torques at ``t_command``, (C, m), N·m.
-        filter_values: Per tick (at ``t_command``), the safety filter's diagnostic values.
+        filter_values: Per tick, in stamp order, the safety filter's diagnostic values
+            (one per tick stamp; keys :class:`~grasp_safety_filter.io.diagnostic_keys.Key`).
+        watchdog_values: The filter's input-watchdog statuses (inputs missing), bag order.
         stop_reason: Why the simulator stopped (``"duration"`` when it ran to the end), or None
             if the bag has no end-of-run status (an interrupted recording).
         t_end: Time the run reached, s.
@@ -62,6 +63,7 @@ class RunData:
     u_nominal: np.ndarray
     u_command: np.ndarray
     filter_values: list[dict[str, str]] = field(default_factory=list)
+    watchdog_values: list[dict[str, str]] = field(default_factory=list)
     stop_reason: str | None = None
     t_end: float = 0.0
 
@@ -140,24 +142,32 @@ def load_run(bag: Path | str) -> RunData:
         )
 
     def efforts(topic: str) -> dict[int, np.ndarray]:
-        return {
-            header_stamp_ns(msg): effort_from_msg(msg, joint_names, source=topic).effort
-            for _, msg in messages.get(topic, [])
-        }
+        # The first message of a stamp is the tick's answer; the filter's watchdog may repeat
+        # a fallback later with the same stamp (the node clock stood still).
+        by_stamp: dict[int, np.ndarray] = {}
+        for _, msg in messages.get(topic, []):
+            stamp = header_stamp_ns(msg)
+            if stamp not in by_stamp:
+                by_stamp[stamp] = effort_from_msg(msg, joint_names, source=topic).effort
+        return by_stamp
 
     nominal, command = efforts(topics.EFFORT_NOMINAL), efforts(topics.EFFORT_COMMAND)
     command_stamps = sorted(set(nominal) & set(command))
     filter_values: dict[int, dict[str, str]] = {}
+    watchdog_values: list[dict[str, str]] = []
     stop_reason, t_end = None, None
     for _, msg in messages.get(topics.DIAGNOSTICS, []):
         data = diagnostics_from_msg(msg)
         for report in data.reports:
-            if report.name == FILTER_STATUS and 'status' in report.values:
-                filter_values[header_stamp_ns(msg)] = dict(report.values)
-            elif report.name == SIM_STATUS and 'run.stop_reason' in report.values:
+            if report.name == FILTER_DIAGNOSTIC and Key.STATUS in report.values:
+                if report.values.get(Key.INPUT_WATCHDOG) == 'true':
+                    watchdog_values.append(dict(report.values))
+                else:
+                    filter_values[header_stamp_ns(msg)] = dict(report.values)
+            elif report.name == SIM_DIAGNOSTIC and 'run.stop_reason' in report.values:
                 stop_reason = report.values['run.stop_reason']
                 t_end = float(report.values['run.t_end'])
-    enabled = [v.get('filter.enabled') for v in filter_values.values()]
+    enabled = [v.get(Key.FILTER_ENABLED) for v in filter_values.values()]
     mode = 'filtered' if enabled and all(e == 'true' for e in enabled) else 'nominal'
     m = len(joint_names)
     return RunData(
@@ -172,6 +182,7 @@ def load_run(bag: Path | str) -> RunData:
         u_nominal=np.array([nominal[s] for s in command_stamps]).reshape(-1, m),
         u_command=np.array([command[s] for s in command_stamps]).reshape(-1, m),
         filter_values=[filter_values[s] for s in sorted(filter_values)],
+        watchdog_values=watchdog_values,
         stop_reason=stop_reason,
         t_end=t_end if t_end is not None else max(q_by_stamp) * 1e-9,
     )

@@ -9,9 +9,18 @@ Keys (later additions never rename one)::
      "violations": {family: {"count", "first_t"}},
      "min_margin": {"fingertip_workspace", "joint_limits", "friction"},
      "max_required_friction", "mu",
-     "filter": {"steps", "relaxed_steps", "failed_steps", "relaxed_families": {family: steps},
+     "filter": {"steps", "relaxed_steps", "failed_steps", "rejected_steps",
+                "watchdog_fallbacks", "statuses": {status: steps},
+                "relaxed_families": {family: steps},
                 "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"},
                 "tick_us": {"median", "p99"}}}
+
+Filter steps are the ticks the filter answered: ``failed_steps``
+those without a QP answer (the filter's own fallback, an ERROR), ``rejected_steps`` those
+with rejected input (the hold policy's held or fallback command), ``statuses`` every
+``status`` value (:class:`~grasp_safety_filter.io.diagnostic_keys.TickStatus`) with its
+count; ``watchdog_fallbacks`` counts the fallback commands the input watchdog sent while
+no input came.
 
 A margin is the smallest barrier value h over the run in its own units (negative =
 violated); infinite values (a separated contact) are written as null. Filter times are the
@@ -28,11 +37,13 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.analysis.run_data import RunData
+from grasp_safety_filter.io.diagnostic_keys import (
+    FAILED_STATUSES,
+    INPUT_STATUSES,
+    Key,
+    TickStatus,
+)
 from hand_sim_node.events import EventLog, EventMonitor
-
-# Filter statuses that count as a failed step: the QP gave no usable answer and the
-# fallback command went out.
-FAILED_STATUSES = frozenset({'failed', 'fallback', 'invalid_input'})
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -63,29 +74,51 @@ def constraint_log(run: RunData) -> EventLog:
     return log
 
 
+def tick_status(values: dict[str, str]) -> TickStatus | str:
+    """Return the ``status`` of a filter diagnostic: a :class:`TickStatus`, else the text.
+
+    A status this version does not know (a bag from another one) stays text: it is counted
+    in ``statuses`` but as neither failed nor rejected.
+    """
+    text = values.get(Key.STATUS, '')
+    try:
+        return TickStatus(text)
+    except ValueError:
+        return text
+
+
 def filter_summary(run: RunData) -> dict[str, Any]:
-    """Count the filter's steps, relaxed and failed steps; QP, filter-step and tick times.
+    """Count the filter's steps by status; QP, filter-step and tick times.
 
     ``relaxed_families`` counts, per family, the relaxed steps that gave up one of its rows.
     """
-    statuses = [values.get('status', '') for values in run.filter_values]
+    statuses = [tick_status(values) for values in run.filter_values]
     relaxed_families: dict[str, int] = {}
     for values in run.filter_values:
-        if values.get('relaxed') == 'true':
-            for family in filter(None, values.get('relaxed_families', '').split(',')):
+        if values.get(Key.RELAXED) == 'true':
+            for family in filter(None, values.get(Key.RELAXED_FAMILIES, '').split(',')):
                 relaxed_families[family] = relaxed_families.get(family, 0) + 1
+    counts: dict[str, int] = {}
+    for status in statuses:
+        text = status.value if isinstance(status, TickStatus) else status
+        counts[text] = counts.get(text, 0) + 1
 
     def times(key: str) -> dict[str, float | None]:
         return _percentiles([float(v[key]) for v in run.filter_values if key in v])
 
     return {
         'steps': len(run.filter_values),
-        'relaxed_steps': sum(values.get('relaxed') == 'true' for values in run.filter_values),
+        'relaxed_steps': sum(v.get(Key.RELAXED) == 'true' for v in run.filter_values),
         'failed_steps': sum(status in FAILED_STATUSES for status in statuses),
+        'rejected_steps': sum(status in INPUT_STATUSES for status in statuses),
+        'watchdog_fallbacks': sum(
+            tick_status(values) is TickStatus.INPUT_FALLBACK for values in run.watchdog_values
+        ),
+        'statuses': counts,
         'relaxed_families': relaxed_families,
-        'qp_solve_us': times('solve_time_us'),
-        'step_us': times('step_time_us'),
-        'tick_us': times('tick_time_us'),
+        'qp_solve_us': times(Key.SOLVE_TIME_US),
+        'step_us': times(Key.STEP_TIME_US),
+        'tick_us': times(Key.TICK_TIME_US),
     }
 
 
