@@ -110,6 +110,12 @@ def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> tuple[b
         f'  t_end {summary["t_end"]:.3f} s of {summary["duration_requested"]:g} s, '
         f'stop reason: {stop}'
     )
+    missed = summary.get('missed_start') or {}
+    if missed:
+        print(
+            '  recording missed the start of the run (t_0 = 0): '
+            + ', '.join(f'{topic} from {t:.3f} s' for topic, t in missed.items())
+        )
     for family, record in summary['violations'].items():
         first = '' if record['first_t'] is None else f' (first at {record["first_t"]:.3f} s)'
         print(f'  {family:20s} {record["count"]:6d} steps violated{first}')

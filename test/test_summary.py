@@ -1,21 +1,25 @@
-"""The analysis reads what the filter writes: every status counted, from a bag."""
+"""The analysis reads what the filter writes: statuses counted, a late recording reported."""
 
 from __future__ import annotations
 
 from collections import Counter, deque
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.analysis.summary import summarize
+from grasp_safety_filter.cli import analyze_main
 from grasp_safety_filter.control.safety_filter import FilterStatus
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder, read_bag
-from grasp_safety_filter.runner import build_endpoints, RunOptions
+from grasp_safety_filter.runner import analyze_bag, build_endpoints, run, RunOptions
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
 STEPS = 30
@@ -121,6 +125,7 @@ def test_summary_counts_failed_rejected_and_watchdog_ticks_from_the_bag(tmp_path
     assert sum(statuses.values()) == counts['steps']
     assert Counter(v['status'] for v in run_data.watchdog_values) == {'input_fallback': 2}
     assert summary['mode'] == 'filtered'
+    assert summary['missed_start'] == {}
     # The watchdog's fallbacks carry the last tick's stamp: the tick's own command is kept.
     stamp = round(0.019e9)
     sent = [
@@ -131,3 +136,60 @@ def test_summary_counts_failed_rejected_and_watchdog_ticks_from_the_bag(tmp_path
     assert len(sent) == 3 and not np.allclose(sent[0], sent[-1])
     (k,) = np.flatnonzero(np.round(run_data.t_command * 1e9) == stamp)
     np.testing.assert_array_equal(run_data.u_command[k], sent[0])
+
+
+# ----------------------------------------------------------------------------------------
+# A recording that missed the start of the run
+
+
+@pytest.fixture(scope='module')
+def runner_bag(tmp_path_factory):
+    """Run a short filtered run with the runner; return its bag and summary."""
+    result = run(RunOptions(CONFIG, 'filtered', duration=0.03), tmp_path_factory.mktemp('run'))
+    return result.bag, result.summary
+
+
+def copy_dropping_first(source: Path, target: Path, dropped: dict[str, int]) -> None:
+    """Copy a bag (to mcap), leaving out the first ``dropped[topic]`` messages of some topics."""
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    seen: Counter[str] = Counter()
+    with Reader(source) as reader:
+        writer = Writer(target, version=9, storage_plugin=StoragePlugin.MCAP)
+        with writer:
+            connections = {
+                c.id: writer.add_connection(
+                    c.topic,
+                    c.msgtype,
+                    typestore=typestore,
+                    offered_qos_profiles=c.ext.offered_qos_profiles,
+                )
+                for c in reader.connections
+            }
+            for connection, timestamp, data in reader.messages():
+                seen[connection.topic] += 1
+                if seen[connection.topic] > dropped.get(connection.topic, 0):
+                    writer.write(connections[connection.id], timestamp, data)
+
+
+def test_a_bag_that_missed_the_start_is_analysed_and_says_so(runner_bag, tmp_path, capsys):
+    bag, live_summary = runner_bag
+    assert live_summary['missed_start'] == {}
+    late = tmp_path / 'late_bag'
+    dropped = {topics.EFFORT_COMMAND: 5, topics.JOINT_STATES: 3, topics.CONTACTS: 1}
+    copy_dropping_first(bag, late, dropped)
+
+    summary, _ = analyze_bag(late, tmp_path / 'late')
+    assert summary['missed_start'] == {
+        topic: pytest.approx(n * DT, abs=1e-12) for topic, n in dropped.items()
+    }
+    assert json.loads((tmp_path / 'late' / 'summary.json').read_text()) == summary
+    # Analysed from where the data begin, with the run's own verdict on that part.
+    assert summary['completed']
+    assert summary['violations'] == live_summary['violations']
+    assert summary['filter']['steps'] == live_summary['filter']['steps']
+
+    assert analyze_main([str(late), '--out', str(tmp_path / 'printed')]) == 0
+    printed = capsys.readouterr().out
+    assert 'recording missed the start of the run' in printed
+    assert f'{topics.EFFORT_COMMAND} from 0.005 s' in printed
+    assert f'{topics.JOINT_STATES} from 0.003 s' in printed

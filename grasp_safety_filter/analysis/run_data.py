@@ -2,6 +2,11 @@
 
 Works on bags written by the ROS-free runner and by ``ros2 bag record`` alike: everything
 is taken from the messages (header stamps, ``/grasp/scenario``), nothing from the runner.
+
+A recorder that subscribed late misses the start of the run: every analysed topic whose
+first message is stamped after the run's start (:data:`RUN_START`, the simulator's t_0) is
+listed in :attr:`RunData.missed_start`, and the run is analysed from where its data begin
+(contact samples older than the first joint state are left out).
 """
 
 from __future__ import annotations
@@ -21,9 +26,14 @@ from grasp_safety_filter.io.messages import (
     effort_from_msg,
     header_stamp_ns,
     joint_state_from_msg,
+    nanoseconds_to_seconds,
 )
 from grasp_safety_filter.nodes.scenario import scenario_from_msg
 from hand_sim_node.endpoint import DIAGNOSTIC_NAME as SIM_DIAGNOSTIC
+
+#: Simulation time at which a run starts, s: ``hand_sim_node`` starts every run at t_0 = 0,
+#: with the scenario and the state at t_0.
+RUN_START = 0.0
 
 
 class RunDataError(ValueError):
@@ -50,6 +60,8 @@ class RunData:
         stop_reason: Why the simulator stopped (``"duration"`` when it ran to the end), or None
             if the bag has no end-of-run status (an interrupted recording).
         t_end: Time the run reached, s.
+        missed_start: Analysed topics whose first message is stamped after the run's start
+            (the recording began late): topic -> that first stamp, s. Empty if none.
     """
 
     scenario: dict[str, Any]
@@ -66,6 +78,7 @@ class RunData:
     watchdog_values: list[dict[str, str]] = field(default_factory=list)
     stop_reason: str | None = None
     t_end: float = 0.0
+    missed_start: dict[str, float] = field(default_factory=dict)
 
     @property
     def joint_names(self) -> list[str]:
@@ -132,6 +145,11 @@ def load_run(bag: Path | str) -> RunData:
             msg, joint_names, source=topics.JOINT_STATES
         ).position
     contact_msgs = sorted((msg for _, msg in messages[topics.CONTACTS]), key=header_stamp_ns)
+    # Samples before the first joint state were missed by the recorder (see missed_start).
+    first_state = min(q_by_stamp)
+    contact_msgs = [msg for msg in contact_msgs if header_stamp_ns(msg) >= first_state]
+    if not contact_msgs:
+        raise RunDataError(f'{bag}: no contact sample at or after the first joint state')
     contacts = [contacts_from_msg(msg, contact_names) for msg in contact_msgs]
     stamps = [header_stamp_ns(msg) for msg in contact_msgs]
     missing = [s for s in stamps if s not in q_by_stamp]
@@ -169,6 +187,23 @@ def load_run(bag: Path | str) -> RunData:
                 t_end = float(report.values['run.t_end'])
     enabled = [v.get(Key.FILTER_ENABLED) for v in filter_values.values()]
     mode = 'filtered' if enabled and all(e == 'true' for e in enabled) else 'nominal'
+    first_stamps = {
+        topics.JOINT_STATES: min(q_by_stamp),
+        topics.CONTACTS: min(header_stamp_ns(msg) for _, msg in messages[topics.CONTACTS]),
+    }
+    for topic, by_stamp in (
+        (topics.EFFORT_NOMINAL, nominal),
+        (topics.EFFORT_COMMAND, command),
+        (topics.DIAGNOSTICS, filter_values),
+    ):
+        if by_stamp:
+            first_stamps[topic] = min(by_stamp)
+    step = float(scenario['time_step'])
+    missed_start = {
+        topic: nanoseconds_to_seconds(stamp)
+        for topic, stamp in first_stamps.items()
+        if nanoseconds_to_seconds(stamp) > RUN_START + 0.5 * step
+    }
     m = len(joint_names)
     return RunData(
         scenario=scenario,
@@ -185,4 +220,5 @@ def load_run(bag: Path | str) -> RunData:
         watchdog_values=watchdog_values,
         stop_reason=stop_reason,
         t_end=t_end if t_end is not None else max(q_by_stamp) * 1e-9,
+        missed_start=missed_start,
     )

@@ -6,6 +6,7 @@ the simulator judges a live run with, so a bag and its run always agree.
 Keys (later additions never rename one)::
 
     {"mode", "completed", "t_end", "duration_requested", "stop_reason",
+     "missed_start": {topic: first_stamp},
      "violations": {family: {"count", "first_t"}},
      "min_margin": {"fingertip_workspace", "joint_limits", "friction"},
      "max_required_friction", "mu",
@@ -15,7 +16,9 @@ Keys (later additions never rename one)::
                 "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"},
                 "tick_us": {"median", "p99"}}}
 
-Filter steps are the ticks the filter answered: ``failed_steps``
+``missed_start`` lists the topics whose recording began after the run's start (a recorder
+that subscribed late), with their first stamp in s; the verdict is then drawn from the
+part that was recorded. Filter steps are the ticks the filter answered: ``failed_steps``
 those without a QP answer (the filter's own fallback, an ERROR), ``rejected_steps`` those
 with rejected input (the hold policy's held or fallback command), ``statuses`` every
 ``status`` value (:class:`~grasp_safety_filter.io.diagnostic_keys.TickStatus`) with its
@@ -137,6 +140,7 @@ def summarize(run: RunData) -> dict[str, Any]:
         't_end': float(run.t_end),
         'duration_requested': duration,
         'stop_reason': stop_reason,
+        'missed_start': dict(run.missed_start),
         'violations': log.violations(),
         'min_margin': {k: _finite_or_none(v) for k, v in log.min_margin().items()},
         'max_required_friction': _finite_or_none(log.max_required_friction),
