@@ -13,8 +13,8 @@ it and the nodes it reads from subscribed to the state) and, with
 ``start.wait_for_recorder`` set to a recorder's node name (``rosbag2_recorder`` for
 ``ros2 bag record``), once that recorder is subscribed to every published topic of the topic
 table, so that neither the controllers nor the bag miss the first tick; the graph must stay
-so for ``START_SETTLE`` s. While it waits it logs what it waits for every
-``WAITING_LOG_PERIOD`` s. Then in lockstep (the default) each
+so for ``START_SETTLE`` s (``RECORDER_SETTLE`` s with a recorder). While it waits it logs
+what it waits for every ``WAITING_LOG_PERIOD`` s. Then in lockstep (the default) each
 command stamped with the current state's stamp advances the simulation by one step, as fast
 as the controllers answer. A wall-clock watchdog reports a command missing for
 ``command_timeout`` s and publishes the state again. Without lockstep, a wall-clock timer
@@ -62,10 +62,15 @@ EXIT_DELAY = 1.0
 WAITING_LOG_PERIOD = 2.0
 
 #: Wall-clock time the graph must stay connected before the run starts, s. The simulator
-#: sees its own discovery only: the other nodes' participants may take a moment longer to
-#: discover each other (the filter and a recorder started last, say), and a reliable,
-#: volatile writer drops what it publishes before it has matched a reader.
+#: sees its own discovery only: the other nodes' participants may take longer to discover
+#: each other, and a reliable, volatile writer drops what it publishes before it has matched
+#: a reader. Between the controllers the lockstep watchdog recovers a lost first command.
 START_SETTLE = 1.0
+
+#: The same with a recorder to wait for, s: what it misses is lost for the bag. A pair of
+#: participants that missed each other's initial announcements meets at the next periodic
+#: one (Fast DDS announces every 3 s).
+RECORDER_SETTLE = 3.5
 
 #: Parameter naming the recorder node to wait for (empty: none).
 RECORDER_PARAMETER = 'start.wait_for_recorder'
@@ -127,7 +132,7 @@ class HandSimNode(EndpointNode):
         if not blockers:
             if self._connected_since is None:
                 self._connected_since = now
-            if now - self._connected_since < START_SETTLE:
+            if now - self._connected_since < (RECORDER_SETTLE if self.recorder else START_SETTLE):
                 return
             recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
             self.get_logger().info(f'controllers{recorder} connected: starting the run')
