@@ -29,19 +29,6 @@ CONSOLE_SCRIPTS = {
 }
 
 
-def test_console_scripts_are_the_entry_points_of_every_node():
-    from importlib.metadata import entry_points as installed_entry_points
-
-    from grasp_safety_filter.nodes import entry_points
-
-    assert entry_points.NODE_MODULES == {
-        name: script.partition(':')[0] for name, script in CONSOLE_SCRIPTS.items()
-    }
-    installed = {ep.name: ep.value for ep in installed_entry_points(group='console_scripts')}
-    for name in CONSOLE_SCRIPTS:
-        assert installed[name] == f'grasp_safety_filter.nodes.entry_points:{name}'
-        assert callable(getattr(entry_points, name))
-
 #: The message-level endpoints (and what they use): importable without ROS.
 PURE_MODULES = (
     'grasp_safety_filter.nodes.outgoing',
@@ -116,6 +103,20 @@ def test_every_executable_has_a_main_taking_optional_args(name):
     assert len(main.args.defaults) == 1
     assert isinstance(main.args.defaults[0], ast.Constant)
     assert main.args.defaults[0].value is None
+
+
+def test_console_scripts_are_the_entry_points_of_every_node():
+    from importlib.metadata import entry_points as installed_entry_points
+
+    from grasp_safety_filter.nodes import entry_points
+
+    assert entry_points.NODE_MODULES == {
+        name: script.partition(':')[0] for name, script in CONSOLE_SCRIPTS.items()
+    }
+    installed = {ep.name: ep.value for ep in installed_entry_points(group='console_scripts')}
+    for name in CONSOLE_SCRIPTS:
+        assert installed[name] == f'grasp_safety_filter.nodes.entry_points:{name}'
+        assert callable(getattr(entry_points, name))
 
 
 def test_only_the_node_shells_import_rclpy_at_import_time():
