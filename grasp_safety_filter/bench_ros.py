@@ -52,6 +52,7 @@ from grasp_safety_filter.io.parameters import load_parameter_file, ROS_PARAMETER
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
+    NODE_SCHEMAS,
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
 )
@@ -268,14 +269,38 @@ class _Monitor:
         }
 
 
+def override_arguments(overrides: Sequence[str]) -> dict[str, list[str]]:
+    """Per node, the ``-p NAME:=VALUE`` arguments of the overrides it declares.
+
+    Raises:
+        ValueError: An override is not ``NAME=VALUE`` or no node declares ``NAME``.
+    """
+    arguments: dict[str, list[str]] = {name: [] for name in GRAPH_NODES}
+    for override in overrides:
+        name, equals, value = override.partition('=')
+        owners = [node for node in GRAPH_NODES if NODE_SCHEMAS[node].get(name) is not None]
+        if not equals or not owners:
+            raise ValueError(
+                f'--set {override!r}: expected NAME=VALUE with a parameter of one of the nodes'
+            )
+        for node in owners:
+            arguments[node] += ['-p', f'{name}:={value}']
+    return arguments
+
+
 def graph_run(
-    config: Path, duration: float, enabled: bool = True, timeout: float = 600.0
+    config: Path,
+    duration: float,
+    enabled: bool = True,
+    overrides: Sequence[str] = (),
+    timeout: float = 600.0,
 ) -> dict[str, Any]:
     """Run the three nodes as processes over DDS and time the run from a monitor node."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     bin_dir = Path(sys.executable).parent
+    extra_arguments = override_arguments(overrides)
     with tempfile.TemporaryDirectory(prefix='grasp-bench-ros-') as tmp:
         params = scenario_file(config, duration, Path(tmp), enabled)
         context = rclpy.Context()
@@ -299,6 +324,7 @@ def graph_run(
                             str(params),
                             '-p',
                             'use_sim_time:=true',
+                            *extra_arguments[name],
                         ],
                         stdout=log,
                         stderr=subprocess.STDOUT,
@@ -336,6 +362,7 @@ def graph_run(
     }
     figures['duration'] = duration
     figures['enabled'] = enabled
+    figures['overrides'] = list(overrides)
     return figures
 
 
@@ -358,7 +385,9 @@ def report(results: dict[str, Any]) -> str:
         _row('baseline ping-pong round trip (2 processes)', baseline),
         f"graph: {graph['ticks']} ticks, "
         f"{graph['ticks_per_wall_second'] or float('nan'):.0f} ticks per wall second "
-        f"(filter {'on' if graph['enabled'] else 'off'})",
+        f"(filter {'on' if graph['enabled'] else 'off'}"
+        + ''.join(f', {o}' for o in graph.get('overrides', []))
+        + ')',
         _row('tick period (state to state)', graph['tick_period_ms']),
         _row('state -> command (whole graph)', graph['state_to_command_ms']),
         _row('filter latency (u_nom in -> u* out)', graph['filter_latency_ms']),
@@ -394,6 +423,14 @@ def bench_ros_main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         '--no-filter', action='store_true', help='the graph with the filter off (enabled false)'
     )
+    parser.add_argument(
+        '--set',
+        dest='overrides',
+        action='append',
+        default=[],
+        metavar='NAME=VALUE',
+        help='give the nodes that declare it this parameter (-p NAME:=VALUE), repeatable',
+    )
     parser.add_argument('--json', type=Path, help='also write the figures to this file')
     parser.add_argument('--echo', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -403,7 +440,9 @@ def bench_ros_main(argv: list[str] | None = None) -> int:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     results = {
         'baseline': ping_pong(args.pings),
-        'graph': graph_run(args.config, args.duration, enabled=not args.no_filter),
+        'graph': graph_run(
+            args.config, args.duration, enabled=not args.no_filter, overrides=args.overrides
+        ),
         'ros_domain_id': os.environ.get('ROS_DOMAIN_ID', '0'),
     }
     print(report(results))

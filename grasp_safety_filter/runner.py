@@ -42,6 +42,7 @@ from grasp_safety_filter.io.schemas import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
+from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
 from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
@@ -172,6 +173,7 @@ def build_endpoints(
         InputPolicyConfig.from_parameters(filter_params),
         msgs,
         enabled=options.mode == 'filtered',
+        publication_rate_config=PublicationRateConfig.from_parameters(filter_params),
     )
     return sim, nominal, safety_filter
 

@@ -851,3 +851,23 @@ def test_filter_computes_the_model_terms_once_the_state_is_complete(params, orde
         m.margins_from_msg(outgoing[1].msg).h, m.margins_from_msg(expected[1].msg).h
     )
     assert safety_filter._states == {}
+
+
+def test_watchdog_never_answers_a_tick_whose_inputs_are_still_coming(params):
+    """Lockstep: the simulator waits at t_1 for u*(t_1) while the nominal controller is slow.
+
+    The watchdog's fallback then goes out 1 ns after t_1, which a lockstep simulator does not
+    take for its command; the tick, once complete, gets its own u* stamped t_1.
+    """
+    sim, safety_filter, _, inputs = filter_after_one_wall_tick(params)
+    t1 = sim.config.time_step
+    late = WALL + 2.0 * safety_filter.hold.hold_timeout
+    state_only = (topics.JOINT_STATES, topics.OBJECT_ODOM)
+    assert next_tick(safety_filter, inputs, t1, wall=WALL + 0.001, only=state_only) == []
+    fallback = safety_filter.watchdog(late, now=t1)
+    command = next(o.msg for o in fallback if o.topic == topics.EFFORT_COMMAND)
+    assert m.header_stamp_ns(command) == m.seconds_to_nanoseconds(t1) + 1
+    outgoing = next_tick(safety_filter, inputs, t1, wall=late, only=(topics.EFFORT_NOMINAL,))
+    (tick_command,) = [o.msg for o in outgoing if o.topic == topics.EFFORT_COMMAND]
+    assert m.header_stamp_ns(tick_command) == m.seconds_to_nanoseconds(t1)
+    assert safety_filter.filter.calls == 2

@@ -10,6 +10,7 @@ lockstep runner's, message by message.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import json
 from pathlib import Path
 import subprocess
@@ -504,6 +505,8 @@ def test_bad_input_is_held_then_falls_back_and_is_diagnosed(tmp_path):
     from grasp_safety_filter.io.launch_arguments import safety_filter_alone
 
     node = safety_filter_alone(CONFIG, use_sim_time=True)  # safety_filter.launch.py's node
+    # Every tick's status, the good ones too: the test reads the answer to each input.
+    node = dataclasses.replace(node, overrides={**node.overrides, 'diagnostics.period': 0.0})
     context = rclpy.Context()
     rclpy.init(context=context)
     with Processes(tmp_path / 'logs') as processes:

@@ -54,8 +54,10 @@ class RunData:
         required_friction: ``beta_i``, shape (K, n).
         t_command: Stamps of the commands, shape (C,), s.
         u_nominal, u_command: Nominal and commanded torques at ``t_command``, (C, m), N·m.
-        filter_values: Per tick, in stamp order, the safety filter's diagnostic values
-            (one per tick stamp; keys :class:`~grasp_safety_filter.io.diagnostic_keys.Key`).
+        filter_values: The safety filter's published tick statuses, in stamp order (one per
+            stamp; keys :class:`~grasp_safety_filter.io.diagnostic_keys.Key`): every tick's,
+            or with ``diagnostics.period`` every event's and one per period of a steady run.
+        t_filter: Stamps of ``filter_values``, shape (F,), s.
         watchdog_values: The filter's input-watchdog statuses (inputs missing), bag order.
         stop_reason: Why the simulator stopped (``"duration"`` when it ran to the end), or None
             if the bag has no end-of-run status (an interrupted recording).
@@ -75,6 +77,7 @@ class RunData:
     u_nominal: np.ndarray
     u_command: np.ndarray
     filter_values: list[dict[str, str]] = field(default_factory=list)
+    t_filter: np.ndarray = field(default_factory=lambda: np.zeros(0))
     watchdog_values: list[dict[str, str]] = field(default_factory=list)
     stop_reason: str | None = None
     t_end: float = 0.0
@@ -217,6 +220,7 @@ def load_run(bag: Path | str) -> RunData:
         u_nominal=np.array([nominal[s] for s in command_stamps]).reshape(-1, m),
         u_command=np.array([command[s] for s in command_stamps]).reshape(-1, m),
         filter_values=[filter_values[s] for s in sorted(filter_values)],
+        t_filter=np.array(sorted(filter_values), dtype=float) * 1e-9,
         watchdog_values=watchdog_values,
         stop_reason=stop_reason,
         t_end=t_end if t_end is not None else max(q_by_stamp) * 1e-9,

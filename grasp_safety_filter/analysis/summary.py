@@ -34,6 +34,7 @@ and allocator effects of the simulator sharing the process.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 import math
 from typing import Any
 
@@ -90,30 +91,58 @@ def tick_status(values: dict[str, str]) -> TickStatus | str:
         return text
 
 
+def tick_counts(run: RunData) -> dict[str, int]:
+    """Count the run's ticks by status, including those whose status was not published.
+
+    A status carries the counts of every tick so far (``count.<status>``); the ticks
+    answered after the last published one repeat its status (a steady run between two
+    ``diagnostics.period``). Statuses without counts (a bag of an older version): one tick
+    each.
+    """
+    counted = [values for values in run.filter_values if Key.TICKS in values]
+    counts: dict[str, int] = {}
+    if counted:
+        for key, value in counted[-1].items():
+            if key.startswith(Key.COUNT_PREFIX):
+                counts[key.removeprefix(Key.COUNT_PREFIX)] = int(value)
+    else:
+        for values in run.filter_values:
+            text = values.get(Key.STATUS, '')
+            counts[text] = counts.get(text, 0) + 1
+    if run.filter_values and len(run.t_filter):
+        last = run.filter_values[-1].get(Key.STATUS, '')
+        later = int(np.count_nonzero(run.t_command > run.t_filter[-1] + 0.5e-9))
+        if later:
+            counts[last] = counts.get(last, 0) + later
+    return counts
+
+
 def filter_summary(run: RunData) -> dict[str, Any]:
     """Count the filter's steps by status; QP, filter-step and tick times.
 
-    ``relaxed_families`` counts, per family, the relaxed steps that gave up one of its rows.
+    Counts are exact (:func:`tick_counts`). Every relaxed, failed or rejected tick's status
+    is published, so ``relaxed_families`` counts, per family, the relaxed steps that gave up
+    one of its rows; the times are those of the published statuses (all ticks with
+    ``diagnostics.period`` 0).
     """
-    statuses = [tick_status(values) for values in run.filter_values]
+    counts = tick_counts(run)
     relaxed_families: dict[str, int] = {}
     for values in run.filter_values:
         if values.get(Key.RELAXED) == 'true':
             for family in filter(None, values.get(Key.RELAXED_FAMILIES, '').split(',')):
                 relaxed_families[family] = relaxed_families.get(family, 0) + 1
-    counts: dict[str, int] = {}
-    for status in statuses:
-        text = status.value if isinstance(status, TickStatus) else status
-        counts[text] = counts.get(text, 0) + 1
+
+    def count(statuses: Iterable[TickStatus]) -> int:
+        return sum(counts.get(status.value, 0) for status in statuses)
 
     def times(key: str) -> dict[str, float | None]:
         return _percentiles([float(v[key]) for v in run.filter_values if key in v])
 
     return {
-        'steps': len(run.filter_values),
+        'steps': sum(counts.values()),
         'relaxed_steps': sum(v.get(Key.RELAXED) == 'true' for v in run.filter_values),
-        'failed_steps': sum(status in FAILED_STATUSES for status in statuses),
-        'rejected_steps': sum(status in INPUT_STATUSES for status in statuses),
+        'failed_steps': count(FAILED_STATUSES),
+        'rejected_steps': count(INPUT_STATUSES),
         'watchdog_fallbacks': sum(
             tick_status(values) is TickStatus.INPUT_FALLBACK for values in run.watchdog_values
         ),

@@ -96,6 +96,11 @@ class Key:
     MIN_MARGIN_PREFIX = 'min_margin.'
     """Followed by a family name: its smallest barrier value h at u* (:func:`min_margin`)."""
 
+    TICKS = 'ticks'
+    """Ticks answered so far (every status counted, published or not)."""
+    COUNT_PREFIX = 'count.'
+    """Followed by a :class:`TickStatus` value: its ticks so far (:func:`status_count`)."""
+
     INPUT_MODE = 'input.mode'
     """An :class:`InputMode` value."""
     INPUT_FALLBACK = 'input.fallback'
@@ -123,6 +128,11 @@ class Key:
 def min_margin(family: str) -> str:
     """Key of a constraint family's smallest barrier value."""
     return Key.MIN_MARGIN_PREFIX + family
+
+
+def status_count(status: TickStatus) -> str:
+    """Key of the number of ticks with ``status`` so far."""
+    return Key.COUNT_PREFIX + status.value
 
 
 def silent_for(topic: str) -> str:

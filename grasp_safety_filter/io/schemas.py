@@ -508,6 +508,21 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ),
     *SAFETY_FILTER_QP_PARAMETERS,
     *SAFETY_FILTER_INPUT_PARAMETERS,
+    ParameterSpec(
+        'diagnostics.period',
+        DOUBLE,
+        0.1,
+        'Least stamp interval between two /diagnostics statuses of unchanged good ticks '
+        '(solved, nominal, off); every other tick is published; 0: every tick [s]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
+        'margins.period',
+        DOUBLE,
+        0.0,
+        'Least stamp interval between two /safety_filter/margins messages; 0: every tick [s]',
+        min_value=0.0,
+    ),
 )
 
 HAND_SIM_NODE = 'hand_sim_node'

@@ -109,6 +109,7 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.publication_rate import PublicationRate, PublicationRateConfig
 
 #: Period of the input watchdog, s (steady clock). The fallback goes out and /diagnostics
 #: say ERROR at most ``input.hold_timeout`` + this after the last accepted tick, and the
@@ -149,6 +150,8 @@ class SafetyFilterEndpoint:
         input_policy_config: ``input.max_age``, ``input.hold_timeout``, ``input.fallback``.
         msgs: Message classes to build (rclpy or rosbags).
         enabled: Filter on; off passes u_nom through (still validated).
+        publication_rate_config: How often steady statuses and the margins go out
+            (default: every tick).
 
     Attributes:
         filter: The safety filter core.
@@ -167,6 +170,7 @@ class SafetyFilterEndpoint:
         input_policy_config: InputPolicyConfig,
         msgs: MessageNamespace,
         enabled: bool = True,
+        publication_rate_config: PublicationRateConfig | None = None,
     ) -> None:
         self.model = model
         self.msgs = msgs
@@ -177,6 +181,7 @@ class SafetyFilterEndpoint:
             input_policy_config, model.n_joints, -effort_limits, effort_limits
         )
         self.guard = StampGuard(input_policy_config.max_age)
+        self.rate = PublicationRate(publication_rate_config)
         self.last_result: FilterResult | None = None
         self._joint_names = list(model.joint_names)
         self._pending: dict[int, dict[str, Any]] = {}
@@ -250,7 +255,9 @@ class SafetyFilterEndpoint:
         Args:
             now_wall: The steady clock, s (that of the handlers' ``wall``).
             now: The node's clock, s: the stamp of the fallback command (not before the
-                last tick's stamp, so commands never go back in time).
+                last tick's stamp, so commands never go back in time; 1 ns later if a tick of
+                that stamp has some of its inputs, so the fallback never answers a tick that
+                is under way).
 
         Returns:
             Nothing before the first accepted tick and while the last one is at most
@@ -284,7 +291,13 @@ class SafetyFilterEndpoint:
         u = self.hold.absent(elapsed, reason, gravity)
         if self._watchdog_since is None:
             self._watchdog_since = now_wall
-        t = nanoseconds_to_seconds(self._clock_stamp(now))
+        stamp = self._clock_stamp(now)
+        if stamp in self._pending:
+            # A tick of this stamp is under way (a lockstep simulator waits for its command
+            # while the nominal controller is slow): the fallback must not answer it in its
+            # place, so that the tick still gets its own u* when its inputs are complete.
+            stamp += 1
+        t = nanoseconds_to_seconds(stamp)
         values: dict[str, Any] = {
             Key.FILTER_ENABLED: self.enabled,
             Key.STATUS: INPUT_MODE_STATUS[self.hold.mode].value,
@@ -334,6 +347,7 @@ class SafetyFilterEndpoint:
         filter_config: SafetyFilterConfig | None = None,
         input_policy_config: InputPolicyConfig | None = None,
         enabled: bool | None = None,
+        publication_rate_config: PublicationRateConfig | None = None,
     ) -> None:
         """Apply new parameters from the next tick on (None: unchanged).
 
@@ -348,6 +362,8 @@ class SafetyFilterEndpoint:
             self.hold.fallback = input_policy_config.fallback
         if enabled is not None:
             self.switch(enabled)
+        if publication_rate_config is not None:
+            self.rate.configure(publication_rate_config)
 
     # ------------------------------------------------------------------------ internals
     def _now(self, msg: Any, now: float | None) -> float:
@@ -469,14 +485,17 @@ class SafetyFilterEndpoint:
                 resumed_after = wall - self._accepted_wall
                 self._watchdog_since = None
             self._accepted_wall = wall
-        outgoing = [
-            stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
-            stamped(MARGINS, margins_to_msg(self.msgs, t, margins.names, margins.array)),
-        ]
-        tick_time = time.perf_counter() - start
-        outgoing.append(
-            self._tick_status(t, now, result, margins, filter_time, tick_time, resumed_after)
-        )
+        outgoing = [stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u))]
+        if self.rate.margins_due(stamp):
+            outgoing.append(
+                stamped(MARGINS, margins_to_msg(self.msgs, t, margins.names, margins.array))
+            )
+        status = TickStatus.DISABLED if result is None else TickStatus.of(result.status)
+        if self.rate.status_due(stamp, status, force=resumed_after is not None):
+            tick_time = time.perf_counter() - start
+            outgoing.append(
+                self._tick_status(t, now, result, margins, filter_time, tick_time, resumed_after)
+            )
         self._last_outputs = outgoing
         return list(outgoing)
 
@@ -517,6 +536,7 @@ class SafetyFilterEndpoint:
             values[Key.ACTIVE] = ','.join(result.active)
         values[Key.STEP_TIME_US] = step_time * 1e6
         values[Key.TICK_TIME_US] = tick_time * 1e6
+        values.update(self.rate.counter_values())
         for family, h in _min_margin_per_family(margins).items():
             values[min_margin(family)] = h
         values.update(self.hold.diagnostic_values(now))
@@ -551,12 +571,15 @@ class SafetyFilterEndpoint:
             if mode is InputMode.HOLDING
             else f'fallback command: {self.hold.fallback.value}{note}'
         )
+        status = INPUT_MODE_STATUS[mode]
+        self.rate.status_due(stamp, status)  # counted; never a steady status: always sent
         values: dict[str, Any] = {
             Key.FILTER_ENABLED: self.enabled,
-            Key.STATUS: INPUT_MODE_STATUS[mode].value,
+            Key.STATUS: status.value,
             Key.INPUT_TOPIC: topic,
         }
         values.update(self.hold.diagnostic_values(now))
+        values.update(self.rate.counter_values())
         report = DiagnosticReport.create(
             FILTER_DIAGNOSTIC,
             self.hold.diagnostic_level,

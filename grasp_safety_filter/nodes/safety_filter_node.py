@@ -25,8 +25,9 @@ simulator that waits for that stamp applies the fallback and steps. Wall-clock t
 Live parameters: ``enabled`` (false passes u_nom through; switching is logged, WARN when
 off, INFO when on, and the status stays WARN while off), the constraint switches,
 ``no_slip.normal_force_margin``, the class-K functions, the relaxation weights, the OSQP
-settings (these rebuild the filter) and ``input.*`` (the hold policy) apply from the next
-tick; ``no_slip.pyramid_faces`` and the model are read-only (read at start-up).
+settings (these rebuild the filter), ``input.*`` (the hold policy), ``diagnostics.period``
+and ``margins.period`` (how often the status and margins of steady ticks go out) apply from
+the next tick; ``no_slip.pyramid_faces`` and the model are read-only (read at start-up).
 """
 
 from __future__ import annotations
@@ -50,6 +51,10 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.publication_rate import (
+    PUBLICATION_RATE_PARAMETERS,
+    PublicationRateConfig,
+)
 from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
 
 #: Parameter switching the filter off (u* = u_nom) for the paper's unfiltered run.
@@ -70,6 +75,7 @@ class SafetyFilterNode(EndpointNode):
             InputPolicyConfig.from_parameters(self.parameters),
             self.msgs,
             enabled=self.parameters[ENABLED_PARAMETER],
+            publication_rate_config=PublicationRateConfig.from_parameters(self.parameters),
         )
         endpoint = self.endpoint
         monotonic = time.monotonic
@@ -104,16 +110,23 @@ class SafetyFilterNode(EndpointNode):
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
         """Rebuild the filter, update the hold policy or switch the filter on or off (logged)."""
-        filter_changed = any(
-            not name.startswith('input.') and name != ENABLED_PARAMETER for name in changed
-        )
         input_changed = any(name.startswith('input.') for name in changed)
+        rate_changed = any(name in PUBLICATION_RATE_PARAMETERS for name in changed)
+        filter_changed = any(
+            not name.startswith('input.')
+            and name not in PUBLICATION_RATE_PARAMETERS
+            and name != ENABLED_PARAMETER
+            for name in changed
+        )
         self.endpoint.update_config(
             filter_config=(
                 SafetyFilterConfig.from_parameters(self.parameters) if filter_changed else None
             ),
             input_policy_config=(
                 InputPolicyConfig.from_parameters(self.parameters) if input_changed else None
+            ),
+            publication_rate_config=(
+                PublicationRateConfig.from_parameters(self.parameters) if rate_changed else None
             ),
         )
         if ENABLED_PARAMETER in changed:
