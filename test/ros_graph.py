@@ -1,19 +1,15 @@
 """The package's nodes as OS processes over DDS: start them, record them, drive them.
 
-Imported by the graph tests; run as a script it is one of the graph's processes::
+Imported by the graph tests. Runs are recorded by the package's ``grasp-record`` (an rclpy
+node writing every topic of the table to a rosbag2 bag, as ``ros2 bag record`` would); run
+as a script this module is the graph's planner::
 
-    python test/ros_graph.py record BAG [--node-name rosbag2_recorder]
     python test/ros_graph.py planner --initial-position 0 0 0.2195 --rise 0.01 --stop-after 0.4
 
-- ``record``: an rclpy node that subscribes to every topic of the topic table
-  (:data:`grasp_safety_filter.io.topics.TOPICS`, with its reliability and durability) and
-  writes what it receives to a rosbag2 bag (mcap, Jazzy metadata) with the package's
-  :class:`~grasp_safety_filter.io.bag.BagRecorder`, stamped with the arrival time, as
-  ``ros2 bag record`` does. SIGINT or SIGTERM closes the bag.
-- ``planner``: on simulation time, publishes ``/object/reference`` every ``--period`` s: a
-  short trajectory (``--horizon`` s of 1 ms points) of a smooth (quintic) rise by ``--rise``
-  m and turn by ``--yaw`` rad about palm z over ``--move-time`` s from the initial pose, with
-  twist and acceleration feed-forward, until ``--stop-after`` s; then it stays silent.
+``planner``: on simulation time, publishes ``/object/reference`` every ``--period`` s: a
+short trajectory (``--horizon`` s of 1 ms points) of a smooth (quintic) rise by ``--rise``
+m and turn by ``--yaw`` rad about palm z over ``--move-time`` s from the initial pose, with
+twist and acceleration feed-forward, until ``--stop-after`` s; then it stays silent.
 
 The node commands come from :mod:`grasp_safety_filter.io.launch_arguments`, as the launch
 files' nodes do.
@@ -221,7 +217,7 @@ def run_graph(
     bag = work_dir / 'bag'
     start = time.monotonic()
     with Processes(work_dir / 'logs') as processes:
-        record = script_command('record', str(bag), '--node-name', recorder)
+        record = [str(BIN / 'grasp-record'), str(bag), '--node-name', recorder]
         if recorder_delay <= 0.0:
             processes.start('recorder', record)
         for name, command in (extra or {}).items():
@@ -400,51 +396,6 @@ def stream_differences(
 # The recorder process
 
 
-def _record(bag: Path, node_name: str, storage: str) -> int:
-    import rclpy
-    from rclpy.qos import QoSProfile
-    from rclpy.signals import SignalHandlerOptions
-    from rosbags.typesys import get_typestore, Stores
-
-    from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals
-    from grasp_safety_filter.io.messages import rclpy_message_class
-
-    typestore = get_typestore(Stores.ROS2_JAZZY)
-    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node(node_name)
-    try:
-        with interrupt_on_signals(), BagRecorder(bag, storage, typestore=typestore) as recorder:
-
-            def writer(spec: topics.TopicSpec) -> Any:
-                def write(data: bytes) -> None:
-                    msg = typestore.deserialize_cdr(data, spec.msgtype)
-                    recorder.write(spec.name, time.time_ns(), msg)
-
-                return write
-
-            for spec in topics.TOPICS:
-                table = spec.qos.to_rclpy()
-                # A deep reader history: a busy recorder must not lose samples it has not
-                # taken yet (the bag records the table's profile as offered).
-                qos = QoSProfile(
-                    depth=10000, reliability=table.reliability, durability=table.durability
-                )
-                node.create_subscription(
-                    rclpy_message_class(spec.msgtype), spec.name, writer(spec), qos, raw=True
-                )
-            print(f'recording {len(topics.TOPICS)} topics to {bag} as {node_name}', flush=True)
-            try:
-                while True:
-                    rclpy.spin_once(node, timeout_sec=0.1)
-            except KeyboardInterrupt:
-                pass
-            print(f'closing {bag}: {dict(recorder.counts)}', flush=True)
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
-
-
 # ----------------------------------------------------------------------------------------
 # The planner process
 
@@ -562,13 +513,9 @@ def _quiet_broken_pipe() -> Iterator[None]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the recorder or the planner (module docstring)."""
+    """Run the planner (module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest='command', required=True)
-    record = commands.add_parser('record', help='record the topic table to a bag')
-    record.add_argument('bag', type=Path)
-    record.add_argument('--node-name', default=RECORDER_NODE)
-    record.add_argument('--storage', default='mcap', choices=('mcap', 'sqlite3'))
     plan = commands.add_parser('planner', help='publish /object/reference')
     plan.add_argument('--initial-position', type=float, nargs=3, required=True)
     plan.add_argument('--initial-yaw', type=float, default=0.0)
@@ -580,8 +527,6 @@ def main(argv: list[str] | None = None) -> int:
     plan.add_argument('--horizon', type=float, default=0.05)
     args = parser.parse_args(argv)
     with _quiet_broken_pipe():
-        if args.command == 'record':
-            return _record(args.bag, args.node_name, args.storage)
         return _plan(args)
 
 

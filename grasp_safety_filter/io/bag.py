@@ -250,13 +250,28 @@ class BagRecorder:
         msgtype = getattr(msg, '__msgtype__', spec.msgtype)
         if msgtype != spec.msgtype:
             raise TypeError(f'topic {topic!r} carries {spec.msgtype}, got a {msgtype}')
+        data = self.typestore.serialize_cdr(msg, spec.msgtype)
+        self.write_cdr(topic, stamp_ns, data)
+        return data
+
+    def write_cdr(self, topic: str, stamp_ns: int, data: bytes) -> None:
+        """Append a message already serialised to CDR (as a subscriber receives it raw).
+
+        Raises:
+            KeyError: Unknown topic.
+            ValueError: Negative or non-integer ``stamp_ns``.
+            RuntimeError: The bag is not open.
+
+        """
+        if self._writer is None:
+            raise RuntimeError(f'bag {self.path} is not open')
+        if topic not in self.topics:
+            raise KeyError(f'topic {topic!r} is not registered; registered: {list(self.topics)}')
         if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int) or stamp_ns < 0:
             raise ValueError(f'stamp_ns: expected an integer >= 0 ns, got {stamp_ns!r}')
-        data = self.typestore.serialize_cdr(msg, spec.msgtype)
         with _critical_section():
             self._writer.write(self._connections[topic], stamp_ns, data)
             self.counts[topic] += 1
-        return data
 
     def set_custom_data(self, key: str, value: str) -> None:
         """Store a string in the bag's ``metadata.yaml`` ``custom_data`` (before closing)."""
