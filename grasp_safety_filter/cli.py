@@ -130,7 +130,8 @@ def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> tuple[b
             f'  filter: {f["steps"]} steps, {f["relaxed_steps"]} relaxed'
             f'{f" ({relaxed})" if relaxed else ""}, {f["failed_steps"]} failed, '
             f'{f.get("rejected_steps", 0)} with rejected input, '
-            f'{f.get("watchdog_fallbacks", 0)} watchdog fallbacks (inputs missing)'
+            f'{f.get("watchdog_fallbacks", 0)} watchdog fallbacks (inputs missing during the '
+            f'run; {f.get("watchdog_statuses_after_end", 0)} statuses after its end)'
         )
         timing = ', '.join(
             f'{label} {_us(f[key]["median"])} / {_us(f[key]["p99"])} us'

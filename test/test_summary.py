@@ -55,6 +55,10 @@ def wall_clock(msg) -> float:
     return m.header_stamp_ns(msg) * 1e-9
 
 
+#: Watchdog calls after the end of the run (each a fallback and its status).
+AFTER_END_WATCHDOG_CALLS = 3
+
+
 def record_faulty_run(bag_path: Path) -> None:
     """Record a lockstep run whose filter meets failed QPs, bad input and missing input.
 
@@ -103,6 +107,11 @@ def record_faulty_run(bag_path: Path) -> None:
             data = bag.write(topic, stamp_ns, msg)
             for handler in subscribers.get(topic, []):
                 queue.extend(handler(typestore.deserialize_cdr(data, msg.__msgtype__)))
+        # The run is over and the filter's inputs stop: its watchdog falls back until the
+        # node is shut down. Not a fault of the run.
+        for k in range(AFTER_END_WATCHDOG_CALLS):
+            for topic, stamp_ns, msg in safety_filter.watchdog(1e6 + 0.02 * k, now=STEPS * DT):
+                bag.write(topic, stamp_ns, msg)
     assert sim.finished and sim.stop_reason == 'duration'
 
 
@@ -117,6 +126,7 @@ def test_summary_counts_failed_rejected_and_watchdog_ticks_from_the_bag(tmp_path
     assert counts['failed_steps'] == 2
     assert counts['rejected_steps'] == 4
     assert counts['watchdog_fallbacks'] == 2
+    assert counts['watchdog_statuses_after_end'] == AFTER_END_WATCHDOG_CALLS
     statuses = counts['statuses']
     assert statuses['fallback_nominal'] == 1
     assert statuses['fallback_last_good'] == 1

@@ -58,7 +58,10 @@ class RunData:
             stamp; keys :class:`~grasp_safety_filter.io.diagnostic_keys.Key`): every tick's,
             or with ``diagnostics.period`` every event's and one per period of a steady run.
         t_filter: Stamps of ``filter_values``, shape (F,), s.
-        watchdog_values: The filter's input-watchdog statuses (inputs missing), bag order.
+        watchdog_values: The filter's input-watchdog statuses (inputs missing) during the
+            run, bag order.
+        watchdog_after_end: How many came after the simulator's end-of-run status (its inputs
+            stop when the run ends: the filter falls back until it is shut down).
         stop_reason: Why the simulator stopped (``"duration"`` when it ran to the end), or None
             if the bag has no end-of-run status (an interrupted recording).
         t_end: Time the run reached, s.
@@ -79,6 +82,7 @@ class RunData:
     filter_values: list[dict[str, str]] = field(default_factory=list)
     t_filter: np.ndarray = field(default_factory=lambda: np.zeros(0))
     watchdog_values: list[dict[str, str]] = field(default_factory=list)
+    watchdog_after_end: int = 0
     stop_reason: str | None = None
     t_end: float = 0.0
     missed_start: dict[str, float] = field(default_factory=dict)
@@ -176,12 +180,15 @@ def load_run(bag: Path | str) -> RunData:
     command_stamps = sorted(set(nominal) & set(command))
     filter_values: dict[int, dict[str, str]] = {}
     watchdog_values: list[dict[str, str]] = []
+    watchdog_after_end = 0
     stop_reason, t_end = None, None
     for _, msg in messages.get(topics.DIAGNOSTICS, []):
         data = diagnostics_from_msg(msg)
         for report in data.reports:
             if report.name == FILTER_DIAGNOSTIC and Key.STATUS in report.values:
-                if report.values.get(Key.INPUT_WATCHDOG) == 'true':
+                if report.values.get(Key.INPUT_WATCHDOG) == 'true' and stop_reason is not None:
+                    watchdog_after_end += 1
+                elif report.values.get(Key.INPUT_WATCHDOG) == 'true':
                     watchdog_values.append(dict(report.values))
                 else:
                     filter_values[header_stamp_ns(msg)] = dict(report.values)
@@ -222,6 +229,7 @@ def load_run(bag: Path | str) -> RunData:
         filter_values=[filter_values[s] for s in sorted(filter_values)],
         t_filter=np.array(sorted(filter_values), dtype=float) * 1e-9,
         watchdog_values=watchdog_values,
+        watchdog_after_end=watchdog_after_end,
         stop_reason=stop_reason,
         t_end=t_end if t_end is not None else max(q_by_stamp) * 1e-9,
         missed_start=missed_start,

@@ -11,7 +11,8 @@ Keys (later additions never rename one)::
      "min_margin": {"fingertip_workspace", "joint_limits", "friction"},
      "max_required_friction", "mu",
      "filter": {"steps", "relaxed_steps", "failed_steps", "rejected_steps",
-                "watchdog_fallbacks", "statuses": {status: steps},
+                "watchdog_fallbacks", "watchdog_statuses_after_end",
+                "statuses": {status: steps},
                 "relaxed_families": {family: steps},
                 "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"},
                 "tick_us": {"median", "p99"}}}
@@ -22,8 +23,10 @@ part that was recorded. Filter steps are the ticks the filter answered: ``failed
 those without a QP answer (the filter's own fallback, an ERROR), ``rejected_steps`` those
 with rejected input (the hold policy's held or fallback command), ``statuses`` every
 ``status`` value (:class:`~grasp_safety_filter.io.diagnostic_keys.TickStatus`) with its
-count; ``watchdog_fallbacks`` counts the fallback commands the input watchdog sent while
-no input came.
+count (exact also when ``diagnostics.period`` thins the published statuses: each status
+carries the counts so far); ``watchdog_fallbacks`` counts the fallback commands the input
+watchdog sent while no input came during the run, ``watchdog_statuses_after_end`` its
+statuses after the simulator's end of run (its inputs stop then: expected, not a fault).
 
 A margin is the smallest barrier value h over the run in its own units (negative =
 violated); infinite values (a separated contact) are written as null. Filter times are the
@@ -146,6 +149,7 @@ def filter_summary(run: RunData) -> dict[str, Any]:
         'watchdog_fallbacks': sum(
             tick_status(values) is TickStatus.INPUT_FALLBACK for values in run.watchdog_values
         ),
+        'watchdog_statuses_after_end': run.watchdog_after_end,
         'statuses': counts,
         'relaxed_families': relaxed_families,
         'qp_solve_us': times(Key.SOLVE_TIME_US),
