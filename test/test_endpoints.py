@@ -35,7 +35,11 @@ from grasp_safety_filter.io.schemas import load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.outgoing import Outgoing
-from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
+from grasp_safety_filter.nodes.safety_filter import (
+    SafetyFilterEndpoint,
+    WAITING_REPORT_PERIOD,
+    WATCHDOG_PERIOD,
+)
 from grasp_safety_filter.nodes.scenario import scenario_from_msg, scenario_from_text, ScenarioError
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
@@ -871,3 +875,25 @@ def test_watchdog_never_answers_a_tick_whose_inputs_are_still_coming(params):
     (tick_command,) = [o.msg for o in outgoing if o.topic == topics.EFFORT_COMMAND]
     assert m.header_stamp_ns(tick_command) == m.seconds_to_nanoseconds(t1)
     assert safety_filter.filter.calls == 2
+
+
+def test_before_a_first_tick_the_watchdog_reports_the_wait_and_sends_no_command(params):
+    fresh = make_filter(params)
+    _, joints, _, _ = tick_inputs(params)
+    period = WAITING_REPORT_PERIOD
+    assert fresh.watchdog(WALL, now=0.0) == []  # the watchdog's first call: the wait starts
+    assert fresh.watchdog(WALL + 0.5 * period, now=0.0) == []
+    (first,) = fresh.watchdog(WALL + period, now=0.0)
+    assert first.topic == topics.DIAGNOSTICS
+    (report,) = m.diagnostics_from_msg(first.msg).reports
+    assert report.level is DiagnosticLevel.WARN
+    assert Key.STATUS not in report.values  # answers no tick: the analysis counts none
+    assert report.values[Key.INPUT_MISSING] == ','.join(
+        (topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL)
+    )
+    assert fresh.watchdog(WALL + 1.5 * period, now=0.0) == []
+    fresh.on_joint_states(joints, wall=WALL + 1.6 * period)
+    (second,) = fresh.watchdog(WALL + 2.0 * period, now=0.0)
+    (report,) = m.diagnostics_from_msg(second.msg).reports
+    assert report.values[Key.INPUT_MISSING] == f'{topics.OBJECT_ODOM},{topics.EFFORT_NOMINAL}'
+    assert 'waiting 2.0 s for a first tick' in report.message

@@ -118,6 +118,9 @@ from grasp_safety_filter.nodes.publication_rate import PublicationRate, Publicat
 #: per call.
 WATCHDOG_PERIOD = 0.02
 
+#: Wall-clock period of the watchdog's "waiting for a first tick" status before any tick, s.
+WAITING_REPORT_PERIOD = 1.0
+
 #: Incomplete input sets kept waiting for their other inputs (older ones are dropped).
 MAX_PENDING = 64
 
@@ -196,6 +199,9 @@ class SafetyFilterEndpoint:
         self._received_wall: dict[str, float] = {}
         self._accepted_wall: float | None = None
         self._watchdog_since: float | None = None
+        # Before the first tick: since when the watchdog runs, and its last report (wall, s).
+        self._waiting_since: float | None = None
+        self._waiting_reported = 0.0
         self._switched_at: float | None = None
 
     # -------------------------------------------------------------------------- inputs
@@ -260,7 +266,10 @@ class SafetyFilterEndpoint:
                 is under way).
 
         Returns:
-            Nothing before the first accepted tick and while the last one is at most
+            Before the first accepted tick, every :data:`WAITING_REPORT_PERIOD` s a WARN
+            status naming the inputs not received yet, and no command (there is no state to
+            hold against gravity, and a hand driver should not get torques from a filter
+            that has never seen its hand); nothing while the last tick is at most
             ``input.hold_timeout`` s old; else the hold policy's fallback (zero torque or
             ``g(q)`` at the last accepted joint positions, clipped to the actuator limits)
             on ``/hand/effort_command`` and an ERROR ``/diagnostics`` status naming the
@@ -268,7 +277,7 @@ class SafetyFilterEndpoint:
 
         """
         if self._accepted_wall is None:
-            return []
+            return self._waiting_status(now_wall, now)
         elapsed = now_wall - self._accepted_wall
         if elapsed <= self.hold.hold_timeout:
             return []
@@ -436,6 +445,32 @@ class SafetyFilterEndpoint:
         except (ValueError, np.linalg.LinAlgError) as error:
             state = error
         return state, time.perf_counter() - start
+
+    def _waiting_status(self, now_wall: float, now: float) -> list[Outgoing]:
+        """Report the wait for a first tick: a WARN every WAITING_REPORT_PERIOD s, no command."""
+        if self._waiting_since is None:
+            self._waiting_since = self._waiting_reported = now_wall
+            return []
+        if now_wall - self._waiting_reported < WAITING_REPORT_PERIOD:
+            return []
+        self._waiting_reported = now_wall
+        missing = [topic for topic in _INPUTS if topic not in self._received_wall]
+        what = (
+            f"nothing on {', '.join(missing)}"
+            if missing
+            else 'inputs arrive, but no complete valid set of one stamp'
+        )
+        report = DiagnosticReport.create(
+            FILTER_DIAGNOSTIC,
+            DiagnosticLevel.WARN,
+            f'waiting {now_wall - self._waiting_since:.1f} s for a first tick: {what}',
+            {
+                Key.FILTER_ENABLED: self.enabled,
+                Key.INPUT_WATCHDOG: True,
+                Key.INPUT_MISSING: ','.join(missing),
+            },
+        )
+        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, max(now, 0.0), report))]
 
     def _close(self, stamp: int) -> None:
         """Mark the tick of ``stamp`` as done: drop every older or equal pending input."""
