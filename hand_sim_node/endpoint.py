@@ -218,9 +218,9 @@ class HandSimEndpoint:
             return []  # the controllers answer the final state; nothing left to apply
         try:
             command = effort_from_msg(msg, self._joint_names, source=EFFORT_COMMAND)
+            stamp_ns = seconds_to_nanoseconds(command.t)
         except MessageError as error:
             return self._warn(f'command rejected: {error}', msg)
-        stamp_ns = seconds_to_nanoseconds(command.t)
         if not self.lockstep:
             if self._latest_command_ns is not None and stamp_ns < self._latest_command_ns:
                 return self._warn(

@@ -897,3 +897,93 @@ def test_before_a_first_tick_the_watchdog_reports_the_wait_and_sends_no_command(
     (report,) = m.diagnostics_from_msg(second.msg).reports
     assert report.values[Key.INPUT_MISSING] == f'{topics.OBJECT_ODOM},{topics.EFFORT_NOMINAL}'
     assert 'waiting 2.0 s for a first tick' in report.message
+
+
+# ----------------------------------------------------------------------------------------
+# Hardened inputs: no message raises out of an endpoint
+
+
+def negative_stamp(msg):
+    msg.header.stamp = MSGS.Time(sec=-1, nanosec=0)
+    return msg
+
+
+def negative_stamp_cases(params):
+    """Return (handler, message, status name) for every endpoint input, by case."""
+    sim, joints, odometry, effort_nominal = tick_inputs(params)
+    nominal = make_nominal(params)
+    safety_filter = make_filter(params)
+    started = make_sim(params)
+    started.start()
+    command = m.effort_to_msg(MSGS, 0.0, sim.model.joint_names, np.zeros(sim.model.n_joints))
+    reference = m.reference_to_msg(
+        MSGS,
+        0.0,
+        [0.0],
+        [ObjectReference(np.zeros(3), np.eye(3), np.zeros(6), np.zeros(6))],
+    )
+    return {
+        'nominal joint_states': (nominal.on_joint_states, joints, 'nominal_controller'),
+        'nominal odom': (nominal.on_odom, odometry, 'nominal_controller'),
+        'nominal reference': (nominal.on_reference, reference, 'nominal_controller'),
+        'filter joint_states': (safety_filter.on_joint_states, joints, 'safety_filter'),
+        'filter odom': (safety_filter.on_odom, odometry, 'safety_filter'),
+        'filter effort_nominal': (
+            safety_filter.on_effort_nominal,
+            effort_nominal,
+            'safety_filter',
+        ),
+        'simulator command': (started.on_command, command, 'hand_sim'),
+    }
+
+
+NEGATIVE_STAMP_CASES = (
+    'nominal joint_states',
+    'nominal odom',
+    'nominal reference',
+    'filter joint_states',
+    'filter odom',
+    'filter effort_nominal',
+    'simulator command',
+)
+
+
+@pytest.mark.parametrize('case', NEGATIVE_STAMP_CASES)
+@pytest.mark.parametrize('now', [None, 0.0])
+def test_a_negative_stamp_is_reported_not_raised(params, case, now):
+    handler, msg, name = negative_stamp_cases(params)[case]
+    msg = negative_stamp(msg)
+    outgoing = handler(msg) if now is None or name != 'safety_filter' else handler(msg, now=now)
+    (report,) = statuses(outgoing, name)
+    assert report.level >= DiagnosticLevel.WARN
+    assert 'sec must be >= 0' in report.message
+
+
+@pytest.mark.parametrize(
+    'error', [m.MessageError('bad'), ValueError('bad'), KeyError('k'), RuntimeError('r')]
+)
+def test_a_failing_subscription_callback_is_reported_not_raised(error):
+    from grasp_safety_filter.nodes.base_node import guarded_callback
+
+    def callback(msg):
+        raise error
+
+    reported = []
+    guarded = guarded_callback('/t', callback, lambda t, e: reported.append((t, e)), lambda: True)
+    guarded(object())
+    assert reported == [('/t', error)]
+
+    def failing_report(topic, e):
+        raise RuntimeError('publisher gone')
+
+    guarded_callback('/t', callback, failing_report, lambda: True)(object())
+    # Once the context is shut down the exception goes on, as before (the spin loop ends).
+    with pytest.raises(type(error)):
+        guarded_callback('/t', callback, failing_report, lambda: False)(object())
+
+
+@pytest.mark.parametrize('length', [0, 10, 999, 1000, 1001, 100_000])
+def test_report_texts_are_bounded(length):
+    text = m.bounded_text('x' * length)
+    assert len(text) <= m.MAX_REPORT_TEXT
+    assert text == 'x' * length or f'{length} characters in all' in text

@@ -90,6 +90,30 @@ _MESSAGE_TYPES: dict[str, str] = {
 }
 
 
+#: Longest text of a rejection or error report (status message, ``input.last_rejection``),
+#: characters: a message with 100k names must not make every later /diagnostics huge.
+MAX_REPORT_TEXT = 1000
+
+#: Names listed in a rejection text before the rest are only counted.
+NAMES_SHOWN = 5
+
+
+def bounded_text(text: str, limit: int = MAX_REPORT_TEXT) -> str:
+    """Return ``text``, cut to ``limit`` characters with a note of how many were cut."""
+    if len(text) <= limit:
+        return text
+    note = f' ... ({len(text)} characters in all)'
+    return text[: max(limit - len(note), 0)] + note[-limit:]
+
+
+def name_list(names: Sequence[str], shown: int = NAMES_SHOWN) -> str:
+    """Return ``['a', 'b', ... (N more)]``: the first ``shown`` names (bounded), a count."""
+    listed = [repr(bounded_text(str(n), 64)) for n in list(names)[:shown]]
+    if len(names) > shown:
+        listed.append(f'... ({len(names) - shown} more)')
+    return '[' + ', '.join(listed) + ']'
+
+
 class MessageError(ValueError):
     """A message cannot be converted: bad values, lengths, names, frames or stamps."""
 
@@ -214,12 +238,15 @@ def time_msg_to_nanoseconds(msg: Any, what: str = 'time') -> int:
     """Return a ``builtin_interfaces`` Time or Duration as integer ns.
 
     Raises:
-        MessageError: ``nanosec`` outside ``[0, 1e9)``.
+        MessageError: ``nanosec`` outside ``[0, 1e9)`` or ``sec`` negative (no time here
+            is before the clock's origin, and seconds_to_nanoseconds refuses it).
 
     """
     sec, nanosec = int(msg.sec), int(msg.nanosec)
     if not 0 <= nanosec < _NANOSECONDS_PER_SECOND:
         raise MessageError(f'{what}: nanosec must be in [0, 1e9), got {nanosec}')
+    if sec < 0:
+        raise MessageError(f'{what}: sec must be >= 0, got {sec}')
     return sec * _NANOSECONDS_PER_SECOND + nanosec
 
 

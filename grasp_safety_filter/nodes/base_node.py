@@ -37,8 +37,11 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.io.messages import (
+    bounded_text,
     byte_value,
     DiagnosticLevel,
+    DiagnosticReport,
+    diagnostics_to_msg,
     MessageNamespace,
     rclpy_message_class,
 )
@@ -78,6 +81,9 @@ EXIT_BAD_PARAMETERS = 2
 
 #: Longest wait of the spin loop before it checks for SIGINT or SIGTERM, s.
 SIGNAL_CHECK_PERIOD = 0.1
+
+#: Shortest interval between two ERROR logs of failing subscription callbacks, s.
+CALLBACK_ERROR_LOG_PERIOD = 1.0
 
 #: Signals that end a node.
 TERMINATION_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -155,11 +161,29 @@ class EndpointNode(Node):
         return share_directory() / 'config'
 
     def subscribe(self, topic: str, callback: Callable[[Any], None]) -> Any:
-        """Subscribe to a topic of the table with its type and QoS."""
+        """Subscribe to a topic of the table with its type and QoS.
+
+        The callback is wrapped by :func:`guarded_callback`: an exception it raises is
+        logged (ERROR, throttled) and reported on ``/diagnostics`` (when this node
+        publishes them) instead of ending ``rclpy.spin``.
+        """
         spec = topic_spec(topic)
+        guarded = guarded_callback(topic, callback, self._report_callback_error, self.context.ok)
         return self.create_subscription(
-            rclpy_message_class(spec.msgtype), topic, callback, spec.qos.to_rclpy()
+            rclpy_message_class(spec.msgtype), topic, guarded, spec.qos.to_rclpy()
         )
+
+    def _report_callback_error(self, topic: str, error: Exception) -> None:
+        """Log a subscription callback's exception (ERROR, throttled); report it, ERROR."""
+        text = bounded_text(f'{topic}: message not handled: {type(error).__name__}: {error}')
+        self.get_logger().error(text, throttle_duration_sec=CALLBACK_ERROR_LOG_PERIOD)
+        publisher = self._publishers_by_topic.get(DIAGNOSTICS)
+        if publisher is None:
+            return
+        report = DiagnosticReport.create(
+            self.get_name(), DiagnosticLevel.ERROR, text, {'input.topic': topic}
+        )
+        publisher.publish(diagnostics_to_msg(self.msgs, max(self.now_seconds(), 0.0), report))
 
     def publisher(self, topic: str) -> Any:
         """Return the publisher of ``topic``."""
@@ -201,6 +225,37 @@ class EndpointNode(Node):
                 self.get_logger().error(text, throttle_duration_sec=1.0)
             elif level == DiagnosticLevel.WARN:
                 self.get_logger().warning(text, throttle_duration_sec=1.0)
+
+
+def guarded_callback(
+    topic: str,
+    callback: Callable[[Any], None],
+    report: Callable[[str, Exception], None],
+    context_ok: Callable[[], bool],
+) -> Callable[[Any], None]:
+    """Wrap a subscription callback so that no exception it raises ends the spin loop.
+
+    Args:
+        topic: The subscribed topic (named in the report).
+        callback: The endpoint's handler.
+        report: Called with the topic and the exception; its own failure is swallowed.
+        context_ok: Whether the rclpy context still runs: once it is shut down, the
+            exception propagates as before (a callback cut short by the node's shutdown).
+
+    """
+
+    def guarded(msg: Any) -> None:
+        try:
+            callback(msg)
+        except Exception as error:
+            if not context_ok():
+                raise
+            try:
+                report(topic, error)
+            except Exception:  # reporting must never end the spin either
+                pass
+
+    return guarded
 
 
 def _start_up_parameters(

@@ -101,9 +101,9 @@ class NominalControllerEndpoint:
         """Handle ``/hand/joint_states``; tick if the odometry of its stamp is in hand."""
         try:
             data = joint_state_from_msg(msg, self._joint_names, source=JOINT_STATES)
+            stamp = seconds_to_nanoseconds(data.t)
         except MessageError as error:
             return self._rejected(error)
-        stamp = seconds_to_nanoseconds(data.t)
         self._joint_states[stamp] = data
         return self._tick_if_complete(stamp)
 
@@ -111,9 +111,9 @@ class NominalControllerEndpoint:
         """Handle ``/object/odom``; tick if the joint state of its stamp is in hand."""
         try:
             data = odometry_from_msg(msg, source=OBJECT_ODOM)
+            stamp = seconds_to_nanoseconds(data.t)
         except MessageError as error:
             return self._rejected(error)
-        stamp = seconds_to_nanoseconds(data.t)
         self._odometry[stamp] = data
         return self._tick_if_complete(stamp)
 
