@@ -10,9 +10,8 @@ import sys
 from typing import Any
 
 import numpy as np
-import yaml
 
-from grasp_safety_filter.io.parameters import ParameterError
+from grasp_safety_filter.io.parameters import ParameterError, parse_parameter_value
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.model.quaternion import rotation_matrix
 
@@ -148,11 +147,14 @@ def _us(value: float | None) -> str:
 
 
 def _override(text: str) -> tuple[str, Any]:
-    """Parse ``NAME=VALUE`` with a YAML value (``10.0`` a double, ``true`` a bool)."""
+    """Parse ``NAME=VALUE``, the value typed as in a parameter file (``1e-5`` a double)."""
     name, separator, value = text.partition('=')
     if not separator or not name:
         raise argparse.ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
-    return name.strip(), yaml.safe_load(value)
+    try:
+        return name.strip(), parse_parameter_value(value)
+    except ParameterError as error:
+        raise argparse.ArgumentTypeError(f'{text!r}: {error}') from None
 
 
 def demo_main(argv: list[str] | None = None) -> int:
@@ -224,6 +226,7 @@ def demo_main(argv: list[str] | None = None) -> int:
 
 def analyze_main(argv: list[str] | None = None) -> int:
     """``grasp-analyze BAG``: figures and summary.json of any recorded run of this package."""
+    from grasp_safety_filter.analysis.run_data import RunDataError
     from grasp_safety_filter.runner import analyze_bag
 
     parser = argparse.ArgumentParser(prog='grasp-analyze', description=analyze_main.__doc__)
@@ -231,7 +234,11 @@ def analyze_main(argv: list[str] | None = None) -> int:
     parser.add_argument('--out', type=Path, help='output directory (default: next to the bag)')
     args = parser.parse_args(argv)
     out_dir = args.out if args.out is not None else args.bag.resolve().parent
-    summary, figures = analyze_bag(args.bag, out_dir)
+    try:
+        summary, figures = analyze_bag(args.bag, out_dir)
+    except RunDataError as error:
+        print(f'grasp-analyze: {error}', file=sys.stderr)
+        return 2
     _print_summary(summary['mode'], summary, out_dir)
     for figure in figures:
         print(f'  figure: {figure}')

@@ -322,6 +322,22 @@ def test_numbers_read_as_rcl_reads_them(tmp_path):
     assert [type(values[k]) for k in 'abcdef'] == [float, float, float, int, str, float]
 
 
+def test_yaml_1_1_numbers_stay_text_as_in_rcl(tmp_path):
+    # YAML 1.2, as rcl: no digit separators nor base 60; an unsigned exponent is a double.
+    path = write(
+        tmp_path,
+        """
+        n:
+          ros__parameters: {a: 1_000, b: 1:30, c: 1e5, d: 0x10, e: -.5, f: 2., g: 1.5_0}
+        """,
+    )
+    values = load_parameter_file(path)['/n']
+    assert values == {
+        'a': '1_000', 'b': '1:30', 'c': 1e5, 'd': 16, 'e': -0.5, 'f': 2.0, 'g': '1.5_0'
+    }
+    assert [type(values[k]) for k in 'cdef'] == [float, int, float, float]
+
+
 def test_slash_and_nested_namespace_node_names(tmp_path):
     path = write(
         tmp_path,

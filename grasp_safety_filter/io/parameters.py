@@ -283,8 +283,8 @@ ROS_QOS_OVERRIDES_PREFIX = 'qos_overrides.'
 class _RosYamlLoader(yaml.SafeLoader):
     """YAML as rcl_yaml_param_parser reads it: ``1e-8`` is a double; duplicate keys are errors.
 
-    PyYAML follows YAML 1.1, where a float needs a dot and a signed exponent, so it would
-    read ``1e-8`` as a string; rcl converts any plain scalar that parses as a number.
+    Numbers follow YAML 1.2 (:data:`_NUMBER_RESOLVERS`), as rcl does: PyYAML's YAML 1.1
+    would read ``1e-8`` as a string and ``1_000`` or ``1:30`` as numbers.
     """
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict[Any, Any]:
@@ -299,11 +299,28 @@ class _RosYamlLoader(yaml.SafeLoader):
         return super().construct_mapping(node, deep=deep)
 
 
-_RosYamlLoader.add_implicit_resolver(
-    'tag:yaml.org,2002:float',
-    re.compile(r'^[-+]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)[eE][-+]?[0-9]+$'),
-    list('-+0123456789.'),
-)
+#: The plain scalars read as numbers, as in YAML 1.2: an exponent needs no dot nor sign
+#: (``1e-5``); no digit separators (``1_000``) nor base 60 (``1:30``), which stay strings.
+_NUMBER_RESOLVERS: dict[str, tuple[re.Pattern[str], str]] = {
+    'tag:yaml.org,2002:float': (
+        re.compile(
+            r'^(?:[-+]?(?:[0-9]+\.[0-9]*|\.[0-9]+|[0-9]+(?=[eE]))(?:[eE][-+]?[0-9]+)?'
+            r'|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$'
+        ),
+        '-+0123456789.',
+    ),
+    'tag:yaml.org,2002:int': (
+        re.compile(r'^[-+]?(?:[0-9]+|0b[01]+|0o[0-7]+|0x[0-9a-fA-F]+)$'),
+        '-+0123456789',
+    ),
+}
+
+_RosYamlLoader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if tag not in _NUMBER_RESOLVERS]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+for _tag, (_regexp, _first) in _NUMBER_RESOLVERS.items():
+    _RosYamlLoader.add_implicit_resolver(_tag, _regexp, list(_first))
 
 
 def parse_parameter_value(text: str) -> Any:
@@ -324,14 +341,7 @@ def parse_parameter_value(text: str) -> Any:
         raise ParameterError(f'expected a value or a list of values, got {text!r}')
     if isinstance(value, list):
         return [v if isinstance(v, bool | int | float | str) else str(v) for v in value]
-    if isinstance(value, bool | str):
-        return value
-    number = isinstance(value, int | float) and not _YAML_11_NUMBER.search(text)
-    return value if number else text.strip()
-
-
-#: What YAML 1.1 (PyYAML) reads as a number and rcl does not: ``1:30`` (base 60), ``1_000``.
-_YAML_11_NUMBER = re.compile(r'[:_]')
+    return value if isinstance(value, bool | int | float | str) else text.strip()
 
 
 def load_parameter_file(path: str | Path) -> dict[str, dict[str, Any]]:
