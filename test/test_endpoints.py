@@ -987,3 +987,24 @@ def test_report_texts_are_bounded(length):
     text = m.bounded_text('x' * length)
     assert len(text) <= m.MAX_REPORT_TEXT
     assert text == 'x' * length or f'{length} characters in all' in text
+
+
+@pytest.mark.parametrize('shift', [1e308, 0.5])
+def test_gravity_fallback_uses_the_joint_state_of_the_last_accepted_tick(params, shift):
+    sim, safety_filter, _, (joints, odometry, _) = filter_after_one_good_tick(params)
+    accepted = m.joint_state_from_msg(joints, sim.model.joint_names)
+    late = 2 * safety_filter.hold.hold_timeout
+    dt = sim.config.time_step
+    # A joint state that parses but whose tick is never accepted (no u_nom; or the model
+    # refuses it).
+    wild = restamp(through_cdr(joints), dt)
+    wild.position = np.asarray(wild.position) + shift
+    assert safety_filter.on_joint_states(wild) == []
+    outgoing = safety_filter.on_odom(skewed_quaternion(restamp(odometry, late)), now=late)
+    (fallback,) = commands(outgoing, sim.model.joint_names)
+    s = sim.simulator.state
+    g = sim.model.state(
+        0.0, accepted.position, np.zeros(9), s.p_object_in_palm, s.R_object_to_palm, np.zeros(6)
+    ).gravity_torque
+    limits = sim.model.effort_limits
+    np.testing.assert_allclose(fallback, np.clip(g, -limits, limits), rtol=1e-12, atol=1e-12)

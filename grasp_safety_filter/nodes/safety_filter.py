@@ -403,8 +403,6 @@ class SafetyFilterEndpoint:
                 )
         except MessageError as error:
             return self._reject(topic, msg, error, now_s)
-        if topic == JOINT_STATES:
-            self._last_positions = np.array(data.position)
         if stamp == self._last_tick_ns:
             # The same tick again (e.g. a simulator that re-sent its state): same answer.
             self._replay[topic] = data
@@ -513,6 +511,8 @@ class SafetyFilterEndpoint:
             )
         self.last_result = result
         u = self.hold.accept(now, u)
+        # The gravity fallback's q: only a tick's accepted joint state, never one merely parsed.
+        self._last_positions = np.array(inputs.joint_states.position)
         self._close(stamp)
         resumed_after = None
         if wall is not None:
