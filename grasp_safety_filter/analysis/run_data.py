@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import read_bag
+from grasp_safety_filter.io.bag import bag_topics, BagReadError, read_bag
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
 from grasp_safety_filter.io.messages import (
     contacts_from_msg,
@@ -26,9 +26,10 @@ from grasp_safety_filter.io.messages import (
     effort_from_msg,
     header_stamp_ns,
     joint_state_from_msg,
+    MessageError,
     nanoseconds_to_seconds,
 )
-from grasp_safety_filter.nodes.scenario import scenario_from_msg
+from grasp_safety_filter.nodes.scenario import scenario_from_msg, ScenarioError
 from hand_sim_node.endpoint import DIAGNOSTIC_NAME as SIM_DIAGNOSTIC
 
 #: Simulation time at which a run starts, s: ``hand_sim_node`` starts every run at t_0 = 0,
@@ -37,7 +38,10 @@ RUN_START = 0.0
 
 
 class RunDataError(ValueError):
-    """The bag lacks what the analysis needs (names the topic)."""
+    """The bag cannot be analysed: unreadable, or lacks or mangles what the analysis needs.
+
+    The message is one line naming the bag and the topic or problem.
+    """
 
 
 @dataclass
@@ -129,8 +133,19 @@ def load_run(bag: Path | str) -> RunData:
     """Read a run from a rosbag2 directory (mcap or sqlite3).
 
     Raises:
-        RunDataError: A topic the analysis needs is missing or empty.
+        RunDataError: No readable bag at ``bag``, or a topic the analysis needs is missing,
+            empty, of another type or with messages it cannot use (a bad scenario too).
     """
+    try:
+        return _load_run(Path(bag))
+    except RunDataError:
+        raise
+    except (BagReadError, ScenarioError, MessageError) as error:
+        text = ' '.join(str(error).split())
+        raise RunDataError(text if str(bag) in text else f'{bag}: {text}') from error
+
+
+def _load_run(bag: Path) -> RunData:
     wanted = (
         topics.SCENARIO,
         topics.CONTACTS,
@@ -139,7 +154,14 @@ def load_run(bag: Path | str) -> RunData:
         topics.EFFORT_COMMAND,
         topics.DIAGNOSTICS,
     )
-    messages = read_bag(Path(bag), topics=wanted)
+    recorded = bag_topics(bag)
+    for name in wanted:
+        if name in recorded and recorded[name].msgtype != topics.topic_spec(name).msgtype:
+            raise RunDataError(
+                f'{bag}: {name} has type {recorded[name].msgtype}; the analysis needs '
+                f'{topics.topic_spec(name).msgtype}'
+            )
+    messages = read_bag(bag, topics=wanted)
     for topic in (topics.SCENARIO, topics.CONTACTS, topics.JOINT_STATES):
         if not messages.get(topic):
             raise RunDataError(f'{bag}: no messages on {topic}; the analysis needs it')

@@ -17,7 +17,8 @@ therefore records as::
             bag.write(topic, stamp_ns, msg)
 
 :func:`read_bag` and :func:`iter_bag` read any rosbag2 bag (ours or one from
-``ros2 bag record``) with ``rosbags``' AnyReader.
+``ros2 bag record``) with ``rosbags``' AnyReader; a missing, foreign or damaged bag
+raises :class:`BagReadError` (one line naming the path and the problem).
 """
 
 from __future__ import annotations
@@ -332,12 +333,40 @@ class BagTopic:
     offered_qos: tuple[Qos, ...]
 
 
-def _reader(path: Path | str) -> AnyReader:
-    return AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY))
+class BagReadError(ValueError):
+    """A bag cannot be read: no rosbag2 bag at the path, or a damaged one (names the path)."""
+
+
+@contextmanager
+def _reader(path: Path | str) -> Iterator[AnyReader]:
+    """Open a bag; any failure to read it (open or later) becomes :class:`BagReadError`.
+
+    A damaged file fails in whatever layer meets it first (metadata, storage, index,
+    compression, CDR), each with its own exception type: all are the same user error.
+    """
+    path = Path(path)
+    if not path.is_dir():
+        what = 'does not exist' if not path.exists() else 'is not a directory'
+        raise BagReadError(f'{path}: {what}; expected a rosbag2 bag directory')
+    try:
+        with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+            yield reader
+    except BagReadError:
+        raise
+    except Exception as error:
+        detail = ' '.join(str(error).split()) or 'no detail'
+        raise BagReadError(
+            f'{path}: not a readable rosbag2 bag ({type(error).__name__}: {detail})'
+        ) from error
 
 
 def bag_topics(path: Path | str) -> dict[str, BagTopic]:
-    """Return the topics of a bag with type, message count and offered QoS."""
+    """Return the topics of a bag with type, message count and offered QoS.
+
+    Raises:
+        BagReadError: No bag at ``path``, or it cannot be read.
+
+    """
     with _reader(path) as reader:
         topics: dict[str, BagTopic] = {}
         for connection in reader.connections:
@@ -365,6 +394,9 @@ def iter_bag(
     Args:
         path: Bag directory.
         topics: Only these topics (all when None).
+
+    Raises:
+        BagReadError: No bag at ``path``, or it cannot be read (also part-way through).
 
     """
     wanted = None if topics is None else set(topics)

@@ -30,6 +30,15 @@ from typing import Any
 SCENARIO_FORMAT = 'grasp_safety_filter/scenario'
 SCENARIO_VERSION = 1
 
+#: Largest friction coefficient taken as physical (rubber on rubber is about 1-4).
+MAX_FRICTION_COEFFICIENT = 100.0
+#: Smallest time step, s: stamps are whole nanoseconds.
+MIN_TIME_STEP = 1e-9
+#: Most steps a run may have (a day at 1 us).
+MAX_STEPS = 1e11
+#: Integrators the simulator has.
+INTEGRATORS = ('ode3', 'rk4')
+
 #: Keys every scenario document has, with the JSON type of their value.
 SCENARIO_KEYS: dict[str, type] = {
     'format': str,
@@ -109,11 +118,17 @@ def scenario_from_text(text: str) -> dict[str, Any]:
 
     """
     try:
-        document = json.loads(text)
+        document = json.loads(text, parse_constant=_refuse_constant)
     except json.JSONDecodeError as error:
         raise ScenarioError(f'/grasp/scenario: invalid JSON: {error}') from None
+    except RecursionError:
+        raise ScenarioError('/grasp/scenario: invalid JSON: nested too deeply') from None
     check_scenario(document)
     return document
+
+
+def _refuse_constant(name: str) -> float:
+    raise ScenarioError(f'/grasp/scenario: invalid JSON: {name} is not a JSON number')
 
 
 def _has_type(value: Any, expected: type) -> bool:
@@ -126,7 +141,13 @@ def _has_type(value: Any, expected: type) -> bool:
 
 
 def check_scenario(document: Any) -> None:
-    """Raise ScenarioError unless ``document`` has every key of :data:`SCENARIO_KEYS`."""
+    """Raise ScenarioError unless ``document`` is a physical scenario.
+
+    It must have every key of :data:`SCENARIO_KEYS` with its type, finite numbers, limits
+    with lower below upper, positive effort limits, a friction coefficient in
+    (0, :data:`MAX_FRICTION_COEFFICIENT`], a time step of at least :data:`MIN_TIME_STEP`
+    that divides the duration into ``n_steps`` steps, and a known integrator.
+    """
     if not isinstance(document, Mapping):
         raise ScenarioError(
             f'/grasp/scenario: expected a JSON object, got {type(document).__name__}'
@@ -158,6 +179,50 @@ def check_scenario(document: Any) -> None:
             "/grasp/scenario: key 'fingertip_workspace': expected a_min, a_max, b_min, b_max, "
             f'got {sorted(workspace)}'
         )
+    _check_physical(document)
+
+
+def _bad(key: str, expected: str, value: Any) -> ScenarioError:
+    return ScenarioError(f"/grasp/scenario: key '{key}': expected {expected}, got {value!r}")
+
+
+def _finite(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _check_physical(document: Mapping[str, Any]) -> None:
+    """Refuse values no run can have (the types are already checked)."""
+    for key in ('joint_names', 'contact_names'):
+        names = document[key]
+        if not names or not all(isinstance(n, str) and n for n in names):
+            raise _bad(key, 'a non-empty list of names', names)
+        if len(set(names)) != len(names):
+            raise _bad(key, 'distinct names', names)
+    lower, upper = document['joint_lower_limits'], document['joint_upper_limits']
+    if not all(lo < hi for lo, hi in zip(lower, upper, strict=True)):
+        raise _bad('joint_lower_limits', 'each below its joint_upper_limits', lower)
+    if not all(e > 0 for e in document['effort_limits']):
+        raise _bad('effort_limits', 'numbers > 0', document['effort_limits'])
+    mu = document['friction_coefficient']
+    if not (_finite(mu) and 0 < mu <= MAX_FRICTION_COEFFICIENT):
+        raise _bad('friction_coefficient', f'a number in (0, {MAX_FRICTION_COEFFICIENT:g}]', mu)
+    workspace = document['fingertip_workspace']
+    for low, high in (('a_min', 'a_max'), ('b_min', 'b_max')):
+        a, b = workspace[low], workspace[high]
+        if not (_finite(a) and _finite(b) and a < b):
+            raise _bad('fingertip_workspace', f'finite {low} < {high}', dict(workspace))
+    step, duration = document['time_step'], document['duration']
+    if not (_finite(step) and step >= MIN_TIME_STEP):
+        raise _bad('time_step', f'a finite number >= {MIN_TIME_STEP:g} s', step)
+    if not (_finite(duration) and duration > 0):
+        raise _bad('duration', 'a finite number > 0 s', duration)
+    if duration / step > MAX_STEPS:
+        raise _bad('duration', f'at most {MAX_STEPS:g} time steps', duration)
+    n_steps = max(1, round(duration / step))
+    if document['n_steps'] != n_steps:
+        raise _bad('n_steps', f'{n_steps} (duration / time_step)', document['n_steps'])
+    if document['integrator'] not in INTEGRATORS:
+        raise _bad('integrator', f'one of {list(INTEGRATORS)}', document['integrator'])
 
 
 def scenario_from_msg(msg: Any) -> dict[str, Any]:
