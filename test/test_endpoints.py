@@ -1008,3 +1008,74 @@ def test_gravity_fallback_uses_the_joint_state_of_the_last_accepted_tick(params,
     ).gravity_torque
     limits = sim.model.effort_limits
     np.testing.assert_allclose(fallback, np.clip(g, -limits, limits), rtol=1e-12, atol=1e-12)
+
+
+FUTURE_STAMPS = {
+    'INT32_MAX s': lambda msg, now: setattr(
+        msg.header, 'stamp', MSGS.Time(sec=2**31 - 1, nanosec=0)
+    ),
+    'now + 1 s': lambda msg, now: restamp(msg, now + 1.0),
+}
+
+
+def filter_handlers(safety_filter):
+    return {
+        topics.JOINT_STATES: safety_filter.on_joint_states,
+        topics.OBJECT_ODOM: safety_filter.on_odom,
+        topics.EFFORT_NOMINAL: safety_filter.on_effort_nominal,
+    }
+
+
+@pytest.mark.parametrize('clock', ['node clock', 'no clock'])
+@pytest.mark.parametrize('future', list(FUTURE_STAMPS))
+@pytest.mark.parametrize('topic', [topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL])
+def test_a_future_stamp_is_rejected_and_later_valid_ticks_go_on(params, topic, future, clock):
+    sim, safety_filter, _, (joints, odometry, effort_nominal) = filter_after_one_good_tick(params)
+    dt = sim.config.time_step
+    now = dt if clock == 'node clock' else None
+    t_now = 0.0 if now is None else now  # without a clock: the last tick's time
+    inputs = dict(
+        zip(filter_handlers(safety_filter), (joints, odometry, effort_nominal), strict=True)
+    )
+    wild = through_cdr(inputs[topic])
+    FUTURE_STAMPS[future](wild, t_now)
+    rejected = filter_handlers(safety_filter)[topic](wild, now=now)
+    (report,) = statuses(rejected, 'safety_filter')
+    assert 'future stamp' in report.message
+    assert report.values[Key.STATUS] == TickStatus.INPUT_HELD.value
+    for k in (2, 3, 4):  # the rejection closed the tick of its clock stamp, dt
+        outgoing = []
+        for other, handler in filter_handlers(safety_filter).items():
+            msg = restamp(through_cdr(inputs[other]), k * dt)
+            outgoing += handler(msg, now=None if now is None else k * dt)
+        (report,) = statuses(outgoing, 'safety_filter')
+        assert report.values[Key.STATUS] not in {s.value for s in INPUT_STATUSES}, report.message
+    assert safety_filter.filter.calls == 4
+
+
+@pytest.mark.parametrize('future', list(FUTURE_STAMPS))
+@pytest.mark.parametrize('topic', [topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL])
+def test_without_a_clock_a_future_first_stamp_does_not_block_the_first_tick(
+    params, topic, future
+):
+    _, joints, odometry, effort_nominal = tick_inputs(params)
+    safety_filter = make_filter(params)
+    inputs = dict(
+        zip(filter_handlers(safety_filter), (joints, odometry, effort_nominal), strict=True)
+    )
+    wild = through_cdr(inputs[topic])
+    FUTURE_STAMPS[future](wild, 0.0)
+    filter_handlers(safety_filter)[topic](wild)
+    # A garbled far-future message (it does not parse) closes no tick either.
+    garbled = nan_nominal(through_cdr(effort_nominal))
+    FUTURE_STAMPS[future](garbled, 0.0)
+    safety_filter.on_effort_nominal(garbled)
+    outgoing = []
+    for other, handler in filter_handlers(safety_filter).items():
+        outgoing += handler(through_cdr(inputs[other]))
+    assert [o.topic for o in outgoing] == [
+        topics.EFFORT_COMMAND,
+        topics.MARGINS,
+        topics.DIAGNOSTICS,
+    ]
+    assert outgoing[0].stamp_ns == 0

@@ -801,3 +801,34 @@ def test_joint_state_without_effort_is_accepted_as_hand_drivers_publish_it():
     msg.effort = np.zeros(4)  # present but of the wrong length is still an error
     with pytest.raises(m.MessageError, match="'effort' has 4 entries"):
         m.joint_state_from_msg(msg, JOINTS)
+
+
+@pytest.mark.parametrize(
+    ('stamp', 'now', 'error'),
+    [
+        (1.05, 1.0, None),  # at the bound
+        (1.0500001, 1.0, m.FutureStampError),
+        (2.0, 1.0, m.FutureStampError),
+        (2.0**31 - 1, 1.0, m.FutureStampError),
+        (0.95, 1.0, None),
+        (0.9499999, 1.0, m.StaleInputError),
+    ],
+)
+def test_stamp_guard_rejects_stamps_ahead_of_the_clock(stamp, now, error):
+    guard = StampGuard(max_age=0.05)
+    if error is None:
+        guard.accept('/x', stamp, now=now)
+        assert guard.last_stamp('/x') == stamp
+    else:
+        with pytest.raises(error):
+            guard.accept('/x', stamp, now=now)
+        assert guard.last_stamp('/x') is None
+
+
+def test_stamp_guard_forgets_a_reference_that_is_in_the_future_of_the_clock():
+    guard = StampGuard(max_age=0.05)
+    guard.accept('/x', 100.0, now=100.0)  # ``now`` was the stamp itself, no clock
+    guard.accept('/x', 0.001, now=0.0)
+    assert guard.last_stamp('/x') == 0.001
+    with pytest.raises(m.OutOfOrderError):
+        guard.accept('/x', 0.0, now=0.0)

@@ -126,6 +126,10 @@ class OutOfOrderError(MessageError):
     """A message's stamp is older than the last one accepted on its topic."""
 
 
+class FutureStampError(MessageError):
+    """A message's stamp is ahead of the clock by more than the allowed age."""
+
+
 @dataclass(frozen=True)
 class MessageNamespace:
     """The message classes to build, and how their fields hold values.
@@ -1159,11 +1163,15 @@ def clock_from_msg(msg: Any) -> float:
 
 
 class StampGuard:
-    """Rejects stale and out-of-order input stamps, per topic.
+    """Rejects stale, future and out-of-order input stamps, per topic.
 
-    A stamp is stale when ``stamp < now - max_age`` and out of order when it is strictly
+    A stamp is stale when ``stamp < now - max_age``, in the future when
+    ``stamp > now + max_age`` (a clock error or a garbled stamp: accepted, it would make
+    every later valid message look out of order), and out of order when it is strictly
     older than the last stamp accepted on the same topic (an equal stamp is accepted: a
-    repeated sample is not a reordering).
+    repeated sample is not a reordering). A last accepted stamp that is itself in the
+    future of ``now`` (possible only when ``now`` was not a clock, e.g. the stamp of a
+    first message) is no reference: it is forgotten.
     """
 
     def __init__(self, max_age: float) -> None:
@@ -1183,6 +1191,7 @@ class StampGuard:
 
         Raises:
             StaleInputError: The stamp is older than ``now - max_age``.
+            FutureStampError: The stamp is later than ``now + max_age``.
             OutOfOrderError: The stamp is older than the last one accepted on ``topic``.
             MessageError: ``stamp`` or ``now`` is not finite.
 
@@ -1194,7 +1203,14 @@ class StampGuard:
                 f'{topic}: stale stamp {stamp:.9f} s at now {now:.9f} s (age '
                 f'{now - stamp:.9f} s > max_age {self.max_age} s)'
             )
+        if stamp > now + self.max_age:
+            raise FutureStampError(
+                f'{topic}: future stamp {stamp:.9f} s at now {now:.9f} s (ahead by '
+                f'{stamp - now:.9f} s > max_age {self.max_age} s)'
+            )
         last = self._last.get(topic)
+        if last is not None and last > now + self.max_age:
+            last = None  # accepted against a stamp, not a clock: no reference now
         if last is not None and stamp < last:
             raise OutOfOrderError(
                 f'{topic}: out-of-order stamp {stamp:.9f} s, older than the last accepted '

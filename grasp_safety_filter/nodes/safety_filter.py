@@ -11,9 +11,10 @@ valid::
             /diagnostics: status ``safety_filter`` (below)
 
 Inputs are parsed by joint name and checked by a :class:`StampGuard` per topic (older than
-``input.max_age`` behind ``now``: stale; older than the topic's last stamp: out of
-order). A rejected input yields no computed command: :meth:`HoldPolicy.reject` gives the
-last safe command (``holding``, WARN) or, after ``input.hold_timeout``, the fallback
+``input.max_age`` behind ``now``: stale; more than ``input.max_age`` ahead of it: future;
+older than the topic's last accepted stamp: out of order; without ``now``, the clock is
+the last tick's time). A rejected input yields no computed command: :meth:`HoldPolicy.reject`
+gives the last safe command (``holding``, WARN) or, after ``input.hold_timeout``, the fallback
 (``fallback``, ERROR: zero torque or gravity compensation ``g(q)`` at the last accepted
 joint positions, clipped to the actuator limits). That command is published stamped with
 the rejected message's stamp when it is readable and current (a lockstep simulator waiting
@@ -85,6 +86,7 @@ from grasp_safety_filter.io.messages import (
     effort_from_msg,
     effort_to_msg,
     EffortData,
+    FutureStampError,
     header_stamp_ns,
     joint_state_from_msg,
     JointStateData,
@@ -343,7 +345,7 @@ class SafetyFilterEndpoint:
         if enabled == self.enabled:
             return None
         self.enabled = enabled
-        self._switched_at = self._now(None, now)
+        self._switched_at = self._now(None, now)[0]
         if enabled:
             return f'safety filter switched ON at t = {self._switched_at:.6f} s (node clock)'
         return (
@@ -375,21 +377,25 @@ class SafetyFilterEndpoint:
             self.rate.configure(publication_rate_config)
 
     # ------------------------------------------------------------------------ internals
-    def _now(self, msg: Any, now: float | None) -> float:
-        """Return the clock for this input: ``now``, else the last tick's time or the stamp."""
+    def _now(self, msg: Any, now: float | None) -> tuple[float, bool]:
+        """Return the clock for this input, s, and whether it is one.
+
+        ``now``, else the last tick's time; before any tick and without ``now``, the
+        message's own stamp (or 0.0), which is no clock: a rejection then closes no tick.
+        """
         if now is not None:
-            return float(now)
+            return float(now), True
         if self._last_tick_ns is not None:
-            return nanoseconds_to_seconds(self._last_tick_ns)
+            return nanoseconds_to_seconds(self._last_tick_ns), True
         try:
-            return nanoseconds_to_seconds(header_stamp_ns(msg))
+            return nanoseconds_to_seconds(header_stamp_ns(msg)), False
         except (AttributeError, MessageError):
-            return 0.0
+            return 0.0, False
 
     def _on_input(
         self, topic: str, msg: Any, now: float | None, wall: float | None, parse: Any
     ) -> list[Outgoing]:
-        now_s = self._now(msg, now)
+        now_s, is_clock = self._now(msg, now)
         if wall is not None:
             self._received_wall[topic] = wall
         try:
@@ -402,7 +408,7 @@ class SafetyFilterEndpoint:
                     f'tick {nanoseconds_to_seconds(self._last_tick_ns):.9f} s)'
                 )
         except MessageError as error:
-            return self._reject(topic, msg, error, now_s)
+            return self._reject(topic, msg, error, now_s, close=is_clock)
         if stamp == self._last_tick_ns:
             # The same tick again (e.g. a simulator that re-sent its state): same answer.
             self._replay[topic] = data
@@ -589,16 +595,24 @@ class SafetyFilterEndpoint:
         error: Exception,
         now: float,
         stamp: int | None = None,
+        close: bool = True,
     ) -> list[Outgoing]:
-        """Held or fallback command for a rejected input, and the status saying why."""
-        if stamp is None and not isinstance(error, StaleInputError | OutOfOrderError):
+        """Held or fallback command for a rejected input, and the status saying why.
+
+        ``close``: the tick of the command's stamp is closed (not when ``now`` is no clock:
+        a garbled first stamp must not close ticks that have not happened).
+        """
+        if stamp is None and not isinstance(
+            error, StaleInputError | OutOfOrderError | FutureStampError
+        ):
             stamp = self._current_stamp(msg, now)
         if stamp is None:
             # The message's own stamp is unusable: stamp the command with the clock.
             stamp = self._clock_stamp(now)
         gravity, note = self._fallback_gravity()
         u = self.hold.reject(now, f'{topic}: {error}', gravity)
-        self._close(stamp)
+        if close:
+            self._close(stamp)
         t = nanoseconds_to_seconds(stamp)
         mode = self.hold.mode
         action = (
