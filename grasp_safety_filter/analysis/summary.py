@@ -57,11 +57,46 @@ def _finite_or_none(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-def _percentiles(values: list[float]) -> dict[str, float | None]:
+def _percentiles(
+    values: list[float], weights: list[int] | None = None
+) -> dict[str, float | None]:
+    """Median and p99 of ``values``, each counted ``weights`` times (default once).
+
+    With weights, the inverted CDF (the smallest value whose cumulative weight reaches the
+    quantile), as ``numpy.percentile(..., method='inverted_cdf')``.
+    """
     if not values:
         return {'median': None, 'p99': None}
     array = np.asarray(values, dtype=float)
-    return {'median': float(np.median(array)), 'p99': float(np.percentile(array, 99))}
+    if weights is None:
+        return {'median': float(np.median(array)), 'p99': float(np.percentile(array, 99))}
+    order = np.argsort(array, kind='stable')
+    cumulative = np.cumsum(np.asarray(weights, dtype=float)[order])
+
+    def quantile(q: float) -> float:
+        index = int(np.searchsorted(cumulative, q * cumulative[-1], side='left'))
+        return float(array[order][min(index, len(array) - 1)])
+
+    return {'median': quantile(0.5), 'p99': quantile(0.99)}
+
+
+def _tick_weights(run: RunData) -> list[int]:
+    """How many ticks each published status stands for: those since the previous one.
+
+    A steady status published once per ``diagnostics.period`` stands for the ticks of its
+    period, so that times are percentiles over ticks, not over published statuses.
+    Statuses without counts (an older bag) stand for one tick each.
+    """
+    weights: list[int] = []
+    previous = 0
+    for values in run.filter_values:
+        ticks = values.get(Key.TICKS)
+        if ticks is None:
+            weights.append(1)
+            continue
+        weights.append(max(int(ticks) - previous, 1))
+        previous = int(ticks)
+    return weights
 
 
 def constraint_log(run: RunData) -> EventLog:
@@ -125,8 +160,9 @@ def filter_summary(run: RunData) -> dict[str, Any]:
 
     Counts are exact (:func:`tick_counts`). Every relaxed, failed or rejected tick's status
     is published, so ``relaxed_families`` counts, per family, the relaxed steps that gave up
-    one of its rows; the times are those of the published statuses (all ticks with
-    ``diagnostics.period`` 0).
+    one of its rows; the times are percentiles over ticks, each published status standing
+    for the ticks since the previous one (:func:`_tick_weights`): exact with
+    ``diagnostics.period`` 0, else a steady period's times are those of its published tick.
     """
     counts = tick_counts(run)
     relaxed_families: dict[str, int] = {}
@@ -138,8 +174,12 @@ def filter_summary(run: RunData) -> dict[str, Any]:
     def count(statuses: Iterable[TickStatus]) -> int:
         return sum(counts.get(status.value, 0) for status in statuses)
 
+    weights = _tick_weights(run)
+
     def times(key: str) -> dict[str, float | None]:
-        return _percentiles([float(v[key]) for v in run.filter_values if key in v])
+        pairs = zip(run.filter_values, weights, strict=True)
+        timed = [(float(values[key]), w) for values, w in pairs if key in values]
+        return _percentiles([t for t, _ in timed], [w for _, w in timed])
 
     return {
         'steps': sum(counts.values()),
