@@ -159,7 +159,14 @@ def _override(text: str) -> tuple[str, Any]:
 
 def demo_main(argv: list[str] | None = None) -> int:
     """``grasp-demo``: the paper's runs, recorded to bags, with figures and a verdict."""
-    from grasp_safety_filter.runner import run, RunOptions
+    from grasp_safety_filter.runner import (
+        check_output_dir,
+        OutputError,
+        run,
+        RunOptions,
+        VERDICT_FILE,
+        write_file,
+    )
 
     parser = argparse.ArgumentParser(prog='grasp-demo', description=demo_main.__doc__)
     parser.add_argument(
@@ -193,9 +200,19 @@ def demo_main(argv: list[str] | None = None) -> int:
         help='override a parameter of every node that declares it, e.g. '
         'barrier.alpha1.gain=10.0 (YAML value, repeatable)',
     )
+    parser.add_argument(
+        '--force',
+        action='store_true',
+        help='write into OUT even if it holds files that are not a previous output',
+    )
     args = parser.parse_args(argv)
     modes = ('nominal', 'filtered') if args.mode == 'both' else (args.mode,)
     verdicts = {}
+    try:
+        check_output_dir(args.out, args.force)
+    except OutputError as error:
+        print(f'grasp-demo: {error}', file=sys.stderr)
+        return 2
     for mode in modes:
         out_dir = args.out / mode if args.mode == 'both' else args.out
         try:
@@ -208,8 +225,8 @@ def demo_main(argv: list[str] | None = None) -> int:
                 args.storage,
                 dict(args.overrides),
             )
-            result = run(options, out_dir, _progress_printer(mode))
-        except ParameterError as error:
+            result = run(options, out_dir, _progress_printer(mode), force=args.force)
+        except (ParameterError, OutputError) as error:
             print(f'grasp-demo: {error}', file=sys.stderr)
             return 2
         except KeyboardInterrupt:
@@ -220,26 +237,47 @@ def demo_main(argv: list[str] | None = None) -> int:
             return 130
         ok, verdict = _print_summary(mode, result.summary, out_dir)
         verdicts[mode] = {'reproduced': ok, 'verdict': verdict}
-    (args.out / 'verdict.json').write_text(json.dumps(verdicts, indent=2) + '\n')
+    write_file(args.out / VERDICT_FILE, json.dumps(verdicts, indent=2) + '\n')
     return 0 if all(v['reproduced'] for v in verdicts.values()) else 1
 
 
 def analyze_main(argv: list[str] | None = None) -> int:
     """``grasp-analyze BAG``: figures and summary.json of any recorded run of this package."""
     from grasp_safety_filter.analysis.run_data import RunDataError
-    from grasp_safety_filter.runner import analyze_bag
+    from grasp_safety_filter.runner import (
+        ANALYSIS_DIRECTORY,
+        analyze_bag,
+        OutputError,
+        SUMMARY_FILE,
+    )
 
     parser = argparse.ArgumentParser(prog='grasp-analyze', description=analyze_main.__doc__)
     parser.add_argument('bag', type=Path, help='rosbag2 directory (mcap or sqlite3)')
-    parser.add_argument('--out', type=Path, help='output directory (default: next to the bag)')
+    parser.add_argument(
+        '--out',
+        type=Path,
+        help='output directory (default: next to the bag, or its analysis/ directory when '
+        'a summary.json is already there, e.g. that of the grasp-demo run)',
+    )
+    parser.add_argument(
+        '--force',
+        action='store_true',
+        help='write into OUT even if it holds files that are not a previous output',
+    )
     args = parser.parse_args(argv)
-    out_dir = args.out if args.out is not None else args.bag.resolve().parent
+    out_dir = args.out
+    if out_dir is None:
+        out_dir = args.bag.resolve().parent
+        if (out_dir / SUMMARY_FILE).exists() or (out_dir / SUMMARY_FILE).is_symlink():
+            # The run's own summary (it may say "interrupted"): keep it.
+            out_dir = out_dir / ANALYSIS_DIRECTORY
     try:
-        summary, figures = analyze_bag(args.bag, out_dir)
-    except RunDataError as error:
+        summary, figures = analyze_bag(args.bag, out_dir, force=args.force)
+    except (RunDataError, OutputError) as error:
         print(f'grasp-analyze: {error}', file=sys.stderr)
         return 2
     _print_summary(summary['mode'], summary, out_dir)
+    print(f'  summary: {out_dir / SUMMARY_FILE}')
     for figure in figures:
         print(f'  figure: {figure}')
     return 0

@@ -7,6 +7,14 @@ lockstep makes this the same stream a ``ros2 launch`` run of the paper demo reco
 
 Results (figures and ``summary.json``) are then produced from the bag alone, by the same
 analysis ``grasp-analyze`` runs on any recording.
+
+Output directories: a run writes only into a directory that is empty, new, or a previous
+output of this package, i.e. one holding nothing but :data:`OUTPUT_NAMES` (``bag`` with
+only bag files in it, ``summary.json``, ``verdict.json``, the figures, and ``nominal``,
+``filtered`` and ``analysis`` directories of the same kind). Anything else, or a symbolic
+link in the place of one of them, raises :class:`OutputError` unless ``force`` is given.
+Files are written to a temporary file and renamed into place, so a planted symbolic link
+is replaced, never followed, and a reader never sees half a file.
 """
 
 from __future__ import annotations
@@ -16,14 +24,16 @@ from collections.abc import Callable, Mapping
 import dataclasses
 from dataclasses import dataclass, field
 import json
+import os
 from pathlib import Path
 import shutil
+import tempfile
 import time
 from typing import Any
 
 from rosbags.typesys import get_typestore, Stores
 
-from grasp_safety_filter.analysis.figures import plot_run
+from grasp_safety_filter.analysis.figures import FIGURE_FILES, plot_run
 from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.analysis.summary import summarize
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
@@ -51,6 +61,107 @@ from hand_sim_node.events import EventLog
 MODES = ('nominal', 'filtered')
 BAG_DIRECTORY = 'bag'
 SUMMARY_FILE = 'summary.json'
+VERDICT_FILE = 'verdict.json'
+ANALYSIS_DIRECTORY = 'analysis'
+#: Directories of an output directory that are outputs of their own (``--mode both``,
+#: ``grasp-analyze`` next to a run that has a summary).
+OUTPUT_SUBDIRECTORIES = (*MODES, ANALYSIS_DIRECTORY)
+#: Every name this package writes into an output directory.
+OUTPUT_NAMES = (BAG_DIRECTORY, SUMMARY_FILE, VERDICT_FILE, *FIGURE_FILES, *OUTPUT_SUBDIRECTORIES)
+#: Files of a bag directory written by this package's recorder (rosbags) or ``ros2 bag``.
+BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-journal', '.db3-wal', '.db3-shm')
+
+
+class OutputError(ValueError):
+    """An output directory that is not this package's to write into (names the entry)."""
+
+
+def _foreign_entries(directory: Path, inputs: frozenset[Path]) -> list[str]:
+    """Entries of ``directory`` that are not outputs of this package (see the module doc)."""
+    foreign = []
+    for entry in sorted(directory.iterdir()):
+        if entry.resolve() in inputs and not entry.is_symlink():
+            continue
+        if entry.is_symlink():
+            foreign.append(f'{entry} (a symbolic link)')
+        elif entry.name not in OUTPUT_NAMES:
+            foreign.append(str(entry))
+        elif entry.name == BAG_DIRECTORY:
+            if not entry.is_dir():
+                foreign.append(f'{entry} (not a bag directory)')
+            else:
+                foreign.extend(
+                    f'{f} (in a bag)'
+                    for f in sorted(entry.iterdir())
+                    if f.is_symlink()
+                    or not f.is_file()
+                    or (f.name != 'metadata.yaml' and not f.name.endswith(BAG_FILE_SUFFIXES))
+                )
+        elif entry.name in OUTPUT_SUBDIRECTORIES:
+            if not entry.is_dir():
+                foreign.append(str(entry))
+            else:
+                foreign.extend(_foreign_entries(entry, inputs))
+        elif not entry.is_file():
+            foreign.append(str(entry))
+    return foreign
+
+
+def check_output_dir(out_dir: Path, force: bool = False, inputs: tuple[Path, ...] = ()) -> None:
+    """Refuse ``out_dir`` unless it is new, empty or a previous output (module doc).
+
+    Args:
+        out_dir: The output directory.
+        force: Write into it anyway (symbolic links are still replaced, never followed).
+        inputs: Paths inside it that are read, not written (the bag ``grasp-analyze`` reads).
+
+    Raises:
+        OutputError: Not ours, without ``force``; or it is not a directory.
+
+    """
+    out_dir = Path(out_dir)
+    if not out_dir.exists():
+        if out_dir.is_symlink():
+            raise OutputError(f'{out_dir}: a dangling symbolic link, not an output directory')
+        return
+    if not out_dir.is_dir():
+        raise OutputError(f'{out_dir}: exists and is not a directory')
+    if force:
+        return
+    foreign = _foreign_entries(out_dir, frozenset(Path(p).resolve() for p in inputs))
+    if foreign:
+        shown = ', '.join(foreign[:3]) + (
+            f' and {len(foreign) - 3} more' if len(foreign) > 3 else ''
+        )
+        raise OutputError(
+            f'{out_dir}: not an output directory of this package (has {shown}); '
+            'choose another or pass --force to write into it'
+        )
+
+
+def write_file(path: Path, data: str | bytes) -> Path:
+    """Write ``path`` through a temporary file renamed into place (a symlink is replaced)."""
+    path = Path(path)
+    if path.is_dir() and not path.is_symlink():
+        raise OutputError(f'{path}: is a directory, expected a file')
+    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.')
+    try:
+        with os.fdopen(descriptor, 'wb') as file:
+            file.write(data.encode() if isinstance(data, str) else data)
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _remove(path: Path) -> None:
+    """Remove a previous bag; a symbolic link itself, never what it points to."""
+    if path.is_symlink() or path.is_file():
+        path.unlink()
+    elif path.exists():
+        shutil.rmtree(path)
 
 
 @dataclass(frozen=True)
@@ -189,8 +300,7 @@ def record_run(options: RunOptions, bag_path: Path, progress: Progress | None = 
     msgs = MessageNamespace.from_typestore(typestore)
     # Bad parameters fail here, before an earlier bag is replaced.
     sim, nominal, safety_filter = build_endpoints(options, msgs)
-    if bag_path.exists():
-        shutil.rmtree(bag_path)
+    _remove(bag_path)
     with (
         interrupt_on_signals(),
         BagRecorder(bag_path, storage=options.storage, typestore=typestore) as bag,
@@ -220,31 +330,49 @@ def record_run(options: RunOptions, bag_path: Path, progress: Progress | None = 
         return Recording(interrupted, simulator.log, simulator.stop_reason, simulator.t)
 
 
-def analyze_bag(bag_path: Path, out_dir: Path) -> tuple[dict[str, Any], list[Path]]:
-    """Figures and ``summary.json`` of a recorded run, into ``out_dir``."""
+def _write_summary(out_dir: Path, summary: dict[str, Any]) -> None:
+    write_file(out_dir / SUMMARY_FILE, json.dumps(summary, indent=2) + '\n')
+
+
+def analyze_bag(
+    bag_path: Path, out_dir: Path, force: bool = False
+) -> tuple[dict[str, Any], list[Path]]:
+    """Figures and ``summary.json`` of a recorded run, into ``out_dir``.
+
+    Raises:
+        RunDataError: The bag cannot be analysed.
+        OutputError: ``out_dir`` is not ours to write into (see :func:`check_output_dir`).
+
+    """
+    out_dir = Path(out_dir)
+    check_output_dir(out_dir, force, inputs=(Path(bag_path),))
     run = load_run(bag_path)
     summary = summarize(run)
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2) + '\n')
+    _write_summary(out_dir, summary)
     return summary, plot_run(run, out_dir)
 
 
-def run(options: RunOptions, out_dir: Path, progress: Progress | None = None) -> RunResult:
+def run(
+    options: RunOptions, out_dir: Path, progress: Progress | None = None, force: bool = False
+) -> RunResult:
     """Run, record and analyse one scenario run into ``out_dir`` (its bag is replaced).
 
     Raises:
+        OutputError: ``out_dir`` is not ours to write into (see :func:`check_output_dir`).
         KeyboardInterrupt: After the bag and summary of the partial run are written, so the
             caller can exit with the usual status.
     """
     out_dir = Path(out_dir)
+    check_output_dir(out_dir, force)
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_path = out_dir / BAG_DIRECTORY
     start = time.perf_counter()
     recording = record_run(options, bag_path, progress)
     wall_time = time.perf_counter() - start
-    summary, figures = analyze_bag(bag_path, out_dir)
+    summary, figures = analyze_bag(bag_path, out_dir, force=True)
     if recording.interrupted is not None:
         summary['interrupted'] = recording.interrupted
-        (out_dir / SUMMARY_FILE).write_text(json.dumps(summary, indent=2) + '\n')
+        _write_summary(out_dir, summary)
         raise KeyboardInterrupt(recording.interrupted)
     return RunResult(out_dir, bag_path, summary, figures, wall_time, recording)

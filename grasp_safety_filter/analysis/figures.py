@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+import tempfile
 
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
@@ -10,6 +12,8 @@ import numpy as np
 
 from grasp_safety_filter.analysis.run_data import RunData
 
+#: The figures of a run, in :func:`plot_run`'s order (torques only with commands).
+FIGURE_FILES = ('contacts.png', 'joints.png', 'friction.png', 'torques.png')
 INFEASIBLE = {'color': '0.85', 'zorder': 0}
 # Symmetric grasps give identical curves; line styles keep each one visible.
 LINE_STYLES = ('-', '--', ':', '-.')
@@ -129,7 +133,16 @@ def plot_run(run: RunData, out_dir: Path) -> list[Path]:
 
 
 def _save(figure: Figure, path: Path) -> Path:
-    # Figure without pyplot: no GUI backend, no global state, works headless.
+    # Figure without pyplot: no GUI backend, no global state, works headless. Saved to a
+    # temporary file renamed into place: a symbolic link at ``path`` is replaced, not followed.
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.')
+    try:
+        with os.fdopen(descriptor, 'wb') as file:
+            figure.savefig(file, dpi=120, format='png')
+        os.chmod(temporary, 0o644)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
     return path
