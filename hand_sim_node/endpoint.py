@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.io.messages import (
+    bounded_text,
     clock_to_msg,
     ContactData,
     contacts_to_msg,
@@ -371,7 +372,9 @@ class HandSimEndpoint:
             values['command_stamp'] = nanoseconds_to_seconds(header_stamp_ns(msg))
         except (AttributeError, MessageError):
             values['command_stamp'] = 'unreadable'
-        report = DiagnosticReport.create(DIAGNOSTIC_NAME, DiagnosticLevel.WARN, text, values)
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME, DiagnosticLevel.WARN, bounded_text(text), values
+        )
         return [self._diagnostics(report)]
 
     def _diagnostics(self, report: DiagnosticReport) -> Outgoing:

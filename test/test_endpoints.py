@@ -1079,3 +1079,63 @@ def test_without_a_clock_a_future_first_stamp_does_not_block_the_first_tick(
         topics.DIAGNOSTICS,
     ]
     assert outgoing[0].stamp_ns == 0
+
+
+def many_names(msg):
+    msg.name = [f'joint_{i}' for i in range(100_000)]
+    return msg
+
+
+def many_duplicates(msg):
+    msg.name = ['x'] * 100_000
+    return msg
+
+
+def huge_frame(msg):
+    msg.header.frame_id = 'f' * 100_000
+    return msg
+
+
+def huge_name(msg):
+    msg.name = ['n' * 100_000, *msg.name[1:]]
+    return msg
+
+
+HUGE_INPUTS = {
+    '100k joint names': (topics.JOINT_STATES, many_names, '99995 more'),
+    '100k duplicate names': (topics.EFFORT_NOMINAL, many_duplicates, 'duplicate'),
+    '100 kB frame id': (topics.OBJECT_ODOM, huge_frame, 'frame'),
+    '100 kB joint name': (topics.JOINT_STATES, huge_name, 'unknown'),
+}
+
+
+@pytest.mark.parametrize('case', list(HUGE_INPUTS))
+def test_rejection_reports_are_bounded_and_not_carried_on_at_full_size(params, case):
+    topic, mutate, match = HUGE_INPUTS[case]
+    sim, safety_filter, _, (joints, odometry, effort_nominal) = filter_after_one_good_tick(params)
+    dt = sim.config.time_step
+    inputs = dict(
+        zip(filter_handlers(safety_filter), (joints, odometry, effort_nominal), strict=True)
+    )
+    bad = mutate(restamp(through_cdr(inputs[topic]), dt))
+    (report,) = statuses(filter_handlers(safety_filter)[topic](bad), 'safety_filter')
+    assert match in report.message
+    assert len(report.message) <= m.MAX_REPORT_TEXT
+    assert len(report.values[Key.INPUT_LAST_REJECTION]) <= m.MAX_REPORT_TEXT
+    outgoing = []
+    for other, handler in filter_handlers(safety_filter).items():
+        outgoing += handler(restamp(through_cdr(inputs[other]), 2 * dt))
+    (diagnostics,) = [o.msg for o in outgoing if o.topic == topics.DIAGNOSTICS]
+    assert len(TYPESTORE.serialize_cdr(diagnostics, diagnostics.__msgtype__)) < 8_000
+    if topic != topics.OBJECT_ODOM:
+        # The nominal controller and the simulator bound their reports too.
+        nominal = make_nominal(params)
+        handler = nominal.on_joint_states if topic == topics.JOINT_STATES else None
+        started = make_sim(params)
+        started.start()
+        command = mutate(m.effort_to_msg(MSGS, 0.0, sim.model.joint_names, np.zeros(9)))
+        reports = statuses(started.on_command(command), 'hand_sim')
+        if handler is not None:
+            reports += statuses(handler(mutate(through_cdr(joints))), 'nominal_controller')
+        for other in reports:
+            assert len(other.message) <= m.MAX_REPORT_TEXT

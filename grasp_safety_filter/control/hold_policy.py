@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.io.diagnostic_keys import InputMode, Key
-from grasp_safety_filter.io.messages import DiagnosticLevel
+from grasp_safety_filter.io.messages import bounded_text, DiagnosticLevel
 
 MAX_AGE_PARAMETER = 'input.max_age'
 HOLD_TIMEOUT_PARAMETER = 'input.hold_timeout'
@@ -184,7 +184,11 @@ class HoldPolicy:
 
     @property
     def last_reason(self) -> str:
-        """Why the last rejected input was rejected (empty if none was)."""
+        """Why the last rejected input was rejected (empty if none was).
+
+        At most :data:`~grasp_safety_filter.io.messages.MAX_REPORT_TEXT` characters: it
+        goes with every later status.
+        """
         return self._last_reason
 
     @property
@@ -252,7 +256,7 @@ class HoldPolicy:
         self, since_accepted: float, reason: str, gravity_torque: np.ndarray | None
     ) -> np.ndarray:
         """Hold the last safe command up to ``hold_timeout`` s after it, else fall back."""
-        self._last_reason = str(reason)
+        self._last_reason = bounded_text(str(reason))
         if self._last_command is not None and since_accepted <= self.hold_timeout:
             self._mode = InputMode.HOLDING
             return self._last_command.copy()

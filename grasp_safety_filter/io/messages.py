@@ -15,9 +15,11 @@ Parsing (``*_from_msg``) accepts either representation. It never returns values 
 from bad input: non-finite numbers, arrays whose length does not match the names, unknown,
 missing or duplicate names, unexpected frames and non-unit quaternions raise
 :class:`MessageError` with a message naming the source, the entry, the field, what was
-expected and what was received. Joints and contacts are matched by name, in any order.
-Building (``*_to_msg``) checks shapes and names, not values: a producer that publishes a
-NaN is caught by its consumer. :class:`StampGuard` rejects stale and out-of-order stamps.
+expected and what was received (received names: the first :data:`NAMES_SHOWN` and a
+count; any report text at most :data:`MAX_REPORT_TEXT` characters, :func:`bounded_text`).
+Joints and contacts are matched by name, in any order. Building (``*_to_msg``) checks
+shapes and names, not values: a producer that publishes a NaN is caught by its consumer.
+:class:`StampGuard` rejects stale, future and out-of-order stamps.
 
 Times are float seconds on the numpy side and ``builtin_interfaces`` ``(sec, nanosec)``
 in messages; the conversion rounds to the nearest nanosecond, so any time ``ns / 1e9``
@@ -97,6 +99,9 @@ MAX_REPORT_TEXT = 1000
 #: Names listed in a rejection text before the rest are only counted.
 NAMES_SHOWN = 5
 
+# Longest text of one received name (or frame id) in a rejection text, characters.
+_NAME_TEXT = 64
+
 
 def bounded_text(text: str, limit: int = MAX_REPORT_TEXT) -> str:
     """Return ``text``, cut to ``limit`` characters with a note of how many were cut."""
@@ -108,7 +113,7 @@ def bounded_text(text: str, limit: int = MAX_REPORT_TEXT) -> str:
 
 def name_list(names: Sequence[str], shown: int = NAMES_SHOWN) -> str:
     """Return ``['a', 'b', ... (N more)]``: the first ``shown`` names (bounded), a count."""
-    listed = [repr(bounded_text(str(n), 64)) for n in list(names)[:shown]]
+    listed = [repr(bounded_text(str(n), _NAME_TEXT)) for n in list(names)[:shown]]
     if len(names) > shown:
         listed.append(f'... ({len(names) - shown} more)')
     return '[' + ', '.join(listed) + ']'
@@ -279,7 +284,8 @@ def _duration_to_msg(msgs: MessageNamespace, t: float) -> Any:
 
 def _check_frame(source: str, what: str, received: str, expected: str) -> None:
     if received != expected:
-        raise MessageError(f'{source}: {what} must be {expected!r}, got {received!r}')
+        got = bounded_text(repr(received), _NAME_TEXT)
+        raise MessageError(f'{source}: {what} must be {expected!r}, got {got}')
 
 
 def _names(source: str, names: Sequence[str], kind: str) -> list[str]:
@@ -287,7 +293,9 @@ def _names(source: str, names: Sequence[str], kind: str) -> list[str]:
     received = [str(n) for n in names]
     duplicates = sorted(n for n, count in Counter(received).items() if count > 1)
     if duplicates:
-        raise MessageError(f'{source}: duplicate {kind} names {duplicates}')
+        raise MessageError(
+            f'{source}: {len(duplicates)} duplicate {kind} names {name_list(duplicates)}'
+        )
     return received
 
 
@@ -301,11 +309,15 @@ def _match_names(
     unknown = [n for n in received if n not in expected]
     if unknown:
         raise MessageError(
-            f'{source}: unknown {kind} names {unknown}; expected {list(expected_names)}'
+            f'{source}: {len(unknown)} unknown {kind} names {name_list(unknown)}; expected '
+            f'{list(expected_names)}'
         )
     missing = [n for n in expected_names if n not in index]
     if missing:
-        raise MessageError(f'{source}: missing {kind} names {missing}; received {received}')
+        raise MessageError(
+            f'{source}: missing {kind} names {missing}; received {len(received)} '
+            f'{name_list(received)}'
+        )
     return np.array([index[n] for n in expected_names], dtype=int)
 
 
@@ -343,7 +355,8 @@ def _array_field(
         bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        raise MessageError(f"{source}: '{field_name}' of '{names[i]}' is {float(array[i])!r}")
+        name = bounded_text(str(names[i]), _NAME_TEXT)
+        raise MessageError(f"{source}: '{field_name}' of '{name}' is {float(array[i])!r}")
     return array
 
 
@@ -934,7 +947,7 @@ def reference_from_msg(
             if length not in allowed:
                 raise MessageError(
                     f"{where}: '{f}' has {length} entries, expected "
-                    f'{" or ".join(map(str, allowed))} (joints {list(msg.joint_names)})'
+                    f'{" or ".join(map(str, allowed))} (joints {name_list(msg.joint_names)})'
                 )
         transform = point.transforms[j]
         translation = transform.translation

@@ -35,6 +35,7 @@ from grasp_safety_filter.control.reference import (
     TopicReference,
 )
 from grasp_safety_filter.io.messages import (
+    bounded_text,
     DiagnosticLevel,
     DiagnosticReport,
     diagnostics_to_msg,
@@ -233,7 +234,7 @@ class NominalControllerEndpoint:
         report = DiagnosticReport.create(
             DIAGNOSTIC_NAME,
             DiagnosticLevel.WARN,
-            f'input rejected, no command: {error}',
+            bounded_text(f'input rejected, no command: {error}'),
             {'input.rejected': True},
         )
         return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))]

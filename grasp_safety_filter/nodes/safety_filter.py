@@ -80,6 +80,7 @@ from grasp_safety_filter.io.diagnostic_keys import (
     TickStatus,
 )
 from grasp_safety_filter.io.messages import (
+    bounded_text,
     DiagnosticLevel,
     DiagnosticReport,
     diagnostics_to_msg,
@@ -632,7 +633,7 @@ class SafetyFilterEndpoint:
         report = DiagnosticReport.create(
             FILTER_DIAGNOSTIC,
             self.hold.diagnostic_level,
-            f'input rejected, {action}: {error}',
+            bounded_text(f'input rejected, {action}: {error}'),
             values,
         )
         outgoing = [
