@@ -9,7 +9,10 @@ Every tick (paper eq. 28)::
 The steps of :meth:`SafetyFilter.solve`:
 
 1. Check u_nom (size, finite) and assemble the QP in place (:meth:`SafetyFilter.assemble`);
-   a non-finite state entry the rows read raises ValueError naming it, before any solver call.
+   a non-finite measured entry (:data:`MEASURED_STATE_FIELDS`) under a non-finite row
+   raises ValueError naming it, before any solver call. Rows that are not finite although
+   the measured state is (model terms overflowing at absurd but finite speeds or
+   positions, or non-finite model terms) go to step 7 at once, with the families named.
 2. If u_nom is inside the box and satisfies every row exactly, ``u* = u_nom`` (it is the
    optimum; no solver call). Status ``nominal``.
 3. Otherwise, first the previous tick's active set: the rows move little from one tick to
@@ -42,7 +45,9 @@ The steps of :meth:`SafetyFilter.solve`:
    skips OSQP altogether, starts the infeasibility proof from the rows that gave the last
    one, and the relaxed QP from its active set.
 7. If nothing gives a finite answer: the last accepted u* (or u_nom if there is none),
-   clipped to the box. Status ``fallback_last_good`` / ``fallback_nominal``.
+   clipped to the box. Status ``fallback_last_good`` / ``fallback_nominal``; the families
+   whose rows are violated or not finite are named (``relaxed_families``), and
+   ``max_violation`` is inf when a row is not finite.
 
 Why steps 3 and 5: the filter's QPs are degenerate where it matters. Near a joint limit the
 barrier rows of the same joint on the three fingers are nearly linearly dependent (all are
@@ -235,6 +240,17 @@ class SafetyFilterConfig:
             # problems converge in a few, and the exact step finishes those that do not.
             'check_termination': 5,
         }
+
+
+#: The measured :class:`GraspState` fields (the arguments of ``GraspModel.state``); every
+#: other field is a model term derived from them.
+MEASURED_STATE_FIELDS: tuple[str, ...] = (
+    'q',
+    'dq',
+    'p_object_in_palm',
+    'R_object_to_palm',
+    'twist_object',
+)
 
 
 class FilterStatus(str, Enum):
@@ -537,9 +553,6 @@ class SafetyFilter:
         self._relaxed_solver = _OSQPProblem(self.relaxed_qp, settings)
         self._margin_names = (*self.row_names, *self.actuator_limits.names)
         self._margin_index = {name: i for i, name in enumerate(self._margin_names)}
-        self._state_fields = tuple(
-            dict.fromkeys(name for family in self.families for name in family.state_fields)
-        )
         self._last_good_u: np.ndarray | None = None
         # OSQP keeps its last iterate as the next warm start; when a tick was settled
         # without it (nominal, active-set finisher), the exact primal-dual pair is kept here
@@ -621,7 +634,7 @@ class SafetyFilter:
 
         Returns:
             u_nom as a checked float array, and whether every row is finite (False only
-            for a finite state whose rows overflow).
+            for a finite measured state whose model terms or rows are not finite).
 
         Raises:
             ValueError: As :meth:`solve`.
@@ -639,13 +652,14 @@ class SafetyFilter:
             u_nom: Nominal torque, shape (m,), N·m.
 
         Returns:
-            The filtered torque and how it was obtained. For any finite state the torque is
-            finite and inside the actuator box.
+            The filtered torque and how it was obtained. For any finite measured state
+            (:data:`MEASURED_STATE_FIELDS`) the torque is finite and inside the actuator
+            box: rows that overflow or model terms that are not finite give a fallback.
 
         Raises:
             ValueError: u_nom has the wrong size or a non-finite entry, the state has the
-                wrong number of joints or contacts, or an array the enabled families read
-                holds a non-finite value; raised before any solver call.
+                wrong number of joints or contacts, or a measured field is not finite where
+                the enabled families' rows are not; raised before any solver call.
         """
         u_nom, rows_finite = self.assemble(state, u_nom)
         A = self.hard_qp.A_rows
@@ -904,11 +918,11 @@ class SafetyFilter:
                 lower[rows] = block.lower
         if np.isfinite(self.hard_qp.C_data).all() and np.isfinite(lower).all():
             return True
-        self._raise_if_state_not_finite(state)
+        self._raise_if_measured_not_finite(state)
         return False
 
-    def _raise_if_state_not_finite(self, state: GraspState) -> None:
-        for name in self._state_fields:
+    def _raise_if_measured_not_finite(self, state: GraspState) -> None:
+        for name in MEASURED_STATE_FIELDS:
             value = getattr(state, name)
             arrays = (
                 ((f'{name}.matrix', value.matrix), (f'{name}.offset', value.offset))
