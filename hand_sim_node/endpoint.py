@@ -17,7 +17,10 @@ the same stream. One tick in lockstep mode (the default)::
 
 A command is applied only if it parses (every joint by name, finite efforts) and, in
 lockstep, its stamp equals the current state's stamp; otherwise the endpoint reports it on
-``/diagnostics`` (status ``hand_sim``, WARN) and does not step. If no command arrives
+``/diagnostics`` (status ``hand_sim``, WARN) and does not step. As a hand driver does, it
+clips an applied command to the model's effort limits (the URDF's), and says so in a WARN
+``hand_sim`` status stamped t_k (``effort.clipped``: the joints; ``effort.max_excess`` and
+``effort.excess.<joint>``: by how much, N·m). If no command arrives
 within ``command_timeout`` s of wall time, :meth:`HandSimEndpoint.timeout` reports it and
 publishes the current state again (same stamp), which recovers a command or state lost
 while the graph was still connecting. The run ends after ``duration`` (the state at
@@ -52,6 +55,7 @@ from grasp_safety_filter.io.messages import (
     joint_state_to_msg,
     MessageError,
     MessageNamespace,
+    name_list,
     nanoseconds_to_seconds,
     odometry_to_msg,
     seconds_to_nanoseconds,
@@ -306,17 +310,52 @@ class HandSimEndpoint:
 
     # ------------------------------------------------------------------------- internals
     def _step(self, effort: np.ndarray) -> list[Outgoing]:
-        report = self.simulator.step(effort)
+        applied, clipped = self._clip_to_limits(effort)
+        report = self.simulator.step(applied)
         contacts = ContactData.from_grasp_state(report.grasp_state, report.contact_force)
-        outgoing = [
+        outgoing = [] if clipped is None else [clipped]
+        outgoing.append(
             stamped(CONTACTS, contacts_to_msg(self.msgs, contacts, self.model.contact_names))
-        ]
+        )
         if report.stop_reason is None:
             self._applied_effort = np.array(report.effort)
             outgoing += self._state_messages()
         if self.finished and not self._reported_end:
             outgoing.append(self._end_of_run())
         return outgoing
+
+    def _clip_to_limits(self, effort: np.ndarray) -> tuple[np.ndarray, Outgoing | None]:
+        """Clip a command to the URDF effort limits, as a driver does; WARN if it was over.
+
+        Returns:
+            The applied torque, N·m, and the ``hand_sim`` WARN status naming the joints over
+            their limit and by how much (None if none was).
+
+        """
+        limits = np.asarray(self.model.effort_limits, dtype=float)
+        effort = np.asarray(effort, dtype=float)
+        applied = np.clip(effort, -limits, limits)
+        over = np.flatnonzero(applied != effort)
+        if over.size == 0:
+            return applied, None
+        excess = np.abs(effort - applied)
+        names = [self._joint_names[i] for i in over]
+        worst = int(over[np.argmax(excess[over])])
+        text = (
+            f'command over the effort limits of {len(names)} joints {name_list(names)}: '
+            f'clipped (largest excess {excess[worst]:.6g} N·m on {self._joint_names[worst]!r}, '
+            f'limit {limits[worst]:.6g} N·m)'
+        )
+        values: dict[str, Any] = {
+            't': self.t,
+            'effort.clipped': ','.join(names),
+            'effort.max_excess': float(excess[worst]),
+        }
+        values.update({f'effort.excess.{self._joint_names[i]}': float(excess[i]) for i in over})
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME, DiagnosticLevel.WARN, bounded_text(text), values
+        )
+        return applied, self._diagnostics(report)
 
     def _state_messages(self) -> list[Outgoing]:
         state = self.simulator.state

@@ -1139,3 +1139,48 @@ def test_rejection_reports_are_bounded_and_not_carried_on_at_full_size(params, c
             reports += statuses(handler(mutate(through_cdr(joints))), 'nominal_controller')
         for other in reports:
             assert len(other.message) <= m.MAX_REPORT_TEXT
+
+
+@pytest.mark.parametrize(
+    ('over', 'clipped'),
+    [
+        ({}, []),
+        ({0: 1e6}, [0]),
+        ({2: -1e6, 5: 1e3}, [2, 5]),
+    ],
+)
+def test_simulator_clips_commands_to_the_effort_limits_and_warns(params, over, clipped):
+    sim = make_sim(params)
+    sim.start()
+    names, limits = sim.model.joint_names, sim.model.effort_limits
+    u = 0.5 * limits
+    for i, value in over.items():
+        u[i] = value
+    command = m.effort_to_msg(MSGS, 0.0, names, u)
+    outgoing = sim.on_command(command)
+    reference = make_sim(params)
+    reference.start()
+    expected = np.clip(u, -limits, limits)
+    reference_out = reference.on_command(m.effort_to_msg(MSGS, 0.0, names, expected))
+    applied = m.joint_state_from_msg(
+        next(o.msg for o in outgoing if o.topic == topics.JOINT_STATES), names
+    ).effort
+    np.testing.assert_array_equal(applied, expected)
+
+    def cdr(messages):
+        return [bytes(TYPESTORE.serialize_cdr(o.msg, o.msg.__msgtype__)) for o in messages]
+
+    assert cdr(o for o in outgoing if o.topic != topics.DIAGNOSTICS) == cdr(reference_out)
+    reports = statuses(outgoing, 'hand_sim')
+    if not clipped:
+        assert reports == []
+        return
+    (report,) = reports
+    assert report.level is DiagnosticLevel.WARN
+    assert report.values['effort.clipped'] == ','.join(names[i] for i in clipped)
+    for i in clipped:
+        excess = abs(u[i]) - limits[i]
+        assert float(report.values[f'effort.excess.{names[i]}']) == pytest.approx(excess)
+    assert float(report.values['effort.max_excess']) == pytest.approx(
+        max(abs(u[i]) - limits[i] for i in clipped)
+    )
