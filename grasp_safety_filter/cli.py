@@ -157,12 +157,38 @@ def _override(text: str) -> tuple[str, Any]:
         raise argparse.ArgumentTypeError(f'{text!r}: {error}') from None
 
 
+def _interrupt_message(interrupt: Any) -> str:
+    """Say what an interrupted run left (a ``runner.RunInterrupted``)."""
+    if interrupt.bag is None:
+        return (
+            f'interrupted by {interrupt.signal} before recording: this run left no bag, no summary'
+        )
+    if interrupt.summary is None:
+        return (
+            f'interrupted by {interrupt.signal}: the bag is in {interrupt.bag}, no summary '
+            f'(grasp-analyze {interrupt.bag} writes one)'
+        )
+    return (
+        f'interrupted by {interrupt.signal}: the bag and summary are in {interrupt.summary.parent}'
+    )
+
+
 def demo_main(argv: list[str] | None = None) -> int:
     """``grasp-demo``: the paper's runs, recorded to bags, with figures and a verdict."""
+    try:
+        return _demo(argv)
+    except KeyboardInterrupt:
+        # Outside a run (start-up, between runs, the verdict): no partial run to report.
+        print('\ngrasp-demo: interrupted before or between runs: no partial run', file=sys.stderr)
+        return 130
+
+
+def _demo(argv: list[str] | None) -> int:
     from grasp_safety_filter.runner import (
         check_output_dir,
         OutputError,
         run,
+        RunInterrupted,
         RunOptions,
         VERDICT_FILE,
         write_file,
@@ -229,11 +255,8 @@ def demo_main(argv: list[str] | None = None) -> int:
         except (ParameterError, OutputError) as error:
             print(f'grasp-demo: {error}', file=sys.stderr)
             return 2
-        except KeyboardInterrupt:
-            print(
-                f'\n[{mode}] interrupted: the bag and summary of the partial run are in {out_dir}',
-                file=sys.stderr,
-            )
+        except RunInterrupted as interrupt:
+            print(f'\n[{mode}] {_interrupt_message(interrupt)}', file=sys.stderr)
             return 130
         ok, verdict = _print_summary(mode, result.summary, out_dir)
         verdicts[mode] = {'reproduced': ok, 'verdict': verdict}

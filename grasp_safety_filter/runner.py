@@ -40,7 +40,12 @@ from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.nominal import NominalConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals, signal_name
+from grasp_safety_filter.io.bag import (
+    BagRecorder,
+    deferred_interrupts,
+    interrupt_on_signals,
+    signal_name,
+)
 from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.parameters import ParameterError, suggestion
 from grasp_safety_filter.io.schemas import (
@@ -289,45 +294,76 @@ def build_endpoints(
     return sim, nominal, safety_filter
 
 
-def record_run(options: RunOptions, bag_path: Path, progress: Progress | None = None) -> Recording:
+def record_run(
+    options: RunOptions,
+    bag_path: Path,
+    progress: Progress | None = None,
+    replaces: tuple[Path, ...] = (),
+    on_start: Callable[[], None] | None = None,
+) -> Recording:
     """Run the scenario in lockstep and record every message to ``bag_path`` (replaced).
 
     The bag is closed and readable however the run ends; an interrupted one has
-    ``interrupted`` in its custom data. An exception other than an interrupt propagates
-    after the bag is closed.
+    ``interrupted`` in its custom data, and a further signal while it is being closed is
+    ignored. An exception other than an interrupt propagates after the bag is closed.
+
+    Args:
+        options: What to run.
+        bag_path: The bag directory.
+        progress: Called as the run advances.
+        replaces: Files removed with the earlier bag (both or neither: an outcome of the
+            earlier run never stays beside this run's bag).
+        on_start: Called once the earlier bag and ``replaces`` are gone.
+
     """
     typestore = get_typestore(Stores.ROS2_JAZZY)
     msgs = MessageNamespace.from_typestore(typestore)
     # Bad parameters fail here, before an earlier bag is replaced.
     sim, nominal, safety_filter = build_endpoints(options, msgs)
-    _remove(bag_path)
-    with (
-        interrupt_on_signals(),
-        BagRecorder(bag_path, storage=options.storage, typestore=typestore) as bag,
-    ):
-        subscribers = _subscribers(sim, nominal, safety_filter)
-        duration = sim.config.duration
-        interrupted = None
-        try:
-            queue = deque(sim.start())
-            while queue:
-                topic, stamp_ns, msg = queue.popleft()
-                data = bag.write(topic, stamp_ns, msg)
-                handlers = subscribers.get(topic)
-                if handlers:
-                    received = typestore.deserialize_cdr(data, msg.__msgtype__)
-                    for handler in handlers:
-                        queue.extend(handler(received))
-                if progress is not None and topic == topics.JOINT_STATES:
-                    progress(sim.t, duration)
-        except KeyboardInterrupt as interrupt:
-            interrupted = signal_name(interrupt)
+    with interrupt_on_signals():
+        with deferred_interrupts():
+            for path in (*replaces, bag_path):
+                _remove(path)
+        if on_start is not None:
+            on_start()
+        with BagRecorder(bag_path, storage=options.storage, typestore=typestore) as bag:
+            return _record(sim, nominal, safety_filter, bag, typestore, progress)
+
+
+def _record(
+    sim: HandSimEndpoint,
+    nominal: NominalControllerEndpoint,
+    safety_filter: SafetyFilterEndpoint,
+    bag: BagRecorder,
+    typestore: Any,
+    progress: Progress | None,
+) -> Recording:
+    """Run the lockstep loop into an open bag (see :func:`record_run`)."""
+    subscribers = _subscribers(sim, nominal, safety_filter)
+    duration = sim.config.duration
+    interrupted = None
+    try:
+        queue = deque(sim.start())
+        while queue:
+            topic, stamp_ns, msg = queue.popleft()
+            data = bag.write(topic, stamp_ns, msg)
+            handlers = subscribers.get(topic)
+            if handlers:
+                received = typestore.deserialize_cdr(data, msg.__msgtype__)
+                for handler in handlers:
+                    queue.extend(handler(received))
+            if progress is not None and topic == topics.JOINT_STATES:
+                progress(sim.t, duration)
+    except KeyboardInterrupt as interrupt:
+        interrupted = signal_name(interrupt)
+        with deferred_interrupts(raise_pending=False):  # already stopping
             bag.set_custom_data('interrupted', interrupted)
-        except Exception as error:
-            bag.set_custom_data('interrupted', type(error).__name__)
-            raise
-        simulator = sim.simulator
-        return Recording(interrupted, simulator.log, simulator.stop_reason, simulator.t)
+            bag.close(raise_pending_interrupt=False)
+    except Exception as error:
+        bag.set_custom_data('interrupted', type(error).__name__)
+        raise
+    simulator = sim.simulator
+    return Recording(interrupted, simulator.log, simulator.stop_reason, simulator.t)
 
 
 def _write_summary(out_dir: Path, summary: dict[str, Any]) -> None:
@@ -353,26 +389,62 @@ def analyze_bag(
     return summary, plot_run(run, out_dir)
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """A run stopped by a signal, with what of it is on disk.
+
+    Attributes:
+        signal: ``"SIGINT"`` or ``"SIGTERM"``.
+        bag: This run's closed, readable bag, or None (interrupted before recording).
+        summary: This run's ``summary.json``, or None (interrupted before it was written).
+
+    """
+
+    def __init__(self, signal: str, bag: Path | None, summary: Path | None) -> None:
+        super().__init__(f'interrupted by {signal}')
+        self.signal, self.bag, self.summary = signal, bag, summary
+
+
 def run(
     options: RunOptions, out_dir: Path, progress: Progress | None = None, force: bool = False
 ) -> RunResult:
     """Run, record and analyse one scenario run into ``out_dir`` (its bag is replaced).
 
+    Signals (SIGINT, SIGTERM) stop the run, not the bookkeeping: the bag is closed and the
+    summary written however many arrive; one during the analysis waits for the summary.
+
     Raises:
         OutputError: ``out_dir`` is not ours to write into (see :func:`check_output_dir`).
-        KeyboardInterrupt: After the bag and summary of the partial run are written, so the
-            caller can exit with the usual status.
+        RunInterrupted: A signal stopped it; says which of its bag and summary exist.
     """
     out_dir = Path(out_dir)
     check_output_dir(out_dir, force)
     out_dir.mkdir(parents=True, exist_ok=True)
-    bag_path = out_dir / BAG_DIRECTORY
-    start = time.perf_counter()
-    recording = record_run(options, bag_path, progress)
-    wall_time = time.perf_counter() - start
-    summary, figures = analyze_bag(bag_path, out_dir, force=True)
+    bag_path, summary_path = out_dir / BAG_DIRECTORY, out_dir / SUMMARY_FILE
+    started, written = [False], [False]
+    with interrupt_on_signals():
+        try:
+            start = time.perf_counter()
+            recording = record_run(
+                options, bag_path, progress, (summary_path,), lambda: started.__setitem__(0, True)
+            )
+            wall_time = time.perf_counter() - start
+            with deferred_interrupts():
+                summary = summarize(run_data := load_run(bag_path))
+                if recording.interrupted is not None:
+                    summary['interrupted'] = recording.interrupted
+                _write_summary(out_dir, summary)
+                written[0] = True
+            figures = plot_run(run_data, out_dir)
+        except KeyboardInterrupt as interrupt:
+            raise _interrupted(signal_name(interrupt), started[0], written[0], out_dir) from None
     if recording.interrupted is not None:
-        summary['interrupted'] = recording.interrupted
-        _write_summary(out_dir, summary)
-        raise KeyboardInterrupt(recording.interrupted)
+        raise _interrupted(recording.interrupted, True, True, out_dir)
     return RunResult(out_dir, bag_path, summary, figures, wall_time, recording)
+
+
+def _interrupted(signal: str, started: bool, written: bool, out_dir: Path) -> RunInterrupted:
+    bag = out_dir / BAG_DIRECTORY
+    readable = started and (bag / 'metadata.yaml').is_file()
+    return RunInterrupted(
+        signal, bag if readable else None, out_dir / SUMMARY_FILE if written else None
+    )

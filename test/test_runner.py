@@ -187,3 +187,114 @@ def test_bad_overrides_fail_before_anything_runs(tmp_path, overrides, message):
     with pytest.raises(ParameterError, match=message):
         run(RunOptions(CONFIG, 'filtered', overrides=overrides), tmp_path)
     assert not (tmp_path / 'bag').exists()
+
+
+# ----------------------------------------------------------------------------------------
+# Signals at every moment of a run: a readable bag and an honest summary, or a message
+
+
+def _send_sigint() -> None:
+    os.kill(os.getpid(), signal.SIGINT)
+
+
+def _signalling(function):
+    def wrapper(*args, **kwargs):
+        _send_sigint()
+        return function(*args, **kwargs)
+
+    return wrapper
+
+
+# case: (moments a SIGINT is sent, bag left, summary left, the summary's "interrupted")
+SIGNAL_CASES = {
+    'start-up': (('build_endpoints',), False, False, None),
+    'mid-run': (('progress',), True, True, 'SIGINT'),
+    'mid-run, again while closing the bag': (
+        ('progress', 'set_custom_data'),
+        True,
+        True,
+        'SIGINT',
+    ),
+    'mid-run, again during the analysis': (('progress', 'load_run'), True, True, 'SIGINT'),
+    'during the analysis': (('load_run',), True, True, None),
+    'during the figures': (('plot_run',), True, True, None),
+}
+
+
+@pytest.mark.parametrize('case', list(SIGNAL_CASES))
+def test_a_signal_at_any_moment_leaves_a_bag_and_an_honest_summary(case, tmp_path, monkeypatch):
+    from grasp_safety_filter.io.bag import BagRecorder
+    import grasp_safety_filter.runner as runner
+
+    moments, bag_left, summary_left, interrupted = SIGNAL_CASES[case]
+    for name in {'build_endpoints', 'load_run', 'plot_run'} & set(moments):
+        monkeypatch.setattr(runner, name, _signalling(getattr(runner, name)))
+    if 'set_custom_data' in moments:
+        monkeypatch.setattr(
+            BagRecorder, 'set_custom_data', _signalling(BagRecorder.set_custom_data)
+        )
+    sent = []
+
+    def progress(t: float, duration: float) -> None:
+        if 'progress' in moments and t >= 0.005 and not sent:
+            sent.append(t)
+            _send_sigint()
+
+    with pytest.raises(runner.RunInterrupted) as caught:
+        run(RunOptions(CONFIG, 'filtered', duration=0.02), tmp_path, progress)
+    assert caught.value.signal == 'SIGINT'
+    assert (caught.value.bag is not None) == bag_left
+    assert (caught.value.summary is not None) == summary_left
+    assert (tmp_path / 'summary.json').exists() == summary_left
+    if bag_left:
+        with AnyReader([tmp_path / 'bag']) as reader:
+            assert {c.topic for c in reader.connections} >= {topics.JOINT_STATES}
+    if summary_left:
+        summary = json.loads((tmp_path / 'summary.json').read_text())
+        assert summary.get('interrupted') == interrupted
+        assert summary['completed'] == (interrupted is None)
+
+
+def test_a_start_up_interrupt_keeps_no_stale_claim(tmp_path, monkeypatch):
+    """An earlier run's summary beside a new run's bag would describe the wrong run."""
+    import grasp_safety_filter.runner as runner
+
+    run(RunOptions(CONFIG, 'filtered', duration=0.01), tmp_path)
+    monkeypatch.setattr(
+        runner, 'BagRecorder', _signalling(runner.BagRecorder)
+    )  # just after the earlier outputs are removed
+    with pytest.raises(runner.RunInterrupted) as caught:
+        run(RunOptions(CONFIG, 'filtered', duration=0.01), tmp_path)
+    assert caught.value.bag is None and caught.value.summary is None
+    assert not (tmp_path / 'summary.json').exists() and not (tmp_path / 'bag').exists()
+
+
+@pytest.mark.parametrize('delay', [0.0, 0.3, 1.0])
+def test_grasp_demo_interrupted_early_says_only_what_is_true(tmp_path, delay):
+    script = (
+        'import sys\n'
+        'from grasp_safety_filter.cli import demo_main\n'
+        'print("ready", flush=True)\n'
+        f'sys.exit(demo_main(["--mode", "filtered", "--duration", "0.3", "--out", '
+        f'{str(tmp_path)!r}]))\n'
+    )
+    process = subprocess.Popen(
+        [sys.executable, '-c', script],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, 'PYTHONPATH': str(REPO)},
+    )
+    assert process.stdout.readline() == 'ready\n'
+    time.sleep(delay)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    assert 'Traceback' not in stderr, stderr
+    summary = tmp_path / 'summary.json'
+    if process.returncode != 130:  # it finished first
+        assert process.returncode in (0, 1) and summary.is_file()
+    elif 'the bag and summary are in' in stderr:
+        assert summary.is_file() and (tmp_path / 'bag' / 'metadata.yaml').is_file()
+    else:
+        assert 'no summary' in stderr or 'no partial run' in stderr, stderr
+        assert not summary.exists()

@@ -24,7 +24,7 @@ raises :class:`BagReadError` (one line naming the path and the problem).
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 import signal
@@ -145,6 +145,17 @@ def _critical_section(raise_pending: bool = True) -> Iterator[None]:
         signum, _InterruptState.pending = _InterruptState.pending, None
         if raise_pending:
             raise SignalInterrupt(signum)
+
+
+def deferred_interrupts(raise_pending: bool = True) -> AbstractContextManager[None]:
+    """Hold :func:`interrupt_on_signals` interrupts off a block that must complete.
+
+    Args:
+        raise_pending: Raise a signal that arrived during the block after it; else drop it
+            (the caller is already stopping on an earlier one).
+
+    """
+    return _critical_section(raise_pending)
 
 
 # ----------------------------------------------------------------------------------------
