@@ -324,6 +324,16 @@ def run_stream(
 WATCHDOG_TEXTS = ('no command stamped', 'is late')
 
 
+def _waiting_for_a_first_tick(status: Any) -> bool:
+    """Tell the filter's watchdog status from before its first tick.
+
+    It answers no tick (no status value) and comes every second of wall time while the
+    graph connects; the runner, which has no wall clock, has none.
+    """
+    keys = {pair.key for pair in status.values}
+    return status.name == 'safety_filter' and 'input.watchdog' in keys and 'status' not in keys
+
+
 def _same(a: Any, b: Any) -> bool:
     found: list[str] = []
     _compare(a, b, '', 0.0, found)
@@ -335,14 +345,16 @@ def without_watchdog_repeats(key: str, messages: list[Any]) -> tuple[list[Any], 
 
     A command lost while DDS still connects two nodes (discovery can take a few seconds)
     makes the simulator report it and publish the same state again, and the controllers
-    answer it again: the simulator's watchdog statuses and each message equal to the one
-    before it on its (sub)stream go; the run's stream is what remains.
+    answer it again: the simulator's watchdog statuses, the filter's while it waits for a
+    first tick, and each message equal to the one before it on its (sub)stream go; the run's
+    stream is what remains.
     """
     kept: list[Any] = []
     for msg in messages:
         statuses = getattr(msg, 'status', None)
         if statuses and all(
-            st.name == 'hand_sim' and any(text in st.message for text in WATCHDOG_TEXTS)
+            (st.name == 'hand_sim' and any(text in st.message for text in WATCHDOG_TEXTS))
+            or _waiting_for_a_first_tick(st)
             for st in statuses
         ):
             continue
