@@ -165,8 +165,8 @@ def _interrupt_message(interrupt: Any) -> str:
         )
     if interrupt.summary is None:
         return (
-            f'interrupted by {interrupt.signal}: the bag is in {interrupt.bag}, no summary '
-            f'(grasp-analyze {interrupt.bag} writes one)'
+            f'interrupted by {interrupt.signal}: the bag is in {interrupt.bag}; it holds too '
+            'little of the run for a summary'
         )
     return (
         f'interrupted by {interrupt.signal}: the bag and summary are in {interrupt.summary.parent}'

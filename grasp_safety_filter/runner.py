@@ -34,7 +34,7 @@ from typing import Any
 from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.analysis.figures import FIGURE_FILES, plot_run
-from grasp_safety_filter.analysis.run_data import load_run
+from grasp_safety_filter.analysis.run_data import load_run, RunDataError
 from grasp_safety_filter.analysis.summary import summarize
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.nominal import NominalConfig
@@ -429,7 +429,14 @@ def run(
             )
             wall_time = time.perf_counter() - start
             with deferred_interrupts():
-                summary = summarize(run_data := load_run(bag_path))
+                try:
+                    run_data = load_run(bag_path)
+                except RunDataError:
+                    if recording.interrupted is None:
+                        raise
+                    # Stopped before a first step: a bag with too little for a summary.
+                    raise _interrupted(recording.interrupted, True, False, out_dir) from None
+                summary = summarize(run_data)
                 if recording.interrupted is not None:
                     summary['interrupted'] = recording.interrupted
                 _write_summary(out_dir, summary)
