@@ -448,13 +448,13 @@ class Hand:
         t_ns = seconds_to_nanoseconds(t)
 
         def answer():
-            # Not an answer: the filter's input watchdog (no tick for a while), or what it
-            # still says about earlier ticks (each rejected input gets its own status).
+            # Not an answer: the filter's input watchdog (no tick for a while, or none yet),
+            # or what it still says about earlier ticks (each rejected input gets its own).
             for status_msg in self.statuses[seen:]:
                 for report in status_msg.status:
                     if (
                         report.name == 'safety_filter'
-                        and 'no tick accepted' not in report.message
+                        and all(pair.key != 'input.watchdog' for pair in report.values)
                         and header_stamp_ns(status_msg) >= t_ns
                     ):
                         return header_stamp_ns(status_msg), report
