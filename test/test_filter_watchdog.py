@@ -287,6 +287,9 @@ def safety_filter(tmp_path_factory) -> FilterProcess:
         str(CONFIG),
         '-p',
         'use_sim_time:=false',
+        # Every tick's status: the watchdog's delay is measured from the last answered tick.
+        '-p',
+        'diagnostics.period:=0.0',
     ]
     with log.open('w') as out:
         process = subprocess.Popen(
