@@ -184,14 +184,13 @@ def demo_main(argv: list[str] | None = None) -> int:
 
 
 def _demo(argv: list[str] | None) -> int:
+    from grasp_safety_filter.io.files import OutputError, write_file
     from grasp_safety_filter.runner import (
         check_output_dir,
-        OutputError,
         run,
         RunInterrupted,
         RunOptions,
         VERDICT_FILE,
-        write_file,
     )
 
     parser = argparse.ArgumentParser(prog='grasp-demo', description=demo_main.__doc__)
@@ -267,10 +266,10 @@ def _demo(argv: list[str] | None) -> int:
 def analyze_main(argv: list[str] | None = None) -> int:
     """``grasp-analyze BAG``: figures and summary.json of any recorded run of this package."""
     from grasp_safety_filter.analysis.run_data import RunDataError
+    from grasp_safety_filter.io.files import OutputError
     from grasp_safety_filter.runner import (
         ANALYSIS_DIRECTORY,
         analyze_bag,
-        OutputError,
         SUMMARY_FILE,
     )
 

@@ -24,10 +24,8 @@ from collections.abc import Callable, Mapping
 import dataclasses
 from dataclasses import dataclass, field
 import json
-import os
 from pathlib import Path
 import shutil
-import tempfile
 import time
 from typing import Any
 
@@ -46,6 +44,7 @@ from grasp_safety_filter.io.bag import (
     interrupt_on_signals,
     signal_name,
 )
+from grasp_safety_filter.io.files import OutputError, write_file
 from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.parameters import ParameterError, suggestion
 from grasp_safety_filter.io.schemas import (
@@ -75,10 +74,6 @@ OUTPUT_SUBDIRECTORIES = (*MODES, ANALYSIS_DIRECTORY)
 OUTPUT_NAMES = (BAG_DIRECTORY, SUMMARY_FILE, VERDICT_FILE, *FIGURE_FILES, *OUTPUT_SUBDIRECTORIES)
 #: Files of a bag directory written by this package's recorder (rosbags) or ``ros2 bag``.
 BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-journal', '.db3-wal', '.db3-shm')
-
-
-class OutputError(ValueError):
-    """An output directory that is not this package's to write into (names the entry)."""
 
 
 def _foreign_entries(directory: Path, inputs: frozenset[Path]) -> list[str]:
@@ -142,23 +137,6 @@ def check_output_dir(out_dir: Path, force: bool = False, inputs: tuple[Path, ...
             f'{out_dir}: not an output directory of this package (has {shown}); '
             'choose another or pass --force to write into it'
         )
-
-
-def write_file(path: Path, data: str | bytes) -> Path:
-    """Write ``path`` through a temporary file renamed into place (a symlink is replaced)."""
-    path = Path(path)
-    if path.is_dir() and not path.is_symlink():
-        raise OutputError(f'{path}: is a directory, expected a file')
-    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.')
-    try:
-        with os.fdopen(descriptor, 'wb') as file:
-            file.write(data.encode() if isinstance(data, str) else data)
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def _remove(path: Path) -> None:

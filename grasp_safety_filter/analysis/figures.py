@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
-import os
+import io
 from pathlib import Path
-import tempfile
 
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 import numpy as np
 
 from grasp_safety_filter.analysis.run_data import RunData
+from grasp_safety_filter.io.files import write_file
 
 #: The figures of a run, in :func:`plot_run`'s order (torques only with commands).
 FIGURE_FILES = ('contacts.png', 'joints.png', 'friction.png', 'torques.png')
@@ -133,16 +133,9 @@ def plot_run(run: RunData, out_dir: Path) -> list[Path]:
 
 
 def _save(figure: Figure, path: Path) -> Path:
-    # Figure without pyplot: no GUI backend, no global state, works headless. Saved to a
-    # temporary file renamed into place: a symbolic link at ``path`` is replaced, not followed.
+    # Figure without pyplot: no GUI backend, no global state, works headless. Written
+    # through a temporary file: a symbolic link at ``path`` is replaced, not followed.
     figure.tight_layout()
-    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.')
-    try:
-        with os.fdopen(descriptor, 'wb') as file:
-            figure.savefig(file, dpi=120, format='png')
-        os.chmod(temporary, 0o644)
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-    return path
+    png = io.BytesIO()
+    figure.savefig(png, dpi=120, format='png')
+    return write_file(path, png.getvalue())
