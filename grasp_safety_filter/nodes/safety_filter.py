@@ -311,7 +311,6 @@ class SafetyFilterEndpoint:
             stamp += 1
         t = nanoseconds_to_seconds(stamp)
         values: dict[str, Any] = {
-            Key.FILTER_ENABLED: self.enabled,
             Key.STATUS: INPUT_MODE_STATUS[self.hold.mode].value,
             Key.INPUT_WATCHDOG: True,
             Key.INPUT_MISSING: ','.join(missing),
@@ -319,15 +318,14 @@ class SafetyFilterEndpoint:
         }
         values.update({silent_for(topic): age for topic, age in silent.items()})
         values.update(self.hold.diagnostic_values(now))
-        report = DiagnosticReport.create(
-            FILTER_DIAGNOSTIC,
-            self.hold.diagnostic_level,
-            f'inputs missing, fallback command: {self.hold.fallback.value}{note}: {reason}',
-            values,
-        )
         return [
             stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
-            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report)),
+            self._status_message(
+                t,
+                self.hold.diagnostic_level,
+                f'inputs missing, fallback command: {self.hold.fallback.value}{note}: {reason}',
+                values,
+            ),
         ]
 
     def switch(self, enabled: bool, now: float | None = None) -> str | None:
@@ -465,17 +463,14 @@ class SafetyFilterEndpoint:
             if missing
             else 'inputs arrive, but no complete valid set of one stamp'
         )
-        report = DiagnosticReport.create(
-            FILTER_DIAGNOSTIC,
-            DiagnosticLevel.WARN,
-            f'waiting {now_wall - self._waiting_since:.1f} s for a first tick: {what}',
-            {
-                Key.FILTER_ENABLED: self.enabled,
-                Key.INPUT_WATCHDOG: True,
-                Key.INPUT_MISSING: ','.join(missing),
-            },
-        )
-        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, max(now, 0.0), report))]
+        return [
+            self._status_message(
+                max(now, 0.0),
+                DiagnosticLevel.WARN,
+                f'waiting {now_wall - self._waiting_since:.1f} s for a first tick: {what}',
+                {Key.INPUT_WATCHDOG: True, Key.INPUT_MISSING: ','.join(missing)},
+            )
+        ]
 
     def _close(self, stamp: int) -> None:
         """Mark the tick of ``stamp`` as done: drop every older or equal pending input."""
@@ -551,7 +546,7 @@ class SafetyFilterEndpoint:
         tick_time: float,
         resumed_after: float | None = None,
     ) -> Outgoing:
-        values: dict[str, Any] = {Key.FILTER_ENABLED: self.enabled}
+        values: dict[str, Any] = {}
         if self._switched_at is not None:
             values[Key.FILTER_SWITCHED_AT] = self._switched_at
         if result is None:
@@ -586,8 +581,7 @@ class SafetyFilterEndpoint:
             values[Key.INPUT_RESUMED_AFTER] = resumed_after
             text += f'; inputs back after {resumed_after:.3f} s without a tick (watchdog ended)'
             level = max(level, DiagnosticLevel.WARN)
-        report = DiagnosticReport.create(FILTER_DIAGNOSTIC, level, text, values)
-        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))
+        return self._status_message(t, level, text, values)
 
     def _reject(
         self,
@@ -623,25 +617,29 @@ class SafetyFilterEndpoint:
         )
         status = INPUT_MODE_STATUS[mode]
         self.rate.status_due(stamp, status)  # counted; never a steady status: always sent
-        values: dict[str, Any] = {
-            Key.FILTER_ENABLED: self.enabled,
-            Key.STATUS: status.value,
-            Key.INPUT_TOPIC: topic,
-        }
+        values: dict[str, Any] = {Key.STATUS: status.value, Key.INPUT_TOPIC: topic}
         values.update(self.hold.diagnostic_values(now))
         values.update(self.rate.counter_values())
-        report = DiagnosticReport.create(
-            FILTER_DIAGNOSTIC,
-            self.hold.diagnostic_level,
-            bounded_text(f'input rejected, {action}: {error}'),
-            values,
-        )
         outgoing = [
             stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u)),
-            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report)),
+            self._status_message(
+                t,
+                self.hold.diagnostic_level,
+                bounded_text(f'input rejected, {action}: {error}'),
+                values,
+            ),
         ]
         self._last_outputs = outgoing
         return list(outgoing)
+
+    def _status_message(
+        self, t: float, level: DiagnosticLevel, text: str, values: Mapping[str, Any]
+    ) -> Outgoing:
+        """Return the ``safety_filter`` status stamped ``t``, s: ``filter.enabled``, ``values``."""
+        report = DiagnosticReport.create(
+            FILTER_DIAGNOSTIC, level, text, {Key.FILTER_ENABLED: self.enabled, **values}
+        )
+        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))
 
     def _clock_stamp(self, now: float) -> int:
         """Stamp from the node clock ``now`` (s), not before the last tick's stamp, ns."""
