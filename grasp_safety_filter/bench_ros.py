@@ -114,8 +114,12 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def _stop(process: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
-    """End a node process: SIGINT (a clean shutdown), SIGKILL if it does not exit in time."""
+def stop_process(process: subprocess.Popen[Any], timeout: float = 10.0) -> int:
+    """End a node process: SIGINT (a clean shutdown), SIGKILL if it does not exit in time.
+
+    Returns:
+        Its exit code.
+    """
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
     try:
@@ -123,6 +127,7 @@ def _stop(process: subprocess.Popen[bytes], timeout: float = 10.0) -> None:
     except subprocess.TimeoutExpired:
         process.kill()
         process.wait()
+    return process.returncode
 
 
 # --------------------------------------------------------------------------------- baseline
@@ -189,7 +194,7 @@ def ping_pong(pings: int, warm_up: int = 100, timeout: float = 60.0) -> dict[str
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
-        _stop(echo)
+        stop_process(echo)
     return {'round_trip_ms': percentiles(round_trips[warm_up:])}
 
 
@@ -351,7 +356,7 @@ def graph_run(
                 )
         finally:
             for process in processes.values():
-                _stop(process)
+                stop_process(process)
             executor.shutdown()
             node.destroy_node()
             rclpy.try_shutdown(context=context)

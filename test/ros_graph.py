@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import math
 import os
 from pathlib import Path
-import signal
 import subprocess
 import sys
 import time
@@ -33,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.bench_ros import stop_process
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import read_bag
 from grasp_safety_filter.io.launch_arguments import NodeLaunch, RECORDER_NODE
@@ -121,15 +121,7 @@ class Processes:
 
     def stop(self, name: str, timeout: float = 10.0) -> int:
         """SIGINT a process (SIGKILL after ``timeout`` s); return its exit code."""
-        popen = self.started[name].popen
-        if popen.poll() is None:
-            popen.send_signal(signal.SIGINT)
-            try:
-                popen.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                popen.kill()
-                popen.wait(timeout=timeout)
-        return popen.returncode
+        return stop_process(self.started[name].popen, timeout)
 
     def logs(self) -> str:
         """Return every process's log, for assertion messages."""
