@@ -227,6 +227,15 @@ class HandSimEndpoint:
         except MessageError as error:
             return self._warn(f'command rejected: {error}', msg)
         if not self.lockstep:
+            # A command answers a state already published: one stamped past the next state
+            # is not trusted, and never becomes the reference the next ones must follow.
+            ahead_ns = stamp_ns - (self.stamp_ns + seconds_to_nanoseconds(self.config.time_step))
+            if ahead_ns > 0:
+                return self._warn(
+                    f'command rejected: stamp {command.t:.9f} s is ahead of the simulation '
+                    f'clock ({self.t:.9f} s) by more than one time step',
+                    msg,
+                )
             if self._latest_command_ns is not None and stamp_ns < self._latest_command_ns:
                 return self._warn(
                     f'command rejected: stamp {command.t:.9f} s is older than the last '

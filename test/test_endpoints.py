@@ -314,12 +314,31 @@ def test_simulator_without_lockstep_holds_the_latest_command(params):
     sim.start()
     assert sim.advance() == []  # no command yet: time does not advance
     names = sim.model.joint_names
-    assert sim.on_command(m.effort_to_msg(MSGS, 123.0, names, np.zeros(len(names)))) == []
+    assert sim.on_command(m.effort_to_msg(MSGS, 0.0, names, np.zeros(len(names)))) == []
     outgoing = sim.advance()
     assert topics.JOINT_STATES in [o.topic for o in outgoing]
     assert sim.simulator.step_index == 1
-    old = sim.on_command(m.effort_to_msg(MSGS, 1.0, names, np.zeros(len(names))))
+    assert sim.on_command(m.effort_to_msg(MSGS, sim.t, names, np.ones(len(names)))) == []
+    old = sim.on_command(m.effort_to_msg(MSGS, 0.0, names, np.zeros(len(names))))
     assert 'older' in statuses(old, 'hand_sim')[0].message
+
+
+@pytest.mark.parametrize('ahead', [2.5e-3, 1.0, 123.0, 2.0**31 - 1])
+def test_free_running_simulator_refuses_a_future_command_and_is_not_locked_out_by_it(
+    params, ahead
+):
+    sim = make_sim(params, lockstep=False)
+    sim.start()
+    names = sim.model.joint_names
+    future = sim.on_command(m.effort_to_msg(MSGS, ahead, names, np.ones(len(names))))
+    (report,) = statuses(future, 'hand_sim')
+    assert report.level is DiagnosticLevel.WARN
+    assert 'ahead of the simulation clock' in report.message
+    assert sim.advance() == []  # the refused command is not applied
+    for _ in range(3):
+        assert sim.on_command(m.effort_to_msg(MSGS, sim.t, names, np.zeros(len(names)))) == []
+        assert topics.JOINT_STATES in [o.topic for o in sim.advance()]
+    assert sim.simulator.step_index == 3
 
 
 def test_simulator_live_parameters_apply_and_read_only_ones_are_refused(params):
