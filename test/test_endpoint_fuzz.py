@@ -196,7 +196,7 @@ class FuzzGraph:
 
 
 def _reference_msg(state_msg: Any, t: float) -> Any:
-    """A valid two-point planner reference around the current object pose."""
+    """Return a valid two-point planner reference holding the current object pose."""
     odometry = m.odometry_from_msg(state_msg)
     hold = m.ObjectReference(
         odometry.p_object_in_palm, odometry.R_object_to_palm, np.zeros(6), np.zeros(6)
