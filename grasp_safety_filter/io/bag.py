@@ -3,7 +3,11 @@
 :class:`BagRecorder` writes what ``ros2 bag record`` would record from the ROS graph
 (rosbag2 metadata version 9, mcap by default or sqlite3, CDR-serialised messages, each
 topic's offered QoS from :mod:`grasp_safety_filter.io.topics`), and always leaves a
-closed, readable bag: on normal exit, on an exception and on an interrupt.
+closed, readable bag: on normal exit, on an exception and on an interrupt. A writer that
+dies without closing (SIGKILL, the OOM killer, a power loss) loses less than
+:data:`~grasp_safety_filter.io.bag_storage.FLUSH_PERIOD_NS` of stamps
+(:mod:`grasp_safety_filter.io.bag_storage`), and
+:func:`~grasp_safety_filter.io.bag_recovery.recover_bag` makes its bag readable again.
 
 Interrupts: Python turns SIGINT into ``KeyboardInterrupt`` wherever the program happens to
 be, possibly halfway through appending a record; SIGTERM ends the process without any
@@ -17,8 +21,8 @@ therefore records as::
             bag.write(topic, stamp_ns, msg)
 
 :func:`read_bag` and :func:`iter_bag` read any rosbag2 bag (ours or one from
-``ros2 bag record``) with ``rosbags``' AnyReader; a missing, foreign or damaged bag
-raises :class:`BagReadError` (one line naming the path and the problem).
+``ros2 bag record``) with ``rosbags``' AnyReader; a missing, foreign, damaged or
+unrecovered bag raises :class:`BagReadError` (one line naming the path and the problem).
 """
 
 from __future__ import annotations
@@ -34,9 +38,10 @@ from typing import Any, Literal
 
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection, Qos
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import get_typestore, Stores
 
+from grasp_safety_filter.io.bag_storage import DurableWriter, FLUSH_PERIOD_NS, storage_files
 from grasp_safety_filter.io.topics import TOPICS, TopicSpec
 
 Storage = Literal['mcap', 'sqlite3']
@@ -169,6 +174,8 @@ class BagRecorder:
     the bag is closed, with its index and ``metadata.yaml``, also when the block raises
     (an exception or ``KeyboardInterrupt``), so ``AnyReader`` can read everything written
     before. ``rosbags.rosbag2.Writer`` on its own would abort the bag on an exception.
+    Without a close (the process killed), the bag keeps all but its last
+    ``flush_period_ns`` of stamps, for :func:`~grasp_safety_filter.io.bag_recovery.recover_bag`.
     """
 
     def __init__(
@@ -177,6 +184,7 @@ class BagRecorder:
         storage: Storage = 'mcap',
         topics: Iterable[TopicSpec] = TOPICS,
         typestore: Any = None,
+        flush_period_ns: int | None = FLUSH_PERIOD_NS,
     ) -> None:
         """Prepare a bag; nothing is created before :meth:`open`.
 
@@ -185,6 +193,8 @@ class BagRecorder:
             storage: ``"mcap"`` (the Jazzy default) or ``"sqlite3"``.
             topics: Topics to register, with their types and offered QoS.
             typestore: rosbags typestore for serialisation (default ROS2_JAZZY).
+            flush_period_ns: Longest span of stamps a kill may lose [ns] (see
+                :mod:`~grasp_safety_filter.io.bag_storage`); None: rosbags' own policy.
 
         """
         if storage not in _STORAGE_PLUGINS:
@@ -200,7 +210,8 @@ class BagRecorder:
             self.topics[spec.name] = spec
         self.typestore = get_typestore(Stores.ROS2_JAZZY) if typestore is None else typestore
         self.counts: dict[str, int] = dict.fromkeys(self.topics, 0)
-        self._writer: Writer | None = None
+        self.flush_period_ns = flush_period_ns
+        self._writer: DurableWriter | None = None
         self._connections: dict[str, Connection] = {}
 
     @property
@@ -217,8 +228,11 @@ class BagRecorder:
         """
         if self._writer is not None:
             raise RuntimeError(f'bag {self.path} is already open')
-        writer = Writer(
-            self.path, version=BAG_VERSION, storage_plugin=_STORAGE_PLUGINS[self.storage]
+        writer = DurableWriter(
+            self.path,
+            version=BAG_VERSION,
+            storage_plugin=_STORAGE_PLUGINS[self.storage],
+            flush_period_ns=self.flush_period_ns,
         )
         with _critical_section():
             writer.open()
@@ -359,6 +373,11 @@ def _reader(path: Path | str) -> Iterator[AnyReader]:
     if not path.is_dir():
         what = 'does not exist' if not path.exists() else 'is not a directory'
         raise BagReadError(f'{path}: {what}; expected a rosbag2 bag directory')
+    if not (path / 'metadata.yaml').exists() and storage_files(path):
+        raise BagReadError(
+            f'{path}: not a readable rosbag2 bag (no metadata.yaml: its writer did not '
+            f'close it); `grasp-analyze --recover {path}` recovers it'
+        )
     try:
         with AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
             yield reader
