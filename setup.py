@@ -15,11 +15,12 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.urdf')),
     ],
     # Runtime dependencies for a pip install without ROS; under colcon they come from
-    # package.xml (rosdep) and osqp from pip.
+    # package.xml (rosdep), osqp and daqp from pip.
     install_requires=[
         'setuptools',
         'numpy>=1.24',
         'osqp>=1.0',
+        'daqp>=0.11',  # the qp.solver=daqp backend: a warm-started daqp.Model
         'scipy>=1.8',  # sparse matrices for OSQP, LU/QR in the active-set step
         'pin>=3.0',
         'rosbags>=0.10',
@@ -30,7 +31,6 @@ setup(
         'test': [
             'pytest>=7',
             'ruff>=0.6',
-            'daqp>=0.6',
             # The linters a colcon build runs on Jazzy (ament_flake8 with its plugins, pep257).
             'ament-lint==0.14.2',
             'ament-lint-flake8==0.14.4',
@@ -56,7 +56,7 @@ setup(
             'ros-jazzy-trajectory-msgs',
         ],
         # grasp-bench's comparison: the same QPs through cvxpy (OSQP, Clarabel) and daqp.
-        'bench': ['cvxpy>=1.4', 'qpsolvers>=4.0', 'daqp>=0.6'],
+        'bench': ['cvxpy>=1.4', 'qpsolvers>=4.0'],
     },
     python_requires='>=3.10',
     zip_safe=True,

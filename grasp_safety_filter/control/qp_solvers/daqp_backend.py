@@ -1,0 +1,180 @@
+"""daqp backend: a dual active-set solver (Arnström, Bemporad, Axehill), warm-started.
+
+daqp solves ``min 1/2 x^T H x + f^T x  s.t.  blower <= [I; A] x <= bupper`` exactly (an
+active-set method: its answer satisfies the KKT conditions to its tolerances, no
+refinement needed) and proves infeasibility. One ``daqp.Model`` per problem is set up once;
+each tick updates ``f``, ``A`` and the bounds, and daqp starts from the previous tick's
+working set (the rows move little in 1 ms). After a tick that did not end optimal (an
+infeasible problem, a failure, or a tick with no answer) the next solve starts cold, from
+an empty working set: a working set left by a failed solve is no valid start.
+
+The hard problem: ``x = u``, ``H = I``, ``f = g``, the box as simple bounds, the barrier
+rows ``lower <= A u``. The relaxed problem is the same :class:`~.problem.Problem` with its
+slacks as variables: ``x = (u, s)``, ``H = diag(1, w)``, simple bounds ``s >= 0``, rows
+``lower_r <= A_r u + d_r s_r`` (``d_r`` of :meth:`~.problem.Problem.slack_scale`). daqp's
+soft constraints would add a slack of their own per row with its own weight convention;
+explicit slacks keep the relaxed problem the one every backend solves.
+
+daqp's multipliers (``lam``: < 0 at a lower bound, > 0 at an upper bound, ``H x + f +
+[I; A]^T lam = 0``) are turned into the problem's row numbering and least-distance form
+(a slack bound's multiplier divided by ``sqrt(w_r)``, as ``s~ = sqrt(w) s``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import daqp
+import numpy as np
+
+from grasp_safety_filter.control.qp_solvers.problem import (
+    FEASIBILITY_TOLERANCE,
+    Problem,
+    Solution,
+    SolutionStatus,
+)
+
+#: daqp's bound for "no bound" (its DAQP_INF).
+_INFINITY = 1e30
+
+#: daqp exit flags.
+_OPTIMAL = 1
+_INFEASIBLE = -1
+
+#: Tolerances tighter than daqp's defaults (primal 1e-6): the filter's own row check is
+#: 1e-6 in the rows' units, which daqp's (normalised) tolerance must not exceed.
+DEFAULT_SETTINGS: dict[str, Any] = {'primal_tol': 1e-9}
+
+
+class _Model:
+    """One daqp workspace with its bounds and constraint buffers."""
+
+    def __init__(
+        self,
+        H: np.ndarray,
+        A: np.ndarray,
+        upper: np.ndarray,
+        lower: np.ndarray,
+        settings: Mapping[str, Any],
+    ) -> None:
+        self.A, self.upper, self.lower = A, upper, lower
+        self.n_bounds = upper.shape[0] - A.shape[0]
+        self.f = np.zeros(H.shape[0])
+        self.cold = np.zeros(upper.shape[0], dtype=np.int32)
+        self.model = daqp.Model()
+        self.model.setup(H, self.f, A, upper, lower)
+        self.model.settings = dict(settings)
+        self.warm = False
+
+    def solve(self) -> tuple[np.ndarray, int, int, np.ndarray]:
+        """Hand over this tick's data and solve: ``(x, exit flag, iterations, lam)``."""
+        if self.warm:
+            self.model.update(f=self.f, A=self.A, blower=self.lower)
+        else:
+            self.model.update(f=self.f, A=self.A, blower=self.lower, sense=self.cold)
+        x, _, flag, info = self.model.solve()
+        self.warm = flag == _OPTIMAL
+        return np.asarray(x, dtype=float), int(flag), int(info['iterations']), info['lam']
+
+
+class DAQPBackend:
+    """The hard and relaxed problems of one filter, each in a warm-started ``daqp.Model``."""
+
+    name = 'daqp'
+
+    def __init__(
+        self, problem: Problem, slack_weights: np.ndarray, settings: Mapping[str, Any]
+    ) -> None:
+        """Set both models up once.
+
+        Args:
+            problem: The hard problem (its arrays may be rewritten every tick).
+            slack_weights: w of the relaxed problem, shape (k,).
+            settings: daqp settings over :data:`DEFAULT_SETTINGS` (e.g. ``iter_limit``).
+        """
+        m, k = problem.n_torques, problem.n_rows
+        self._m, self._k = m, k
+        self._u_min, self._u_max = problem.u_min, problem.u_max
+        self._sqrt_weights = np.sqrt(np.asarray(slack_weights, dtype=float))
+        options = {**DEFAULT_SETTINGS, **settings}
+        no_upper = np.full(k, _INFINITY)
+        self._hard = _Model(
+            np.eye(m),
+            np.zeros((k, m)),
+            np.concatenate((problem.u_max, no_upper)),
+            np.concatenate((problem.u_min, np.zeros(k))),
+            options,
+        )
+        H = np.diag(np.concatenate((np.ones(m), slack_weights)))
+        self._relaxed = _Model(
+            H,
+            np.zeros((k, m + k)),
+            np.concatenate((problem.u_max, no_upper, no_upper)),
+            np.concatenate((problem.u_min, np.zeros(k), np.zeros(k))),
+            options,
+        )
+        # The slack column block's diagonal d, a view into the relaxed rows (entry (r, m + r)).
+        self._slack_diagonal = self._relaxed.A.reshape(-1)[m : m + k * (m + k + 1) : m + k + 1]
+
+    def reset(self) -> None:
+        """Forget the working sets: the next solves start cold."""
+        self._hard.warm = self._relaxed.warm = False
+
+    def warm_start(self, solution: Solution | None) -> None:
+        """Keep the working set after a tick settled without daqp; None: start cold."""
+        if solution is None:
+            self.reset()
+
+    def solve(self, problem: Problem) -> Solution:
+        """Solve the hard or the relaxed problem."""
+        m = self._m
+        model = self._relaxed if problem.relaxed else self._hard
+        np.copyto(model.f[:m], problem.g)
+        model.A[:, :m] = problem.A
+        model.lower[model.n_bounds :] = problem.lower
+        if problem.relaxed:
+            self._slack_diagonal[:] = problem.slack_scale()
+        x, flag, iterations, lam = model.solve()
+        if flag == _INFEASIBLE:
+            u = self._clip(-problem.g)
+            return Solution(u, SolutionStatus.INFEASIBLE, iterations=iterations)
+        u = x[:m]
+        if flag != _OPTIMAL or not np.isfinite(x).all():
+            self.reset()
+            return Solution(self._clip(-problem.g), SolutionStatus.FAILED, iterations=iterations)
+        active, multipliers = self._rows(lam, problem.relaxed)
+        slack = x[m:].copy() if problem.relaxed else None
+        solution = Solution(
+            self._clip(u), SolutionStatus.OPTIMAL, active, multipliers, slack, iterations
+        )
+        if not problem.relaxed and not solution.row_violation(problem) <= FEASIBILITY_TOLERANCE:
+            self.reset()
+            return Solution(solution.u, SolutionStatus.FAILED, iterations=iterations)
+        return solution
+
+    def _rows(self, lam: np.ndarray, relaxed: bool) -> tuple[tuple[int, ...], np.ndarray]:
+        """Turn daqp's nonzero multipliers into the problem's active rows and ``lambda >= 0``.
+
+        daqp's constraints: bounds on u (m), on s (k, relaxed), then the barrier rows (k).
+        """
+        m, k = self._m, self._k
+        n_bounds = m + k if relaxed else m
+        rows: list[int] = []
+        values: list[float] = []
+        for i in np.flatnonzero(lam).tolist():
+            value = float(lam[i])
+            if i < m:  # a torque bound: lower when lam < 0
+                rows.append(k + 2 * i + (1 if value > 0.0 else 0))
+                values.append(abs(value))
+            elif i < n_bounds:  # s_r >= 0, in the least-distance form's s~ = sqrt(w) s
+                r = i - m
+                rows.append(k + 2 * m + r)
+                values.append(-value / self._sqrt_weights[r])
+            else:
+                rows.append(i - n_bounds)
+                values.append(-value)
+        return tuple(rows), np.array(values)
+
+    def _clip(self, u: np.ndarray) -> np.ndarray:
+        return np.minimum(np.maximum(u, self._u_min), self._u_max)
