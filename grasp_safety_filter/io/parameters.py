@@ -37,6 +37,8 @@ from typing import Any
 
 import yaml
 
+from grasp_safety_filter.errors import ConfigError
+
 #: Key under each node name that holds its parameters (rcl_yaml_param_parser).
 ROS_PARAMETERS_KEY = 'ros__parameters'
 
@@ -44,7 +46,7 @@ ROS_PARAMETERS_KEY = 'ros__parameters'
 WILDCARD_NODE = '/**'
 
 
-class ParameterError(ValueError):
+class ParameterError(ConfigError):
     """A parameter is missing, unknown, of the wrong type or out of range.
 
     Attributes:
@@ -366,9 +368,16 @@ def load_parameter_file(path: str | Path) -> dict[str, dict[str, Any]]:
             the message names the file and the offending key.
     """
     path = Path(path)
+    try:
+        stat = path.stat()
+    except FileNotFoundError:
+        raise ParameterError(f"parameter file '{path}' does not exist") from None
+    except OSError as error:
+        raise ParameterError(
+            f"parameter file '{path}': cannot read it: {error.strerror}"
+        ) from None
     if not path.is_file():
-        raise ParameterError(f"parameter file '{path}' does not exist")
-    stat = path.stat()
+        raise ParameterError(f"parameter file '{path}': expected a file, got a directory")
     parsed = _parsed_file(path, path.resolve(), stat.st_mtime_ns, stat.st_size)
     return {node: dict(section) for node, section in parsed.items()}
 
@@ -386,6 +395,17 @@ def _parsed_file(
         document = _read_document(path)
     except yaml.YAMLError as error:
         raise ParameterError(f"parameter file '{path}': invalid YAML: {error}") from None
+    except UnicodeDecodeError as error:
+        raise ParameterError(
+            f"parameter file '{path}': expected UTF-8 text, got byte "
+            f'0x{error.object[error.start]:02x} at offset {error.start}'
+        ) from None
+    except OSError as error:
+        raise ParameterError(
+            f"parameter file '{path}': cannot read it: {error.strerror}"
+        ) from None
+    except RecursionError:
+        raise ParameterError(f"parameter file '{path}': invalid YAML: nested too deeply") from None
     if not isinstance(document, dict) or not document:
         raise ParameterError(
             f"parameter file '{path}': expected a mapping of node names to "

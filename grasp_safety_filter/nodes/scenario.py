@@ -27,6 +27,8 @@ import json
 import math
 from typing import Any
 
+from grasp_safety_filter.errors import ConfigError
+
 SCENARIO_FORMAT = 'grasp_safety_filter/scenario'
 SCENARIO_VERSION = 1
 
@@ -60,7 +62,7 @@ SCENARIO_KEYS: dict[str, type] = {
 }
 
 
-class ScenarioError(ValueError):
+class ScenarioError(ConfigError):
     """A ``/grasp/scenario`` document is not valid JSON or misses or mistypes a key."""
 
 
