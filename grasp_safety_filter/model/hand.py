@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from grasp_safety_filter.model.urdf import check_urdf_file, HandModelError
 
-class HandModelError(ValueError):
-    """The URDF does not describe the hand the configuration expects."""
+__all__ = ['HandModel', 'HandModelError', 'HandTerms']
 
 
 @dataclass(frozen=True)
@@ -66,8 +66,7 @@ class HandModel:
         gravity: np.ndarray,
     ) -> None:
         urdf_path = Path(urdf_path)
-        if not urdf_path.is_file():
-            raise HandModelError(f'model.urdf_file: no such file {str(urdf_path)!r}')
+        check_urdf_file(urdf_path)
         try:
             self.model = pin.buildModelFromUrdf(str(urdf_path))
         except (RuntimeError, ValueError) as error:
@@ -132,6 +131,25 @@ class HandModel:
         self._idx_square = np.ix_(self._idx, self._idx)
         # Pinocchio's crba fills the upper triangle of M only.
         self._upper = np.triu(np.ones((self.model.nv, self.model.nv), dtype=bool))
+        self._check_inertia(urdf_path.name)
+
+    def _check_inertia(self, urdf_name: str) -> None:
+        """Refuse a hand whose M_h is singular at the middle of the joint ranges.
+
+        A joint that moves no mass (links without ``<inertial>``) leaves M_h singular: the
+        filter would divide by it. The joint named is the one the null direction moves most.
+        """
+        q_middle = 0.5 * (self.joint_lower_limits + self.joint_upper_limits)
+        M = pin.crba(self.model, self.data, self._to_pin(q_middle))
+        M = np.where(self._upper, M, M.T)
+        eigenvalues, vectors = np.linalg.eigh(M)
+        if not eigenvalues[0] > 1e-12 * max(eigenvalues[-1], 1e-300):
+            joint = self.joint_names[int(np.argmax(np.abs(self._from_pin(vectors[:, 0]))))]
+            raise HandModelError(
+                f'{urdf_name}: joint {joint!r} moves no inertia (M_h at the middle of the joint '
+                f'ranges has eigenvalue {eigenvalues[0]:.3g}): expected an <inertial> with a '
+                'mass > 0 on a link it moves'
+            )
 
     @property
     def n_joints(self) -> int:
