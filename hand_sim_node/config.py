@@ -16,6 +16,7 @@ import numpy as np
 
 from grasp_safety_filter.io.parameters import flatten_parameters, ParameterError
 from grasp_safety_filter.io.schemas import HAND_SIM_PARAMETERS
+from grasp_safety_filter.nodes.scenario import MAX_STEPS
 
 _SPECS = {spec.name: spec for spec in HAND_SIM_PARAMETERS}
 
@@ -106,6 +107,11 @@ class SimConfig:
             raise ParameterError(
                 f"parameter 'time_step': expected <= duration ({self.duration} s), got "
                 f'{self.time_step}'
+            )
+        if self.duration / self.time_step > MAX_STEPS:
+            raise ParameterError(
+                f"parameter 'duration': expected at most {MAX_STEPS:g} steps of time_step "
+                f'({self.time_step:g} s), got {self.duration:g} s'
             )
 
     @property

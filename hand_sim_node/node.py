@@ -7,9 +7,12 @@ Publishes ``/grasp/scenario`` (once, latched), ``/clock``, ``/hand/joint_states`
 ``/object/odom``, ``/hand/contacts`` and ``/diagnostics``; subscribes to
 ``/hand/effort_command``. Everything else is :class:`hand_sim_node.endpoint.HandSimEndpoint`.
 
-Start-up: the run starts (scenario and state at t_0 published) once the controllers are
-connected (:func:`hand_sim_node.endpoint.start_blockers`: a node publishing the command,
-it and the nodes it reads from subscribed to the state) and, with
+Start-up: the initial grasp is checked (:mod:`grasp_safety_filter.model.grasp_check`:
+joint limits, every fingertip on its face within ``GAP_TOLERANCE``); a bad one stops the
+node with one line naming the joint or contact. The run starts (scenario and state at t_0
+published) once the controllers are connected
+(:func:`hand_sim_node.endpoint.start_blockers`: a node publishing the command, it and the
+nodes it reads from subscribed to the state) and, with
 ``start.wait_for_recorder`` set to a recorder's node name (``rosbag2_recorder`` for
 ``ros2 bag record``), once that recorder is subscribed to every published topic of the topic
 table, so that neither the controllers nor the bag miss the first tick; the graph must stay
@@ -47,6 +50,7 @@ from grasp_safety_filter.io.topics import (
     SCENARIO,
     TOPICS,
 )
+from grasp_safety_filter.model.grasp_check import check_initial_grasp
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from hand_sim_node.config import SimConfig
@@ -86,6 +90,7 @@ class HandSimNode(EndpointNode):
             **kwargs,
         )
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
+        check_initial_grasp(model, self.parameters)
         self.endpoint = HandSimEndpoint(
             model, SimConfig.from_parameters(self.parameters), self.msgs
         )

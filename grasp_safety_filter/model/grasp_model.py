@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -38,7 +39,7 @@ from grasp_safety_filter.model.rolling import contact_stack, ContactGeometry, Co
 from grasp_safety_filter.model.surfaces import SphereSurface
 
 
-class GraspConfigError(ValueError):
+class GraspConfigError(ConfigError):
     """The configuration does not describe a valid grasp (names the parameter and the values)."""
 
 
@@ -299,43 +300,18 @@ class GraspModel:
         q: np.ndarray,
         p_object_in_palm: np.ndarray,
         R_object_to_palm: np.ndarray,
-        tolerance: float = 1e-4,
-        parameter: str = 'initial.joint_positions',
+        tolerance: float | None = None,
     ) -> None:
-        """Raise GraspConfigError unless the grasp is valid.
+        """Raise GraspConfigError unless ``(q, p_o, R_po)`` is a valid grasp.
 
-        Valid: every fingertip touches its surface within ``tolerance`` m, inside the
-        fingertip workspace, and every joint is inside its limits.
+        See :func:`grasp_safety_filter.model.grasp_check.check_grasp` (joint limits, gap or
+        penetration within ``tolerance`` m, default ``GAP_TOLERANCE``, contacts on their
+        faces and in the fingertip workspace, M_h, J_h and G).
         """
-        q = np.asarray(q, dtype=float)
-        if q.shape != (self.n_joints,):
-            raise GraspConfigError(
-                f'{parameter}: expected {self.n_joints} joint angles ({self.joint_names}), '
-                f'got {q.size}'
-            )
-        for name, value, lo, hi in zip(
-            self.joint_names, q, self.joint_lower_limits, self.joint_upper_limits, strict=True
-        ):
-            if not lo < value < hi:
-                raise GraspConfigError(
-                    f'{parameter}: joint {name!r} = {value:.6g} rad is outside its limits '
-                    f'[{lo:.6g}, {hi:.6g}]'
-                )
-        geometries = self.contact_geometry(q, p_object_in_palm, R_object_to_palm)
-        for name, geometry in zip(self.contact_names, geometries, strict=True):
-            if abs(geometry.penetration) > tolerance:
-                state = 'is separated from' if geometry.penetration < 0 else 'penetrates'
-                raise GraspConfigError(
-                    f'{parameter}: fingertip of contact {name!r} {state} the object by '
-                    f'{abs(geometry.penetration):.3g} m (expected touching within {tolerance:g} m)'
-                )
-            margins = self.fingertip_workspace.margins(geometry.xi_cf)[0]
-            if np.any(margins <= 0.0):
-                raise GraspConfigError(
-                    f'{parameter}: contact {name!r} at fingertip coordinates (a, b) = '
-                    f'({geometry.xi_cf[0]:.4g}, {geometry.xi_cf[1]:.4g}) rad is outside the '
-                    'fingertip workspace'
-                )
+        from grasp_safety_filter.model.grasp_check import check_grasp, GAP_TOLERANCE
+
+        gap = GAP_TOLERANCE if tolerance is None else tolerance
+        check_grasp(self, q, p_object_in_palm, R_object_to_palm, gap)
 
     def rolling_joint_velocity(
         self,

@@ -175,9 +175,19 @@ class FlatSurface(Surface):
     """A plane through ``origin`` spanned by orthonormal ``e1, e2``, outward normal ``e1 × e2``.
 
     c(u, v) = origin + u e1 + v e2,   M = I,  K = 0,  T = 0   (u, v in m)
+
+    The chart is the whole plane; ``half_width`` bounds the face itself (a square of
+    ``|u|, |v| <= half_width`` about ``origin``; infinite by default) for
+    :meth:`outside_distance`.
     """
 
-    def __init__(self, origin: np.ndarray, e1: np.ndarray, e2: np.ndarray) -> None:
+    def __init__(
+        self,
+        origin: np.ndarray,
+        e1: np.ndarray,
+        e2: np.ndarray,
+        half_width: float = np.inf,
+    ) -> None:
         origin, e1, e2 = (np.asarray(x, dtype=float) for x in (origin, e1, e2))
         for name, vec in (('origin', origin), ('e1', e1), ('e2', e2)):
             if vec.shape != (3,) or not np.all(np.isfinite(vec)):
@@ -186,8 +196,15 @@ class FlatSurface(Surface):
             raise ValueError(f'FlatSurface: e1, e2 must be unit vectors, got {e1}, {e2}')
         if abs(e1 @ e2) > 1e-12:
             raise ValueError(f'FlatSurface: e1, e2 must be orthogonal, got e1·e2 = {e1 @ e2}')
+        if not half_width > 0.0:
+            raise ValueError(f'FlatSurface: half_width must be > 0, got {half_width!r}')
         self.origin = origin
+        self.half_width = float(half_width)
         self._frame = np.column_stack([e1, e2, np.cross(e1, e2)])
+
+    def outside_distance(self, xi: np.ndarray) -> float:
+        """How far the point ``(u, v)`` lies beyond the face's edges, m (<= 0: on the face)."""
+        return float(np.max(np.abs(np.asarray(xi, dtype=float))) - self.half_width)
 
     @property
     def normal(self) -> np.ndarray:
@@ -262,7 +279,7 @@ def cube_face(label: str, edge_length: float) -> FlatSurface:
     e1, e2 = basis[(axis + 1) % 3], basis[(axis + 2) % 3]
     if sign < 0:
         e1, e2 = e2, e1
-    return FlatSurface(0.5 * edge_length * normal, e1, e2)
+    return FlatSurface(0.5 * edge_length * normal, e1, e2, half_width=0.5 * edge_length)
 
 
 # ------------------------------------------------------------------------- stacked surfaces

@@ -1,0 +1,270 @@
+"""Is a state of the model a grasp? The start-up check, one finding per problem.
+
+At its first state a run must hold the object the way the model assumes (DESIGN.md §3):
+
+- every joint strictly inside its URDF limits;
+- per contact, the fingertip sphere touches its object surface: the gap (or the
+  penetration) between them is at most :data:`GAP_TOLERANCE`;
+- per contact on a cube face, the contact point lies on that face, within its edges (the
+  model's chart of a face is the whole plane: without this check a fingertip far from the
+  object, touching the face's plane, would pass);
+- per contact, the fingertip coordinates are inside the fingertip workspace;
+- the hand's inertia M_h is positive definite, J_h has full row rank 3n (every contact
+  velocity reachable) and G has rank 6 (the contacts can move the object in every
+  direction).
+
+:func:`grasp_findings` returns what fails, each naming the joint or contact and the distance;
+:func:`check_grasp` raises them as one :class:`GraspConfigError`. The paper's initial grasp
+passes with a gap of 3e-16 m, its contacts at the face centres (0.13 m from every edge),
+0.29 rad from the nearest joint limit, cond(J_h) = 6.1 and cond(G) = 16.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.model.grasp_model import GraspConfigError, GraspModel
+from grasp_safety_filter.model.quaternion import rotation_matrix
+from grasp_safety_filter.model.rolling import ContactGeometry
+from grasp_safety_filter.model.surfaces import CUBE_FACE_AXES, FlatSurface, Surface
+
+#: Largest gap or penetration between a fingertip and its object surface at start, m.
+#: The simulator then moves the joints by the least amount that closes it exactly
+#: (``GraspModel.project_to_contact``); a larger one means the configured grasp is not the
+#: one the user meant (a wrong object position, face or fingertip frame). A millimetre is
+#: 1/60 of the paper's fingertip radius and far above the paper's 3e-16 m.
+GAP_TOLERANCE = 1e-3
+
+#: What a start-up check describes, for the messages.
+INITIAL_GRASP = 'initial grasp (initial.joint_positions, initial.object_position/orientation)'
+
+
+@dataclass(frozen=True)
+class GraspFinding:
+    """One way a state is not a valid grasp.
+
+    Attributes:
+        subject: What it concerns: ``"joint 'finger1_joint2'"``, ``"contact 'finger1'"``,
+            ``"hand"``.
+        problem: What is wrong, with the values.
+    """
+
+    subject: str
+    problem: str
+
+    def __str__(self) -> str:
+        return f'{self.subject}: {self.problem}'
+
+
+def _face_label(surface: FlatSurface) -> str:
+    """Name the cube face (``"face +x"``...) with ``surface``'s outward normal, or ``"plane"``."""
+    for label, (axis, sign) in CUBE_FACE_AXES.items():
+        if surface.normal[axis] * sign > 1.0 - 1e-9:
+            return f'face {label}'
+    return 'plane'
+
+
+def grasp_findings(
+    model: GraspModel,
+    q: Sequence[float] | np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    gap_tolerance: float = GAP_TOLERANCE,
+) -> list[GraspFinding]:
+    """Every way the configuration ``(q, p_o, R_po)`` is not a grasp of the model's object.
+
+    Joint and contact findings come first; the hand's terms (M_h, ranks of J_h and G) are
+    checked only when the geometry is right, since they are meaningless otherwise.
+
+    Raises:
+        GraspConfigError: ``q`` does not have one angle per joint.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.shape != (model.n_joints,):
+        raise GraspConfigError(
+            f'{INITIAL_GRASP}: expected {model.n_joints} joint angles ({model.joint_names}), '
+            f'got {q.size}'
+        )
+    findings = []
+    for name, value, lower, upper in zip(
+        model.joint_names, q, model.joint_lower_limits, model.joint_upper_limits, strict=True
+    ):
+        if not lower < value < upper:
+            findings.append(
+                GraspFinding(
+                    f'joint {name!r}',
+                    f'{value:.6g} rad is not inside its limits ({lower:.6g}, {upper:.6g})',
+                )
+            )
+    geometries = model.contact_geometry(q, p_object_in_palm, R_object_to_palm)
+    for name, contact, geometry in zip(
+        model.contact_names, model.contacts, geometries, strict=True
+    ):
+        findings += _contact_findings(
+            model, f'contact {name!r}', contact.object_surface, geometry, gap_tolerance
+        )
+    if findings:
+        return findings
+    return _hand_findings(model, q, p_object_in_palm, R_object_to_palm)
+
+
+def _contact_findings(
+    model: GraspModel,
+    subject: str,
+    surface: Surface,
+    geometry: ContactGeometry,
+    gap_tolerance: float,
+) -> list[GraspFinding]:
+    """Gap or penetration, position on the face and in the fingertip workspace of a contact."""
+    findings = []
+    where = _face_label(surface) if isinstance(surface, FlatSurface) else 'sphere'
+    depth = float(geometry.penetration)
+    if depth < -gap_tolerance:
+        findings.append(
+            GraspFinding(
+                subject,
+                f'the fingertip is separated from the object by {-depth:.3g} m ({where}; '
+                f'expected touching within {gap_tolerance:g} m)',
+            )
+        )
+    elif depth > gap_tolerance:
+        findings.append(
+            GraspFinding(
+                subject,
+                f'the fingertip penetrates the object by {depth:.3g} m ({where}; expected '
+                f'touching within {gap_tolerance:g} m)',
+            )
+        )
+    if isinstance(surface, FlatSurface):
+        outside = surface.outside_distance(geometry.xi_co)
+        if outside > 0.0:
+            u, v = geometry.xi_co
+            findings.append(
+                GraspFinding(
+                    subject,
+                    f'the contact point lies {outside:.3g} m beyond the edge of {where} '
+                    f'((u, v) = ({u:.4f}, {v:.4f}) m, expected within +-{surface.half_width:.4g} '
+                    'm of its centre)',
+                )
+            )
+    margins = model.fingertip_workspace.margins(geometry.xi_cf)[0]
+    if np.any(margins <= 0.0):
+        a, b = geometry.xi_cf
+        findings.append(
+            GraspFinding(
+                subject,
+                f'fingertip coordinates (a, b) = ({a:.4g}, {b:.4g}) rad are outside the '
+                'fingertip workspace (model.fingertip_workspace)',
+            )
+        )
+    return findings
+
+
+def _hand_findings(
+    model: GraspModel, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
+) -> list[GraspFinding]:
+    """M_h positive definite, rank J_h = 3n, rank G = 6 at the configuration, at rest."""
+    state = model.state(
+        0.0, q, np.zeros(model.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
+    )
+    findings = []
+    smallest = float(np.linalg.eigvalsh(state.M_h)[0])
+    if not smallest > 0.0:
+        findings.append(
+            GraspFinding(
+                'hand', f'M_h is not positive definite (smallest eigenvalue {smallest:.3g})'
+            )
+        )
+    n = model.n_contacts
+    rank = int(np.linalg.matrix_rank(state.J_h))
+    if rank < 3 * n:
+        findings.append(
+            GraspFinding(
+                'hand',
+                f'J_h has rank {rank}, expected {3 * n} (3 per contact): a finger is at a '
+                'singular configuration',
+            )
+        )
+    rank = int(np.linalg.matrix_rank(state.G))
+    if rank < 6:
+        findings.append(
+            GraspFinding(
+                'hand',
+                f'the grasp map G has rank {rank}, expected 6: the contacts cannot move the '
+                'object in every direction',
+            )
+        )
+    return findings
+
+
+def check_grasp(
+    model: GraspModel,
+    q: Sequence[float] | np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    gap_tolerance: float = GAP_TOLERANCE,
+    what: str = INITIAL_GRASP,
+) -> None:
+    """Raise one GraspConfigError listing every :func:`grasp_findings`; return if none.
+
+    Args:
+        model: The grasp model.
+        q: Joint angles, model order, rad.
+        p_object_in_palm: Object position, m.
+        R_object_to_palm: Object orientation.
+        gap_tolerance: Largest gap or penetration per contact, m.
+        what: What the state is, at the start of the message.
+    """
+    findings = grasp_findings(model, q, p_object_in_palm, R_object_to_palm, gap_tolerance)
+    if findings:
+        raise GraspConfigError(f'{what}: ' + '; '.join(map(str, findings)))
+
+
+def check_initial_grasp(
+    model: GraspModel, params: Mapping[str, Any], gap_tolerance: float = GAP_TOLERANCE
+) -> None:
+    """Check the initial grasp of ``hand_sim_node``'s validated parameters (:func:`check_grasp`).
+
+    Raises:
+        GraspConfigError: Listing every finding, each naming its joint or contact.
+    """
+    check_grasp(
+        model,
+        params['initial.joint_positions'],
+        np.asarray(params['initial.object_position'], dtype=float),
+        rotation_matrix(params['initial.object_orientation']),
+        gap_tolerance,
+    )
+
+
+def load_initial_grasp(
+    config: Path, overrides: Mapping[str, Any] | None = None
+) -> tuple[GraspModel, dict[str, Any]]:
+    """Load a scenario file's simulator parameters and model; check its initial grasp.
+
+    The start-up check of the ROS-free tools, as ``hand_sim_node`` makes it.
+
+    Args:
+        config: The scenario parameter file.
+        overrides: ``{name: value}`` of any node; those ``hand_sim_node`` declares apply.
+
+    Returns:
+        The model and the validated ``hand_sim_node`` parameters.
+
+    Raises:
+        ConfigError: The file, an override, the URDF or the initial grasp is wrong (a
+            ``ParameterError``, ``HandModelError`` or ``GraspConfigError``).
+    """
+    from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters, NODE_SCHEMAS
+
+    schema = NODE_SCHEMAS[HAND_SIM_NODE]
+    own = {name: value for name, value in (overrides or {}).items() if name in schema}
+    params = load_node_parameters(config, HAND_SIM_NODE, overrides=own)
+    model = GraspModel.from_parameters(params)
+    check_initial_grasp(model, params)
+    return model, params
