@@ -36,6 +36,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
+from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.messages import (
     bounded_text,
     byte_value,
@@ -47,11 +48,13 @@ from grasp_safety_filter.io.messages import (
 )
 from grasp_safety_filter.io.parameters import (
     declare_node_parameters,
+    load_parameter_file,
     ParameterError,
     resolve_relative_paths,
     validate_parameters,
 )
 from grasp_safety_filter.io.paths import share_directory
+from grasp_safety_filter.io.required_parameters import check_required_parameters
 from grasp_safety_filter.io.ros_arguments import (
     given_parameters,
     GivenParameter,
@@ -60,16 +63,13 @@ from grasp_safety_filter.io.ros_arguments import (
 )
 from grasp_safety_filter.io.schemas import check_node_parameters, NODE_SCHEMAS
 from grasp_safety_filter.io.topics import DIAGNOSTICS, topic_spec
-from grasp_safety_filter.model.grasp_model import GraspConfigError
-from grasp_safety_filter.model.hand import HandModelError
 from grasp_safety_filter.nodes.outgoing import Outgoing
 
-#: Errors that mean a node was configured wrongly (its parameters, its model, its ROS
-#: arguments): :func:`spin_node` reports them in one line and exits with EXIT_BAD_PARAMETERS.
+#: Errors that mean a node was configured wrongly (its parameters, its model, its initial
+#: grasp, its ROS arguments): :func:`spin_node` reports them in one line and exits with
+#: EXIT_BAD_PARAMETERS.
 STARTUP_ERRORS: tuple[type[Exception], ...] = (
-    ParameterError,
-    GraspConfigError,
-    HandModelError,
+    ConfigError,
     InvalidParameterTypeException,
     InvalidParameterValueException,
     rclpy_implementation.RCLInvalidROSArgsError,
@@ -77,7 +77,7 @@ STARTUP_ERRORS: tuple[type[Exception], ...] = (
 )
 
 #: Exit code of a node that refused its configuration (as argparse's usage errors).
-EXIT_BAD_PARAMETERS = 2
+EXIT_BAD_PARAMETERS = EXIT_CONFIG_ERROR
 
 #: Longest wait of the spin loop before it checks for SIGINT or SIGTERM, s.
 SIGNAL_CHECK_PERIOD = 0.1
@@ -127,6 +127,7 @@ class EndpointNode(Node):
         given = {name: parameter.value for name, parameter in self.given_parameters.items()}
         source = f"node '{expected_name}'"
         check_node_parameters(node_name, validate_parameters(self.schema, given, source), source)
+        check_required_parameters(node_name, given, source)
         # Converted by the schema (a double array as a list of floats); ROS's own as given.
         overrides = [
             Parameter(name, value=spec.validate(value) if spec is not None else value)
@@ -354,7 +355,9 @@ def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) 
     except STARTUP_ERRORS as error:
         program = Path(arguments[0]).name if arguments else 'node'
         unknown = isinstance(error, rclpy_implementation.UnknownROSArgsError)
-        error_line = f'{program}: ' + (f'unknown ROS arguments {error}' if unknown else str(error))
+        error_line = config_error_line(
+            program, f'unknown ROS arguments {error}' if unknown else error
+        )
     finally:
         _clean_up(executor, node)
         for signum in TERMINATION_SIGNALS:
@@ -382,10 +385,15 @@ def make_executor(context: Any) -> Any:
 def _init_rclpy(arguments: list[str]) -> None:
     """Initialise the default context without rclpy's signal handlers.
 
+    The parameter files are read first, by this package's loader: rcl would refuse a file
+    that is missing or not YAML with an ERROR log line of its own before the node's message.
+
     Raises:
-        ParameterError: rcl refuses the arguments (a malformed ``-p`` rule, a flag without
-            its value).
+        ParameterError: A parameter file cannot be read, or rcl refuses the arguments (a
+            malformed ``-p`` rule, a flag without its value).
     """
+    for path in parse_ros_arguments(arguments).params_files:
+        load_parameter_file(path)
     try:
         rclpy.init(args=arguments, signal_handler_options=SignalHandlerOptions.NO)
     except rclpy_implementation.RCLError as error:
