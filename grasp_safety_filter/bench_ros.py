@@ -46,12 +46,18 @@ from typing import Any
 import numpy as np
 import yaml
 
+from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
 from grasp_safety_filter.io.messages import header_stamp_ns, rclpy_message_class
-from grasp_safety_filter.io.parameters import load_parameter_file, ROS_PARAMETERS_KEY
+from grasp_safety_filter.io.parameters import (
+    load_parameter_file,
+    ParameterError,
+    ROS_PARAMETERS_KEY,
+)
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
+    load_node_parameters,
     NODE_SCHEMAS,
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
@@ -201,8 +207,8 @@ def ping_pong(pings: int, warm_up: int = 100, timeout: float = 60.0) -> dict[str
 # ------------------------------------------------------------------------------------ graph
 def scenario_file(config: Path, duration: float, directory: Path, enabled: bool) -> Path:
     """Write ``config`` with the run's duration, filter switch and monitor; paths absolute."""
-    document = yaml.safe_load(config.read_text(encoding='utf-8'))
     load_parameter_file(config)  # the same checks as the nodes' loader, with its messages
+    document = yaml.safe_load(config.read_text(encoding='utf-8'))
     for section in document.values():
         model = section.get(ROS_PARAMETERS_KEY, {}).get('model', {})
         if 'urdf_file' in model:
@@ -278,14 +284,14 @@ def override_arguments(overrides: Sequence[str]) -> dict[str, list[str]]:
     """Per node, the ``-p NAME:=VALUE`` arguments of the overrides it declares.
 
     Raises:
-        ValueError: An override is not ``NAME=VALUE`` or no node declares ``NAME``.
+        ParameterError: An override is not ``NAME=VALUE`` or no node declares ``NAME``.
     """
     arguments: dict[str, list[str]] = {name: [] for name in GRAPH_NODES}
     for override in overrides:
         name, equals, value = override.partition('=')
         owners = [node for node in GRAPH_NODES if NODE_SCHEMAS[node].get(name) is not None]
         if not equals or not owners:
-            raise ValueError(
+            raise ParameterError(
                 f'--set {override!r}: expected NAME=VALUE with a parameter of one of the nodes'
             )
         for node in owners:
@@ -442,6 +448,17 @@ def bench_ros_main(argv: list[str] | None = None) -> int:
     if args.echo:
         echo_main()
         return 0
+    from grasp_safety_filter.model.grasp_check import load_initial_grasp
+
+    try:
+        # The nodes' start-up checks, before the ping-pong: the nodes would refuse later.
+        load_initial_grasp(args.config)
+        for node in GRAPH_NODES:
+            load_node_parameters(args.config, node)
+        override_arguments(args.overrides)
+    except ConfigError as error:
+        print(config_error_line('grasp-bench-ros', error), file=sys.stderr)
+        return EXIT_CONFIG_ERROR
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     results = {
         'baseline': ping_pong(args.pings),
