@@ -169,9 +169,23 @@ def _hand_findings(
     model: GraspModel, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
 ) -> list[GraspFinding]:
     """M_h positive definite, rank J_h = 3n, rank G = 6 at the configuration, at rest."""
-    state = model.state(
-        0.0, q, np.zeros(model.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
-    )
+    try:
+        with np.errstate(all='ignore'):
+            state = model.state(
+                0.0, q, np.zeros(model.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
+            )
+    except np.linalg.LinAlgError:
+        return [
+            GraspFinding(
+                'hand',
+                'B_ho = J_h M_h^-1 J_h^T + G^T M_o^-1 G is singular: the contact forces are not '
+                'determined',
+            )
+        ]
+    terms = {'M_h': state.M_h, 'J_h': state.J_h, 'G': state.G, 'B_ho': state.B_ho}
+    infinite = [name for name, matrix in terms.items() if not np.all(np.isfinite(matrix))]
+    if infinite:
+        return [GraspFinding('hand', f'{", ".join(infinite)} not finite')]
     findings = []
     smallest = float(np.linalg.eigvalsh(state.M_h)[0])
     if not smallest > 0.0:
