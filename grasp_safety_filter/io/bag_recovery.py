@@ -20,12 +20,12 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-import mmap
 import os
 from pathlib import Path
 import shutil
 import sqlite3
 import struct
+from typing import BinaryIO
 
 from rosbags.interfaces import Connection, MessageDefinition, MessageDefinitionFormat, Qos
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -273,7 +273,7 @@ def _scan_sqlite3(storage_file: Path, scan: _Scan) -> Iterator[_Event]:
 class _Cursor:
     """Little-endian fields of one record, any overrun being damage."""
 
-    def __init__(self, buf: bytes | mmap.mmap, start: int, end: int) -> None:
+    def __init__(self, buf: bytes, start: int, end: int) -> None:
         self.buf, self.pos, self.end = buf, start, end
 
     def take(self, size: int) -> bytes:
@@ -292,7 +292,7 @@ class _Cursor:
             raise _DamagedError from None
 
 
-def _records(buf: bytes | mmap.mmap, start: int, end: int) -> Iterator[tuple[int, int, int]]:
+def _records(buf: bytes, start: int, end: int) -> Iterator[tuple[int, int, int]]:
     """``(opcode, body start, body end)`` of the records in ``buf[start:end]``.
 
     Stops before a record that is cut off (its length runs past ``end``).
@@ -309,39 +309,41 @@ def _records(buf: bytes | mmap.mmap, start: int, end: int) -> Iterator[tuple[int
 def _scan_mcap(storage_file: Path, scan: _Scan) -> Iterator[_Event]:
     """Yield the intact connections and messages of an mcap file, in file order."""
     with storage_file.open('rb') as file:
-        size = os.fstat(file.fileno()).st_size
-        if size == 0:  # killed before its first chunk reached the disk
-            scan.problems.append('mcap file empty')
-            scan.dropped_bytes = 0
-            return
-        with mmap.mmap(file.fileno(), 0, access=mmap.ACCESS_READ) as buf:
-            if buf[: len(_MCAP_MAGIC)] != _MCAP_MAGIC[:size]:
-                raise _UnrecoverableError(f'{storage_file.name} is not an mcap file')
-            yield from _scan_mcap_data(buf, size, scan)
+        magic = file.read(len(_MCAP_MAGIC))
+        if magic != _MCAP_MAGIC[: len(magic)]:
+            raise _UnrecoverableError(f'{storage_file.name} is not an mcap file')
+        yield from _scan_mcap_data(file, os.fstat(file.fileno()).st_size, scan)
 
 
-def _scan_mcap_data(buf: mmap.mmap, size: int, scan: _Scan) -> Iterator[_Event]:
-    """Yield the records after the magic, to the data end or the first damaged one."""
+def _scan_mcap_data(file: BinaryIO, size: int, scan: _Scan) -> Iterator[_Event]:
+    """Yield the records after the magic, to the data end or the first damaged one.
+
+    One record in memory at a time (a chunk at most).
+    """
     schemas: dict[int, tuple[str, MessageDefinition]] = {}
     topics: dict[int, _Topic] = {}
-    intact = len(_MCAP_MAGIC) if size >= len(_MCAP_MAGIC) else 0
+    intact = file.tell()
     closed = False
-    for op, body, end in _records(buf, len(_MCAP_MAGIC), size):
-        try:
-            if op == 0x06:
-                events = list(_chunk(buf, body, end, schemas, topics))
-            elif op in (0x03, 0x04, 0x05):
-                events = list(_record(op, buf, body, end, schemas, topics))
-            elif op in (0x0F, 0x02):  # data end, footer: what follows is the summary
-                closed = True
-                break
-            elif 0x01 <= op <= 0x0E:  # header, indexes, attachments, metadata
-                events = []
-            else:
-                break
-        except _DamagedError:
+    while size - intact >= _RECORD.size:
+        op, length = _RECORD.unpack(file.read(_RECORD.size))
+        end = intact + _RECORD.size + length
+        if end > size or not 0x01 <= op <= 0x0F:  # cut off, or not a record: garbage
             break
-        yield from events
+        if op in (0x0F, 0x02):  # data end, footer: what follows is the summary
+            closed = True
+            break
+        if 0x03 <= op <= 0x06:
+            body = file.read(length)
+            try:
+                if op == 0x06:
+                    events = _chunk(body, schemas, topics)
+                else:
+                    events = list(_record(op, body, 0, length, schemas, topics))
+            except _DamagedError:
+                break
+            yield from events
+        else:  # header, indexes, attachments, metadata
+            file.seek(end)
         intact = end
     if not closed:
         scan.problems.append('mcap file not closed')
@@ -349,14 +351,12 @@ def _scan_mcap_data(buf: mmap.mmap, size: int, scan: _Scan) -> Iterator[_Event]:
 
 
 def _chunk(
-    buf: mmap.mmap,
-    body: int,
-    end: int,
+    body: bytes,
     schemas: dict[int, tuple[str, MessageDefinition]],
     topics: dict[int, _Topic],
-) -> Iterator[_Event]:
+) -> list[_Event]:
     """Return a chunk's records, all checked: a damaged chunk contributes nothing."""
-    cursor = _Cursor(buf, body, end)
+    cursor = _Cursor(body, 0, len(body))
     start_time, end_time, raw_size, crc = _CHUNK.unpack(cursor.take(_CHUNK.size))
     compression = cursor.string()
     data = cursor.take(cursor.uint(8))
@@ -376,12 +376,12 @@ def _chunk(
         pos = stop
     if pos != len(raw):
         raise _DamagedError
-    return iter(events)
+    return events
 
 
 def _record(
     op: int,
-    buf: bytes | mmap.mmap,
+    buf: bytes,
     body: int,
     end: int,
     schemas: dict[int, tuple[str, MessageDefinition]],
