@@ -4,7 +4,8 @@ The states come from the grasp model (:mod:`grasp_states`): the fingertips touch
 and roll with it. Every check is independent of the filter's own assembly: barrier rates
 against finite differences along the constrained dynamics, barrier signs against the hand's
 kinematics and the cone geometry, rows against the formulas written out here, optima
-against daqp, feasibility against a linear program.
+against two exact solvers (daqp and the Goldfarb-Idnani method), feasibility against a
+linear program.
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import dataclasses
 import math
 from xml.etree import ElementTree
 
-import daqp
 from grasp_states import (
     CONFIG_DIR,
     Configuration,
@@ -27,6 +27,7 @@ from grasp_states import (
 )
 import numpy as np
 import pytest
+from qp_reference import hard_optimum, relaxed_optimum
 import scipy.linalg
 from scipy.optimize import linprog
 
@@ -38,6 +39,7 @@ from grasp_safety_filter.control.constraints import (
     JointLimitBarrier,
 )
 from grasp_safety_filter.control.least_distance import LeastDistanceStatus
+from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
@@ -198,33 +200,21 @@ def chebyshev_radius(A, lower, effort):
     return result.x[:m], float(result.x[m])
 
 
-def daqp_optimum(A, lower, u_nom, effort):
-    """daqp: ``(feasible, u*)`` of ``min 1/2 ||u - u_nom||^2 s.t. A u >= lower, |u| <= effort``."""
-    m = u_nom.size
-    upper = np.concatenate((effort, np.full(lower.size, 1e30)))
-    lower = np.concatenate((-effort, lower))
-    x, _, flag, _ = daqp.solve(np.eye(m), -u_nom, np.ascontiguousarray(A), upper, lower)
-    assert flag in (1, -1), f'daqp exit flag {flag}'  # optimal or infeasible, nothing else
-    return flag == 1, np.asarray(x)
+def reference_optimum(A, lower, u_nom, effort):
+    """``(feasible, u*)`` of ``min 1/2 ||u - u_nom||^2 s.t. A u >= lower, |u| <= effort``.
+
+    daqp and the Goldfarb-Idnani method, both cold, must agree (:mod:`qp_reference`).
+    """
+    return hard_optimum(A, lower, u_nom, -effort, effort)
 
 
-def daqp_relaxed_optimum(A, lower, weights, u_nom, effort):
-    """Solve the relaxed QP, written out from its documentation (:mod:`qp`), with daqp.
+def reference_relaxed_optimum(A, lower, weights, u_nom, effort):
+    """Solve the relaxed QP, written out from its documentation (:mod:`qp`), exactly.
 
     ``min 1/2 ||u - u_nom||^2 + 1/2 sum_r w_r s_r^2`` s.t. ``A_r u + ||A_r|| s_r >= lower_r``,
-    ``|u| <= effort``, ``s >= 0``.
+    ``|u| <= effort``, ``s >= 0`` (daqp and the Goldfarb-Idnani method agree).
     """
-    m, k = u_nom.size, lower.size
-    norms = np.linalg.norm(A, axis=1)
-    d = np.where(norms < 1e-9, 1.0, norms)
-    H = np.diag(np.concatenate((np.ones(m), weights)))
-    f = np.concatenate((-u_nom, np.zeros(k)))
-    C = np.hstack((A, np.diag(d)))
-    upper = np.concatenate((effort, np.full(k, 1e30), np.full(k, 1e30)))
-    low = np.concatenate((-effort, np.zeros(k), lower))
-    x, _, flag, _ = daqp.solve(H, f, np.ascontiguousarray(C), upper, low)
-    assert flag == 1, flag
-    return np.asarray(x[:m])
+    return relaxed_optimum(A, lower, weights, u_nom, -effort, effort)[0]
 
 
 def family_of(name):
@@ -511,16 +501,20 @@ def test_joint_and_workspace_rows_act_through_the_objects_six_dofs(model, config
         assert np.abs(A[~motion] @ squeeze).max() > 1e-3 * np.abs(A[~motion]).max()
 
 
+@pytest.mark.parametrize('solver', sorted(BACKENDS))
 @pytest.mark.parametrize('config_name', list(CONFIGS))
-def test_random_real_states_rows_hold_nominal_kept_optimum_matches_daqp(model, config_name):
-    """On random grasps: every row of u* holds, u_nom kept when feasible, daqp's optimum.
+def test_random_real_states_rows_hold_nominal_kept_optimum_matches_the_reference(
+    model, config_name, solver
+):
+    """On random grasps: every row of u* holds, u_nom kept when feasible, the exact optimum.
 
     u_nom is drawn around the centre of the largest ball inside the feasible set (an LP):
     within the ball it is feasible, beyond it usually not; a quarter of the draws are wide
     (box saturation). Where the LP finds no ball the hard QP is infeasible: the filter must
-    relax, stay finite and inside the box, and match daqp on the relaxed QP.
+    relax, stay finite and inside the box, and match the exact relaxed optimum. Every
+    backend (``qp.solver``) on the same draws.
     """
-    config = CONFIGS[config_name]
+    config = dataclasses.replace(CONFIGS[config_name], solver=solver)
     filter_ = SafetyFilter.from_config(model, config)
     effort = np.asarray(model.effort_limits, dtype=float)
     rng = np.random.default_rng(43 + len(config_name))
@@ -550,8 +544,8 @@ def test_random_real_states_rows_hold_nominal_kept_optimum_matches_daqp(model, c
 
         residual = independent_residuals(model, config, state, u)[1]
         nominal_residual = independent_residuals(model, config, state, u_nom)[1]
-        feasible, u_reference = daqp_optimum(A, lower, u_nom, effort)
-        # The LP and daqp agree on feasibility away from the boundary case radius = 0.
+        feasible, u_reference = reference_optimum(A, lower, u_nom, effort)
+        # The LP and the references agree on feasibility away from the boundary case radius = 0.
         if abs(radius) > 1e-9:
             assert feasible == (radius > 0.0), (where, radius)
         if feasible:
@@ -572,7 +566,9 @@ def test_random_real_states_rows_hold_nominal_kept_optimum_matches_daqp(model, c
             assert result.relaxed and result.status is FilterStatus.RELAXED, where
             violated = {family_of(names[i]) for i in np.flatnonzero(residual < -1e-6)}
             assert violated and set(result.relaxed_families) == violated, where
-            u_relaxed = daqp_relaxed_optimum(A, lower, row_weights(config, names), u_nom, effort)
+            u_relaxed = reference_relaxed_optimum(
+                A, lower, row_weights(config, names), u_nom, effort
+            )
             assert np.abs(u - u_relaxed).max() <= 1e-5, (where, u - u_relaxed)
     assert sum(counts.values()) >= 200
     assert counts['nominal feasible'] >= 50, counts
@@ -687,14 +683,16 @@ INFEASIBLE_CASES = {
 }
 
 
+@pytest.mark.parametrize('solver', sorted(BACKENDS))
 @pytest.mark.parametrize('case', list(INFEASIBLE_CASES))
-def test_an_infeasible_real_state_is_relaxed_and_the_families_named(model, case):
+def test_an_infeasible_real_state_is_relaxed_and_the_families_named(model, case, solver):
     """Assumption 5 fails (an LP proves no torque in the box satisfies every row).
 
     The filter relaxes: u finite and inside the box, and the families named are exactly
     those with a row violated at u (evaluated here), including the one forced to give.
     """
     build, config, given_up = INFEASIBLE_CASES[case]
+    config = dataclasses.replace(config, solver=solver)
     model, c = build(model)
     state = c.state(model)
     assert np.all(np.abs(state.penetration) < 1e-12)  # a grasp: every fingertip on the cube
@@ -704,7 +702,7 @@ def test_an_infeasible_real_state_is_relaxed_and_the_families_named(model, case)
     _, radius = chebyshev_radius(A, lower, effort)
     assert radius < -1e-6, radius
     for u_nom in (np.zeros(model.n_joints), state.gravity_torque, np.full(model.n_joints, 10.0)):
-        feasible, _ = daqp_optimum(A, lower, u_nom, effort)
+        feasible, _ = reference_optimum(A, lower, u_nom, effort)
         assert not feasible
         result = filter_.solve(state, u_nom)
         assert result.relaxed and result.status is FilterStatus.RELAXED
@@ -716,7 +714,7 @@ def test_an_infeasible_real_state_is_relaxed_and_the_families_named(model, case)
         )
         assert violated and result.relaxed_families == violated
         assert result.max_violation == pytest.approx(-residual.min(), rel=1e-9)
-        u_relaxed = daqp_relaxed_optimum(A, lower, row_weights(config, names), u_nom, effort)
+        u_relaxed = reference_relaxed_optimum(A, lower, row_weights(config, names), u_nom, effort)
         assert np.abs(result.u - u_relaxed).max() <= 1e-5, result.u - u_relaxed
         if given_up is not None:
             assert residual[names.index(given_up)] < -1e-6
@@ -748,7 +746,7 @@ def test_a_run_of_infeasible_ticks_gives_each_ticks_own_relaxed_optimum(model):
         if tick:
             assert result.iterations == 0, tick  # settled without OSQP
         assert np.abs(result.u - memoryless.u).max() <= 1e-9, tick
-        u_relaxed = daqp_relaxed_optimum(A, lower, weights, u_nom, effort)
+        u_relaxed = reference_relaxed_optimum(A, lower, weights, u_nom, effort)
         assert np.abs(result.u - u_relaxed).max() <= 1e-5, tick
 
 
@@ -765,7 +763,7 @@ def test_a_relaxed_tick_falls_back_to_osqp_when_the_active_set_start_fails(model
     names, A, lower = independent_rows(model, config, state)
     effort = np.asarray(model.effort_limits, dtype=float)
     filter_ = SafetyFilter.from_config(model, config)
-    exactly = filter_._solve_relaxed_exactly
+    exactly = filter_.backend._relaxed_exactly
     calls = []
 
     def first_start_fails(u_nom, guess):
@@ -775,12 +773,12 @@ def test_a_relaxed_tick_falls_back_to_osqp_when_the_active_set_start_fails(model
             return dataclasses.replace(solution, status=LeastDistanceStatus.ITERATION_LIMIT)
         return solution
 
-    monkeypatch.setattr(filter_, '_solve_relaxed_exactly', first_start_fails)
+    monkeypatch.setattr(filter_.backend, '_relaxed_exactly', first_start_fails)
     u_nom = state.gravity_torque
     result = filter_.solve(state, u_nom)
     assert len(calls) == 2 and calls[0]  # the active-set start, then OSQP's
     assert result.status is FilterStatus.RELAXED and result.iterations > 0
-    u_relaxed = daqp_relaxed_optimum(A, lower, row_weights(config, names), u_nom, effort)
+    u_relaxed = reference_relaxed_optimum(A, lower, row_weights(config, names), u_nom, effort)
     assert np.abs(result.u - u_relaxed).max() <= 1e-5
 
 
@@ -806,7 +804,7 @@ def test_the_paper_runs_first_relaxed_tick_is_a_conflict_of_joint_and_workspace_
     def feasible(*families):
         config = only(*families)
         _, A, lower = independent_rows(model, config, state)
-        return daqp_optimum(A, lower, tick.u_nom, effort)[0]
+        return reference_optimum(A, lower, tick.u_nom, effort)[0]
 
     assert not feasible('joint_limits', 'fingertip_workspace')
     assert not feasible('no_slip', 'joint_limits', 'fingertip_workspace')

@@ -7,6 +7,7 @@ import re
 import daqp
 import numpy as np
 import pytest
+from qp_reference import hard_optimum
 import scipy.sparse as sp
 from synthetic_state import synthetic_state, SyntheticHand, with_fields
 
@@ -18,6 +19,7 @@ from grasp_safety_filter.control.constraints import (
     stack_constraints,
 )
 from grasp_safety_filter.control.qp import SafetyQP
+from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     MEASURED_STATE_FIELDS,
@@ -31,6 +33,7 @@ from grasp_safety_filter.model.affine import AffineMap
 HAND = SyntheticHand()
 M = HAND.n_joints
 CERTIFIED = {FilterStatus.NOMINAL, FilterStatus.SOLVED, FilterStatus.SOLVED_ACTIVE_SET}
+SOLVERS = sorted(BACKENDS)
 
 CONFIGS = {
     'paper': SafetyFilterConfig(),
@@ -71,12 +74,9 @@ def independent_rows(config, state, hand=HAND):
 
 
 def reference_optimum(rows, u_nom, effort):
-    """daqp: (feasible, u*) of min 1/2 ||u - u_nom||^2 s.t. rows, |u| <= effort."""
-    m = u_nom.size
-    upper = np.concatenate((np.full(m, effort), np.full(rows.lower.size, 1e30)))
-    lower = np.concatenate((np.full(m, -effort), rows.lower))
-    x, _, flag, _ = daqp.solve(np.eye(m), -u_nom, np.ascontiguousarray(rows.A), upper, lower)
-    return flag == 1, x
+    """(feasible, u*) of min 1/2 ||u - u_nom||^2 s.t. rows, |u| <= effort (daqp and G-I agree)."""
+    box = np.full(u_nom.size, effort)
+    return hard_optimum(rows.A, rows.lower, u_nom, -box, box)
 
 
 def strictly_feasible_point(rows, effort, rng):
@@ -97,9 +97,10 @@ def check_invariants(result, filter_):
 # -- optimality on random states -----------------------------------------------------------
 
 
+@pytest.mark.parametrize('solver', SOLVERS)
 @pytest.mark.parametrize('name', list(CONFIGS))
-def test_random_states_rows_hold_nominal_kept_optimum_matches_daqp(name):
-    config = CONFIGS[name]
+def test_random_states_rows_hold_nominal_kept_optimum_matches_the_reference(name, solver):
+    config = dataclasses.replace(CONFIGS[name], solver=solver)
     filter_ = SafetyFilter.from_config(HAND, config)
     rng = np.random.default_rng(sum(map(ord, name)))
     counts = {'feasible': 0, 'active': 0, 'nominal': 0, 'infeasible': 0}
@@ -140,9 +141,10 @@ def test_random_states_rows_hold_nominal_kept_optimum_matches_daqp(name):
     assert counts['nominal'] >= 50 and counts['active'] >= 100, counts
 
 
-def test_warm_started_sequence_matches_daqp_at_every_tick():
+@pytest.mark.parametrize('solver', SOLVERS)
+def test_warm_started_sequence_matches_the_reference_at_every_tick(solver):
     """Slowly varying states (fixed model terms, moving joints and contacts) and u_nom."""
-    config = CONFIGS['paper']
+    config = dataclasses.replace(CONFIGS['paper'], solver=solver)
     filter_ = SafetyFilter.from_config(HAND, config)
     lo, hi = HAND.joint_lower_limits, HAND.joint_upper_limits
     q0 = lo + 0.5 * (hi - lo)
@@ -167,9 +169,10 @@ def test_warm_started_sequence_matches_daqp_at_every_tick():
 # -- infeasible states: relaxation ---------------------------------------------------------
 
 
-def only(*families):
+def only(*families, solver='osqp'):
     return dataclasses.replace(
         CONFIGS['paper'],
+        solver=solver,
         no_slip_enabled='no_slip' in families,
         joint_limits_enabled='joint_limits' in families,
         fingertip_workspace_enabled='fingertip_workspace' in families,
@@ -215,13 +218,14 @@ INFEASIBLE_CASES = {
 }
 
 
+@pytest.mark.parametrize('solver', SOLVERS)
 @pytest.mark.parametrize('family', list(INFEASIBLE_CASES))
-def test_an_infeasible_family_is_relaxed_and_named(family):
+def test_an_infeasible_family_is_relaxed_and_named(family, solver):
     rng = np.random.default_rng(5)
     make, row = INFEASIBLE_CASES[family]
     state = synthetic_state(rng, WEAK, speed=0.0)
     state = with_fields(state, **make(state))
-    filter_ = SafetyFilter.from_config(WEAK, only(family))
+    filter_ = SafetyFilter.from_config(WEAK, only(family, solver=solver))
     result = filter_.solve(state, rng.normal(size=M))
     check_invariants(result, filter_)
     assert result.status is FilterStatus.RELAXED and result.relaxed
@@ -269,10 +273,11 @@ def conflicting_state(rng):
     )
 
 
+@pytest.mark.parametrize('solver', SOLVERS)
 @pytest.mark.parametrize('joint_weight,workspace_weight', [(1e6, 1e3), (1e3, 1e6)])
-def test_relaxation_gives_up_the_lower_weighted_family(joint_weight, workspace_weight):
+def test_relaxation_gives_up_the_lower_weighted_family(joint_weight, workspace_weight, solver):
     config = dataclasses.replace(
-        only('joint_limits', 'fingertip_workspace'),
+        only('joint_limits', 'fingertip_workspace', solver=solver),
         joint_limits_weight=joint_weight,
         fingertip_workspace_weight=workspace_weight,
     )
@@ -293,8 +298,16 @@ def test_relaxation_gives_up_the_lower_weighted_family(joint_weight, workspace_w
 
 
 class UntouchableSolver:
-    def __getattr__(self, name):
-        raise AssertionError(f'the QP solver was used ({name}) before the input was checked')
+    """A backend that must not solve: the tick is settled before the QP."""
+
+    def solve(self, problem):
+        raise AssertionError('the QP backend solved a problem before the input was checked')
+
+    def warm_start(self, solution):
+        pass
+
+    def reset(self):
+        pass
 
 
 def nan_at(array, index, value=np.nan):
@@ -347,8 +360,7 @@ DERIVED_CASES = [case for case in NON_FINITE_CASES if case not in MEASURED_CASES
 def test_a_non_finite_measured_state_raises_naming_the_field_before_the_qp(field, change):
     rng = np.random.default_rng(9)
     filter_ = SafetyFilter.from_config(HAND, CONFIGS['paper'])
-    filter_._hard_solver = UntouchableSolver()
-    filter_._relaxed_solver = UntouchableSolver()
+    filter_.backend = UntouchableSolver()
     state = synthetic_state(rng, HAND)
     with pytest.raises(ValueError, match=f'state\\.{field.replace(".", "[.]")}'):
         filter_.solve(with_fields(state, **change(state)), np.zeros(M))
@@ -362,8 +374,7 @@ def test_a_non_finite_model_term_falls_back_before_the_qp(field, change):
     state = synthetic_state(rng, HAND, speed=0.0)
     good = filter_.solve(state, np.zeros(M))
     assert good.status in CERTIFIED
-    filter_._hard_solver = UntouchableSolver()
-    filter_._relaxed_solver = UntouchableSolver()
+    filter_.backend = UntouchableSolver()
     result = filter_.solve(with_fields(state, **change(state)), np.ones(M))
     check_invariants(result, filter_)
     assert result.status is FilterStatus.FALLBACK_LAST_GOOD
@@ -394,7 +405,7 @@ def test_a_non_finite_field_that_no_enabled_family_reads_is_ignored():
 )
 def test_a_bad_nominal_torque_raises_before_the_qp(u_nom, message):
     filter_ = SafetyFilter.from_config(HAND, CONFIGS['paper'])
-    filter_._hard_solver = UntouchableSolver()
+    filter_.backend = UntouchableSolver()
     with pytest.raises(ValueError, match=message):
         filter_.solve(synthetic_state(np.random.default_rng(11), HAND), u_nom)
 
@@ -546,6 +557,7 @@ def test_parameter_names_and_defaults():
         'osqp.eps_rel',
         'osqp.max_iter',
         'osqp.polish',
+        'qp.solver',
     }
     defaults = {spec.name: spec.default for spec in SAFETY_FILTER_QP_PARAMETERS}
     assert SafetyFilterConfig().to_parameters() == defaults
@@ -643,14 +655,24 @@ def relaxed_objective(qp, u, u_nom):
     return 0.5 * np.sum((u - u_nom) ** 2) + 0.5 * np.sum(qp.row_weights * slack**2)
 
 
-def test_relaxed_torque_is_the_relaxed_qps_optimum():
-    """Check against daqp on the relaxed QP's own matrices (slacks as variables).
+@pytest.mark.parametrize('solver', SOLVERS)
+def test_relaxed_torque_is_the_relaxed_qps_optimum(solver):
+    """Check against daqp on the relaxed QP's OSQP-form matrices (slacks as variables).
 
     The objective must agree to round-off; the torque to 1e-5 unless the violations are so
     large (> 1e6, objective ~1e15) that double precision no longer pins u down that well.
     """
     rng = np.random.default_rng(18)
-    filter_ = SafetyFilter.from_config(HAND, CONFIGS['paper'])
+    config = dataclasses.replace(CONFIGS['paper'], solver=solver)
+    filter_ = SafetyFilter.from_config(HAND, config)
+    k = len(filter_.row_names)
+    relaxed_qp = SafetyQP(
+        M,
+        k,
+        -HAND.effort * np.ones(M),
+        HAND.effort * np.ones(M),
+        row_weights=filter_.relaxed_problem.slack_weights,
+    )
     checked = 0
     for _ in range(40):
         state = synthetic_state(rng, HAND, speed=0.1)
@@ -658,11 +680,12 @@ def test_relaxed_torque_is_the_relaxed_qps_optimum():
         result = filter_.solve(state, u_nom)
         if result.status is not FilterStatus.RELAXED:
             continue
-        P, q, C, lower, upper = filter_.relaxed_qp.dense()
+        relaxed_qp.update(filter_.problem.A, filter_.problem.lower, u_nom)
+        P, q, C, lower, upper = relaxed_qp.dense()
         x, _, flag, _ = daqp.solve(P, q, C, np.minimum(upper, 1e30), lower)
         assert flag == 1
-        ours = relaxed_objective(filter_.relaxed_qp, result.u, u_nom)
-        reference = relaxed_objective(filter_.relaxed_qp, x[:M], u_nom)
+        ours = relaxed_objective(relaxed_qp, result.u, u_nom)
+        reference = relaxed_objective(relaxed_qp, x[:M], u_nom)
         assert ours <= reference * (1.0 + 1e-9)
         if result.max_violation < 1e6:
             assert np.abs(result.u - x[:M]).max() <= 1e-5

@@ -1,0 +1,134 @@
+"""The safety filter's configuration: constraints, barriers, relaxation weights, QP solver."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from grasp_safety_filter.control.class_k import ClassKFunction
+from grasp_safety_filter.io.parameters import flatten_parameters
+from grasp_safety_filter.io.schemas import SAFETY_FILTER_QP_PARAMETERS
+
+#: Config field of each parameter.
+_FIELDS: dict[str, str] = {
+    'no_slip.enabled': 'no_slip_enabled',
+    'no_slip.pyramid_faces': 'pyramid_faces',
+    'no_slip.normal_force_margin': 'normal_force_margin',
+    'joint_limits.enabled': 'joint_limits_enabled',
+    'fingertip_workspace.enabled': 'fingertip_workspace_enabled',
+    'barrier.alpha1.kind': 'alpha1_kind',
+    'barrier.alpha1.gain': 'alpha1_gain',
+    'barrier.alpha2.kind': 'alpha2_kind',
+    'barrier.alpha2.gain': 'alpha2_gain',
+    'relaxation.no_slip_weight': 'no_slip_weight',
+    'relaxation.joint_limits_weight': 'joint_limits_weight',
+    'relaxation.fingertip_workspace_weight': 'fingertip_workspace_weight',
+    'osqp.eps_abs': 'eps_abs',
+    'osqp.eps_rel': 'eps_rel',
+    'osqp.max_iter': 'max_iter',
+    'osqp.polish': 'polish',
+    'qp.solver': 'solver',
+}
+
+
+@dataclass(frozen=True)
+class SafetyFilterConfig:
+    """Which constraints, how they decay, how they relax, which QP solver (see the parameters).
+
+    Attributes:
+        no_slip_enabled: Enforce the friction pyramids.
+        pyramid_faces: Pyramid faces l_s (>= 3).
+        normal_force_margin: Pyramid margin eps, N (>= 0).
+        joint_limits_enabled: Enforce the joint-limit barriers.
+        fingertip_workspace_enabled: Enforce the fingertip-workspace barriers.
+        alpha1_kind, alpha1_gain: alpha_1 (``"cubic"`` or ``"linear"``, gain > 0).
+        alpha2_kind, alpha2_gain: alpha_2 (same choices).
+        no_slip_weight, joint_limits_weight, fingertip_workspace_weight: Slack weights of
+            the relaxed QP (> 0), per (N·m)² of torque-space violation.
+        eps_abs, eps_rel: OSQP tolerances (> 0).
+        max_iter: OSQP iteration limit (>= 1).
+        polish: OSQP solution polishing.
+        solver: The QP backend (a key of
+            :data:`~grasp_safety_filter.control.qp_solvers.BACKENDS`).
+    """
+
+    no_slip_enabled: bool = True
+    pyramid_faces: int = 8
+    normal_force_margin: float = 0.01
+    joint_limits_enabled: bool = True
+    fingertip_workspace_enabled: bool = True
+    alpha1_kind: str = 'cubic'
+    alpha1_gain: float = 1.0
+    alpha2_kind: str = 'cubic'
+    alpha2_gain: float = 1.0
+    no_slip_weight: float = 1e6
+    joint_limits_weight: float = 1e6
+    fingertip_workspace_weight: float = 1e3
+    eps_abs: float = 1e-4
+    eps_rel: float = 1e-4
+    max_iter: int = 50
+    polish: bool = False
+    solver: str = 'osqp'
+
+    def __post_init__(self) -> None:
+        for spec in SAFETY_FILTER_QP_PARAMETERS:
+            name = _FIELDS[spec.name]
+            object.__setattr__(self, name, spec.validate(getattr(self, name)))
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any]) -> SafetyFilterConfig:
+        """Read the filter's parameters; missing ones take their defaults.
+
+        Args:
+            params: Values by dotted name (``{"no_slip.pyramid_faces": 8, ...}``) or as
+                nested mappings (``{"no_slip": {"pyramid_faces": 8}}``); other names are
+                ignored.
+
+        Raises:
+            ParameterError: A value has the wrong type or is out of range; the message names
+                the parameter, what was expected and what was received.
+        """
+        flat = flatten_parameters(params)
+        # Validated (and converted) by __post_init__, in the same order.
+        return cls(
+            **{
+                _FIELDS[spec.name]: flat[spec.name]
+                for spec in SAFETY_FILTER_QP_PARAMETERS
+                if spec.name in flat
+            }
+        )
+
+    def to_parameters(self) -> dict[str, Any]:
+        """Return the configuration as ``{dotted parameter name: value}``."""
+        return {
+            spec.name: getattr(self, _FIELDS[spec.name]) for spec in SAFETY_FILTER_QP_PARAMETERS
+        }
+
+    @property
+    def alpha1(self) -> ClassKFunction:
+        """alpha_1 as a function."""
+        return ClassKFunction(self.alpha1_kind, self.alpha1_gain)
+
+    @property
+    def alpha2(self) -> ClassKFunction:
+        """alpha_2 as a function."""
+        return ClassKFunction(self.alpha2_kind, self.alpha2_gain)
+
+    def osqp_settings(self) -> dict[str, Any]:
+        """Keyword settings for ``osqp.OSQP.setup``."""
+        return {
+            'verbose': False,
+            'eps_abs': self.eps_abs,
+            'eps_rel': self.eps_rel,
+            'max_iter': self.max_iter,
+            'polishing': self.polish,
+            'warm_starting': True,
+            # Check convergence every 5 iterations instead of OSQP's 25: the warm-started
+            # problems converge in a few, and the exact step finishes those that do not.
+            'check_termination': 5,
+        }
+
+    def solver_settings(self) -> dict[str, Any]:
+        """Return the chosen backend's settings (OSQP's; none for daqp, which has its own)."""
+        return self.osqp_settings() if self.solver == 'osqp' else {}

@@ -1,0 +1,68 @@
+"""What one safety-filter step returns: u*, how it was obtained, margins and active rows."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import Enum
+
+import numpy as np
+
+from grasp_safety_filter.control.margins import Margins
+
+
+class FilterStatus(str, Enum):
+    """How :meth:`SafetyFilter.solve` obtained u* (the value is the status string)."""
+
+    NOMINAL = 'nominal'
+    """u_nom satisfies every row and the box: ``u* = u_nom``, no QP solved."""
+    SOLVED = 'solved'
+    """The hard QP's optimum as the backend found it: daqp's, or with OSQP its certified
+    answer or the optimum on a guessed active set (the previous tick's, with no OSQP call
+    and ``iterations == 0``, or OSQP's) satisfying the KKT conditions."""
+    SOLVED_ACTIVE_SET = 'solved_active_set'
+    """The hard QP's optimum, reached by an exact active-set refinement that added or
+    dropped rows of the backend's guess (OSQP)."""
+    RELAXED = 'relaxed'
+    """The hard QP is infeasible: the relaxed QP's solution."""
+    FALLBACK_LAST_GOOD = 'fallback_last_good'
+    """No QP answer: the last solved or nominal u*, clipped to the box."""
+    FALLBACK_NOMINAL = 'fallback_nominal'
+    """No QP answer and no earlier u*: u_nom clipped to the box."""
+
+
+@dataclass(frozen=True)
+class FilterResult:
+    """The outcome of one filter step.
+
+    Attributes:
+        u: The filtered torque u*, shape (m,), N·m: finite, inside the actuator box.
+        status: How it was obtained (:class:`FilterStatus`; compares equal to its string).
+        relaxed: True when u* is not certified to satisfy every row (status ``relaxed`` or
+            a fallback); False for ``nominal``, ``solved`` and ``solved_active_set``.
+        relaxed_families: Families with a row violated at u* by more than
+            ``FEASIBILITY_TOLERANCE`` (:mod:`~grasp_safety_filter.control.qp_solvers`), in
+            stack order.
+        margins: Barrier value h per row name (a read-only :class:`Margins` mapping): rad
+            (joint limits, fingertip workspace), N (no slip, at the forces ``f_c(u*)``),
+            N·m (actuator limits, at u*).
+        active: Names of the rows with ``A u* - lower <= ACTIVE_TOLERANCE`` (violated rows
+            included) and of the actuator bounds u* touches.
+        solve_time: Wall time spent in the QP backend (the hard problem, the relaxed one
+            when needed), s; 0 when no QP was solved.
+        iterations: The backend's solver iterations (both QPs when relaxed); 0 when it was
+            not called (no QP solved; OSQP: the previous tick's active set certified).
+        active_set_steps: Add/drop steps of an exact active-set refinement after the
+            solver (OSQP's backend; 0 when its guess was optimal).
+        max_violation: ``max(0, max_r (lower_r - A_r u*))``, in the rows' own units.
+    """
+
+    u: np.ndarray
+    status: FilterStatus
+    relaxed: bool
+    relaxed_families: tuple[str, ...]
+    margins: Margins = field(repr=False)
+    active: tuple[str, ...]
+    solve_time: float
+    iterations: int
+    active_set_steps: int
+    max_violation: float

@@ -1,0 +1,78 @@
+"""Exact reference optima of the filter's QPs, written out from their documentation.
+
+Two independent exact solvers answer each problem: daqp's one-shot ``daqp.solve`` (cold,
+dense, its own dual active-set code) and the package's Goldfarb-Idnani method
+(:func:`solve_least_distance`, cold). They must agree with each other, so a backend built
+on either one is still checked against the other.
+"""
+
+import daqp
+import numpy as np
+
+from grasp_safety_filter.control.least_distance import LeastDistanceStatus, solve_least_distance
+
+#: How far the two references may differ (N·m) before the case counts as ill-posed.
+REFERENCE_AGREEMENT = 1e-6
+
+_INF = 1e30
+
+
+def _box_rows(u_min, u_max):
+    m = u_min.size
+    return np.vstack((np.eye(m), -np.eye(m))), np.concatenate((u_min, -u_max))
+
+
+def hard_optimum(A, lower, u_nom, u_min, u_max):
+    """``(feasible, u*)`` of ``min 1/2 ||u - u_nom||^2 s.t. A u >= lower, u_min <= u <= u_max``.
+
+    Raises AssertionError when the two references disagree.
+    """
+    m = u_nom.size
+    upper = np.concatenate((u_max, np.full(lower.size, _INF)))
+    low = np.concatenate((u_min, lower))
+    x, _, flag, _ = daqp.solve(np.eye(m), -u_nom, np.ascontiguousarray(A), upper, low)
+    assert flag in (1, -1), f'daqp exit flag {flag}'
+    B, c = _box_rows(u_min, u_max)
+    exact = solve_least_distance(u_nom, np.vstack((A, B)), np.concatenate((lower, c)))
+    assert exact.status is not LeastDistanceStatus.ITERATION_LIMIT
+    feasible = flag == 1
+    assert feasible == (exact.status is LeastDistanceStatus.OPTIMAL), 'references disagree'
+    if feasible:
+        gap = np.abs(np.asarray(x) - exact.u).max()
+        assert gap <= REFERENCE_AGREEMENT * (1.0 + np.abs(u_nom).max()), gap
+    return feasible, np.asarray(x)
+
+
+def relaxed_optimum(A, lower, weights, u_nom, u_min, u_max):
+    """``u*`` of the relaxed QP (slack ``s_r >= 0`` per row, normalised by ``||A_r||``).
+
+    ``min 1/2 ||u - u_nom||^2 + 1/2 sum_r w_r s_r^2`` s.t. ``A_r u + d_r s_r >= lower_r``
+    (``d_r = ||A_r||``, 1 below 1e-9), ``u_min <= u <= u_max``, ``s >= 0``.
+    Returns ``(u*, s*)``.
+    """
+    m, k = u_nom.size, lower.size
+    norms = np.linalg.norm(A, axis=1)
+    d = np.where(norms < 1e-9, 1.0, norms)
+    H = np.diag(np.concatenate((np.ones(m), weights)))
+    f = np.concatenate((-u_nom, np.zeros(k)))
+    C = np.hstack((A, np.diag(d)))
+    upper = np.concatenate((u_max, np.full(k, _INF), np.full(k, _INF)))
+    low = np.concatenate((u_min, np.zeros(k), lower))
+    x, _, flag, _ = daqp.solve(H, f, np.ascontiguousarray(C), upper, low)
+    assert flag == 1, flag
+    # The same problem in (u, sqrt(w) s): a least-distance problem.
+    B, c = _box_rows(u_min, u_max)
+    rows = np.block(
+        [
+            [A, np.diag(d / np.sqrt(weights))],
+            [B, np.zeros((2 * m, k))],
+            [np.zeros((k, m)), np.eye(k)],
+        ]
+    )
+    exact = solve_least_distance(
+        np.concatenate((u_nom, np.zeros(k))), rows, np.concatenate((lower, c, np.zeros(k)))
+    )
+    assert exact.status is LeastDistanceStatus.OPTIMAL
+    gap = np.abs(np.asarray(x[:m]) - exact.u[:m]).max()
+    assert gap <= REFERENCE_AGREEMENT * (1.0 + np.abs(u_nom).max()), gap
+    return np.asarray(x[:m]), np.asarray(x[m:])
