@@ -339,12 +339,18 @@ def parse_parameter_value(text: str) -> Any:
     """
     try:
         value = yaml.load(text, Loader=_RosYamlLoader)
+        if isinstance(value, dict) or not text.strip():
+            raise ParameterError(f'expected a value or a list of values, got {text!r}')
+        if isinstance(value, list):
+            return [v if isinstance(v, bool | int | float | str) else str(v) for v in value]
     except yaml.YAMLError as error:
         raise ParameterError(f'expected a YAML value, got {text!r}: {error}') from None
-    if isinstance(value, dict) or not text.strip():
-        raise ParameterError(f'expected a value or a list of values, got {text!r}')
-    if isinstance(value, list):
-        return [v if isinstance(v, bool | int | float | str) else str(v) for v in value]
+    except UnicodeError:
+        raise ParameterError(f'expected UTF-8 text, got {text!r}') from None
+    except RecursionError:
+        raise ParameterError(
+            f'expected a value or a list of values, got {text[:40]!r}... nested too deeply'
+        ) from None
     return value if isinstance(value, bool | int | float | str) else text.strip()
 
 
