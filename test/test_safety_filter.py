@@ -423,10 +423,11 @@ def scaled_field(value, factor):
     return np.asarray(value) * factor
 
 
+@pytest.mark.parametrize('solver', SOLVERS)
 @pytest.mark.parametrize('factor', [0.0, 1e-300, 1e150, 1e300])
-def test_any_finite_state_gives_a_finite_torque_inside_the_box(factor):
+def test_any_finite_state_gives_a_finite_torque_inside_the_box(factor, solver):
     rng = np.random.default_rng(13)
-    filter_ = SafetyFilter.from_config(HAND, CONFIGS['paper'])
+    filter_ = SafetyFilter.from_config(HAND, dataclasses.replace(CONFIGS['paper'], solver=solver))
     for _ in range(3):
         state = synthetic_state(rng, HAND, speed=0.5)
         fields = (
@@ -484,9 +485,10 @@ def test_a_disabled_filter_only_clips_to_the_box():
     assert filter_.solve(state, np.zeros(M)).status is FilterStatus.NOMINAL
 
 
-def test_reset_keeps_results_unchanged():
+@pytest.mark.parametrize('solver', SOLVERS)
+def test_reset_keeps_results_unchanged(solver):
     rng = np.random.default_rng(16)
-    filter_ = SafetyFilter.from_config(HAND, CONFIGS['paper'])
+    filter_ = SafetyFilter.from_config(HAND, dataclasses.replace(CONFIGS['paper'], solver=solver))
     state = synthetic_state(rng, HAND, speed=0.0)
     u_nom = rng.normal(scale=3.0, size=M)
     first = filter_.solve(state, u_nom)
