@@ -405,7 +405,9 @@ def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
             f'rotation matrix: expected orthonormal with det +1 (within '
             f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {np.linalg.det(R):.6g}'
         )
-    return from_rotation_matrix(R)
+    # Column-major: pinocchio 3 / eigenpy 3.13's Quaternion(matrix) leaks its copy of a
+    # row-major matrix (80 bytes a call: once per tick in the simulator's odometry).
+    return from_rotation_matrix(np.asfortranarray(R))
 
 
 def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:
@@ -994,7 +996,7 @@ class MarginData:
         t: Stamp, s.
         names: Row names.
         h: Barrier values, shape (r,) (units of each row; >= 0 is safe).
-        h_dot: Their time derivatives, shape (r,); 0.0 where not defined.
+        h_dot: Their time derivatives, shape (r,); NaN where the message carries none.
 
     """
 
@@ -1010,35 +1012,72 @@ def margins_to_msg(
     names: Sequence[str],
     h: np.ndarray,
     h_dot: np.ndarray | None = None,
+    with_names: bool = True,
 ) -> Any:
     """``/safety_filter/margins``: JointState with position = h, velocity = dh/dt.
 
-    ``h_dot`` entries that are NaN (not defined for that row) and a missing ``h_dot``
-    are sent as 0.0; effort is empty.
+    The compact form (:mod:`grasp_safety_filter.io.margin_stream`): ``with_names=False``
+    leaves ``name`` empty, the rows being those of the last message that named them.
+    Without ``h_dot`` the velocity is empty (8 bytes per row and message, not 16); ``h_dot``
+    entries that are NaN (not defined for that row) are sent as 0.0. Effort is empty.
     """
-    h_array = np.asarray(h, dtype=np.float64)
-    rates = np.zeros(h_array.shape) if h_dot is None else np.asarray(h_dot, dtype=np.float64)
-    rates = np.where(np.isnan(rates), 0.0, rates)
-    return joint_state_to_msg(msgs, t, names, h_array, rates, None)
+    h_array = np.asarray(h, dtype=np.float64).ravel()
+    if len(names) != h_array.size:
+        raise ValueError(f'margins: {len(names)} names for {h_array.size} values')
+    rates = None
+    if h_dot is not None:
+        rates = np.asarray(h_dot, dtype=np.float64).ravel()
+        if rates.shape != h_array.shape:
+            raise ValueError(f'margins: {rates.size} rates for {h_array.size} values')
+        rates = np.where(np.isnan(rates), 0.0, rates)
+    empty = np.zeros(0)
+    return msgs.JointState(
+        header=_header(msgs, t, ''),
+        name=[str(n) for n in names] if with_names else [],
+        position=msgs.float_array(h_array),
+        velocity=msgs.float_array(empty if rates is None else rates),
+        effort=msgs.float_array(empty),
+    )
 
 
 def margins_from_msg(
-    msg: Any, names: Sequence[str] | None = None, source: str = 'margins'
+    msg: Any,
+    names: Sequence[str] | None = None,
+    source: str = 'margins',
+    row_names: Sequence[str] | None = None,
 ) -> MarginData:
     """Parse margins; with ``names``, match them by name and return them in that order.
 
+    Args:
+        msg: The message.
+        names: Return these rows, in this order (default: the message's order).
+        source: Name used in error messages.
+        row_names: The rows of a message without names (compact form): the names of the
+            last message that had them. Ignored when the message names its rows.
+
     Raises:
-        MessageError: Duplicate, unknown or missing names; lengths; non-finite values.
+        MessageError: Duplicate, unknown or missing names; lengths; non-finite values; a
+            message without names and no ``row_names``.
 
     """
-    received = _names(source, msg.name, 'margin')
+    if len(msg.name) == 0 and len(msg.position) > 0:
+        if row_names is None:
+            raise MessageError(
+                f'{source}: {len(msg.position)} values without row names, and no earlier '
+                'message named the rows'
+            )
+        received = list(row_names)
+    else:
+        received = _names(source, msg.name, 'margin')
     order = (
         np.arange(len(received))
         if names is None
         else _match_names(source, received, names, 'margin')
     )
     h = _array_field(source, msg.position, 'position', received, required=True)
-    h_dot = _array_field(source, msg.velocity, 'velocity', received, required=True)
+    h_dot = _array_field(source, msg.velocity, 'velocity', received, required=False)
+    if h_dot is None:
+        h_dot = np.full(len(received), np.nan)
     t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
     return MarginData(t=t, names=tuple(received[i] for i in order), h=h[order], h_dot=h_dot[order])
 
