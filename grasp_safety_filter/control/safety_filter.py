@@ -57,6 +57,11 @@ from grasp_safety_filter.control.constraints import (
     JointLimitBarrier,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+from grasp_safety_filter.control.filter_inputs import (
+    checked_torque,
+    MEASURED_STATE_FIELDS,
+    raise_if_measured_not_finite,
+)
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
 from grasp_safety_filter.control.margins import Margins
 from grasp_safety_filter.control.qp import SafetyQP
@@ -67,7 +72,6 @@ from grasp_safety_filter.control.qp_solvers import (
     Solution,
     SolutionStatus,
 )
-from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
 __all__ = [
@@ -84,17 +88,6 @@ __all__ = [
 #: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
 #: when u is within it of the bound).
 ACTIVE_TOLERANCE = 1e-6
-
-#: The measured :class:`GraspState` fields (the arguments of ``GraspModel.state``); every
-#: other field is a model term derived from them.
-MEASURED_STATE_FIELDS: tuple[str, ...] = (
-    'q',
-    'dq',
-    'p_object_in_palm',
-    'R_object_to_palm',
-    'twist_object',
-)
-
 
 _NOT_CERTIFIED = frozenset(
     (FilterStatus.RELAXED, FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL)
@@ -271,7 +264,7 @@ class SafetyFilter:
         Raises:
             ValueError: As :meth:`solve`.
         """
-        u_nom = self._check_nominal(u_nom)
+        u_nom = checked_torque(u_nom, self.joint_names)
         rows_finite = self._assemble_rows(state)
         self.hard_qp.set_nominal(u_nom)
         return u_nom, rows_finite
@@ -333,20 +326,6 @@ class SafetyFilter:
 
     # -- internals ---------------------------------------------------------------------
 
-    def _check_nominal(self, u_nom: np.ndarray) -> np.ndarray:
-        try:
-            u = np.array(u_nom, dtype=float)
-        except (TypeError, ValueError):
-            raise ValueError(f'u_nom: expected {self.n_joints} numbers, got {u_nom!r}') from None
-        if u.shape != (self.n_joints,):
-            raise ValueError(f'u_nom: expected shape ({self.n_joints},), got {u.shape}')
-        if not np.all(np.isfinite(u)):
-            bad = np.flatnonzero(~np.isfinite(u))
-            raise ValueError(
-                f'u_nom: non-finite value {u[bad[0]]} for joint {self.joint_names[bad[0]]!r}'
-            )
-        return u
-
     def _assemble_rows(self, state: GraspState) -> bool:
         """Write every family's rows into the hard QP; False if they are not all finite."""
         if state.n_joints != self.n_joints or state.n_contacts != len(self.contact_names):
@@ -363,25 +342,8 @@ class SafetyFilter:
                 lower[rows] = block.lower
         if np.isfinite(self.hard_qp.C_data).all() and np.isfinite(lower).all():
             return True
-        self._raise_if_measured_not_finite(state)
+        raise_if_measured_not_finite(state)
         return False
-
-    def _raise_if_measured_not_finite(self, state: GraspState) -> None:
-        for name in MEASURED_STATE_FIELDS:
-            value = getattr(state, name)
-            arrays = (
-                ((f'{name}.matrix', value.matrix), (f'{name}.offset', value.offset))
-                if isinstance(value, AffineMap)
-                else ((name, value),)
-            )
-            for label, array in arrays:
-                bad = np.argwhere(~np.isfinite(np.asarray(array, dtype=float)))
-                if bad.size:
-                    index = tuple(int(i) for i in bad[0])
-                    raise ValueError(
-                        f'state.{label}: non-finite value {array[index]} at index '
-                        f'{index[0] if len(index) == 1 else index}'
-                    )
 
     def _fallback(
         self,
