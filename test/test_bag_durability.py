@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
+import yaml
 
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals
@@ -141,6 +142,10 @@ def recover(bag: Path, capsys) -> str:
     assert captured.err == ''
     (line,) = captured.out.splitlines()
     assert line.startswith(f'grasp-analyze: {bag}: incomplete bag (no metadata.yaml'), line
+    # The bag itself says so too.
+    metadata = yaml.safe_load((bag / 'metadata.yaml').read_text())
+    custom = metadata['rosbag2_bagfile_information']['custom_data']
+    assert custom == {'recovered': line.split(f'{bag}: ', 1)[1]}
     return line
 
 

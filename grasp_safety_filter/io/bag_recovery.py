@@ -72,12 +72,15 @@ class Recovery:
     dropped_bytes: int | None
 
     def describe(self) -> str:
-        """One line: the bag was incomplete, why, and how much was recovered."""
+        """Return one line: the bag, that it was incomplete, why, and how much was recovered."""
+        return f'{self.path}: {self.details()}'
+
+    def details(self) -> str:
+        """Return what :meth:`describe` says after the path (also the bag's custom data)."""
         last = '' if self.last_stamp_ns is None else f' to stamp {self.last_stamp_ns / 1e9:.3f} s'
         dropped = f', dropped {self.dropped_bytes} bytes after them' if self.dropped_bytes else ''
         return (
-            f'{self.path}: incomplete bag ({self.problem}), recovered: '
-            f'{self.messages} messages{last}{dropped}'
+            f'incomplete bag ({self.problem}), recovered: {self.messages} messages{last}{dropped}'
         )
 
 
@@ -192,7 +195,7 @@ def _rewrite(
         recovery = Recovery(
             path, ', '.join(scan.problems), count, last, scan.dropped_bytes
         )
-        writer.set_custom_data('recovered', recovery.describe())
+        writer.set_custom_data('recovered', recovery.details())
         writer.close()
     except BaseException:
         writer.abort()
