@@ -29,7 +29,7 @@ from rosbags.typesys import get_typestore, Stores
 import yaml
 
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals
+from grasp_safety_filter.io.bag import bag_topics, BagReadError, BagRecorder, interrupt_on_signals
 from grasp_safety_filter.io.bag_recovery import recover_bag, STAGING_DIRECTORY
 from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS
 
@@ -245,6 +245,8 @@ def test_an_unfinished_mcap_file_gives_up_only_its_damaged_tail(damage, tmp_path
         bag.mkdir()
         tail = b'' if damage == 'cut' else bytes(len(content) - cut)
         (bag / data.name).write_bytes(content[:cut] + tail)
+        with pytest.raises(BagReadError, match=f'no metadata.yaml.* --recover {bag}`'):
+            bag_topics(bag)
         recovery = recover_bag(bag)
         assert recovery is not None
         recovered = bag_records(bag)
