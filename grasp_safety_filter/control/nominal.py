@@ -1,23 +1,63 @@
-"""Nominal in-hand manipulation control: computed torque plus internal squeeze force.
+"""Nominal in-hand manipulation control: computed torque, internal squeeze, null-space posture.
 
-The paper's nominal controller (eq. 19–21; Cole, Hauser & Sastry, IEEE TAC 34(4), 1989)::
+Model (DESIGN.md §3; f the contact forces on the object in the contact frames, 3n rows)::
 
-    u_nom   = J_h^T (G^+ u_m + u_f) - tau_e                  (tau_e = -g(q))
+    M_h ddq + C_h dq - tau_e = u - J_h^T f                        hand, m joints
+    M_o x_o_ddot + C_o x_o_dot = G f + w_e                        object
+    J_h ddq + J_h_dot dq = G^T x_o_ddot + G_dot^T x_o_dot         rolling (3n rows)
+
+The paper's controller (eq. 19–21; Cole, Hauser & Sastry, IEEE TAC 34(4), 1989), for any
+hand with m >= 3n joints and J_h of full row rank 3n::
+
+    u_nom   = J_h^T (G^+ u_m + u_f) - tau_e + tau_null           (tau_e = -g(q))
     u_m     = M_ho x_o_ddot_des + C_ho x_o_dot - w_e
     x_o_ddot_des = P (r_ddot + K_p e + K_d e_dot) + P_dot r_o_dot
     u_f,i   = k_f (p_bar_c - p_c,i)
+    M_ho    = M_o + G Lambda G^T
+    C_ho x_o_dot = C_o x_o_dot + G Lambda (J_h M_h^-1 C_h dq + G_dot^T x_o_dot - J_h_dot dq)
+    tau_null = N^T M_h (-k_null,p (q - q_posture) - k_null,d dq)
 
-with ``M_ho = M_o + G J_h^-T M_h J_h^-1 G^T`` and
-``C_ho x_o_dot = C_o x_o_dot + G J_h^-T (C_h dq + M_h J_h^-1 (G_dot^T x_o_dot - J_h_dot dq))``.
+with the contact-space inertia ``Lambda = (J_h M_h^-1 J_h^T)^-1`` (3n × 3n), the
+M_h-weighted right inverse ``J_bar = M_h^-1 J_h^T Lambda`` (``J_h J_bar = I``) and the
+dynamically consistent null-space projector of joint velocities ``N = I - J_bar J_h``
+(``J_h N = 0``); torques are projected with ``N^T = I - J_h^T Lambda J_h M_h^-1``. Since
+``J_bar^T M_h J_bar = Lambda``, these are the paper's ``M_ho = M_o + G J_h^-T M_h J_h^-1 G^T``
+and ``C_ho`` with ``J_h^-1`` replaced by ``J_bar``. For m = 3n, ``J_bar = J_h^-1``,
+``Lambda = J_h^-T M_h J_h^-1`` and ``N = 0``: the paper's law.
 
-Under rolling contact (``J_h dq = G^T x_o_dot`` and its derivative) this makes the object's
-Euler-coordinate error obey ``e_ddot + K_d e_dot + K_p e = 0`` exactly.
+Derivation. Solve the hand equation for ddq and put it into the rolling constraint:
+``J_h M_h^-1 (u + tau_e - C_h dq) - Lambda^-1 f = G^T x_o_ddot + G_dot^T x_o_dot - J_h_dot dq``,
+so
+
+    f = J_bar^T (u + tau_e - C_h dq) - Lambda (G^T x_o_ddot + G_dot^T x_o_dot - J_h_dot dq).
+
+``J_bar^T J_h^T = I`` and ``J_bar^T N^T = 0``: under the law, ``f = G^+ u_m + u_f -
+J_bar^T C_h dq - Lambda (...)`` whatever tau_null is. With ``G G^+ = I`` and ``G u_f = 0``
+the object equation becomes ``M_ho x_o_ddot + C_ho x_o_dot - w_e = u_m``, i.e.
+``x_o_ddot = x_o_ddot_des`` and the Euler error obeys ``e_ddot + K_d e_dot + K_p e = 0``
+exactly. Only the acceleration-level rolling constraint is used: the measured C_h dq and
+J_h_dot dq enter, not ``C_h J_bar G^T x_o_dot``, which differs once dq has a null(J_h) part.
+The Moore–Penrose ``J_h^+ = J_h^T (J_h J_h^T)^-1`` would not do: torques reach the contacts
+through ``J_h M_h^-1``, and only the M_h-weighted inverse makes the range and null-space
+torques act on the contacts and the object independently.
+
+Null space. Rolling fixes ``J_h dq = G^T x_o_dot`` only; the m - 3n directions of
+null(J_h) (internal finger motion, e.g. a finger turning about its contact point) are left to
+tau_null. ``N M_h^-1 = M_h^-1 N^T`` and ``N^T J_h^T = 0`` give, from the hand equation,
+
+    N ddq = N (-k_null,p (q - q_posture) - k_null,d dq) - M_h^-1 N^T C_h dq:
+
+a posture spring and damper on the internal motion with gains per unit inertia (1/s², 1/s,
+the same for any hand's masses), loading no contact and not moving the object. Only the
+null-space parts ``N (q - q_posture)`` and ``N dq`` act: the term never resists the object's
+motion. q_posture is the first joint positions the controller sees unless one is given.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+import math
 from typing import Any
 
 import numpy as np
@@ -50,6 +90,8 @@ class NominalConfig:
         kp: Proportional gain, K_p = kp I, 1/s².
         kd: Derivative gain, K_d = kd I, 1/s.
         kf: Squeeze gain k_f, N/m.
+        null_space_kp: Posture gain k_null,p of the null(J_h) motion, per unit inertia, 1/s².
+        null_space_kd: Damping gain k_null,d of the null(J_h) motion, per unit inertia, 1/s.
         reference_source: ``"paper"`` or ``"topic"``.
         amplitude: Paper reference amplitude, shape (6,), m and rad.
         frequency: Paper reference angular frequency, rad/s.
@@ -60,6 +102,8 @@ class NominalConfig:
     kp: float = 1.0
     kd: float = 2.5
     kf: float = 10.0
+    null_space_kp: float = 25.0
+    null_space_kd: float = 10.0
     reference_source: str = 'paper'
     amplitude: tuple[float, ...] = PAPER_AMPLITUDE
     frequency: float = PAPER_FREQUENCY
@@ -77,6 +121,11 @@ class NominalConfig:
         }
         for spec in NOMINAL_CONTROLLER_PARAMETERS:
             spec.validate(values[spec.name])
+        for name, gain in (('kp', self.null_space_kp), ('kd', self.null_space_kd)):
+            if not (isinstance(gain, int | float) and math.isfinite(gain) and gain >= 0.0):
+                raise ParameterError(
+                    f'null_space.{name}: expected a finite gain >= 0, got {gain!r}'
+                )
         object.__setattr__(self, 'amplitude', tuple(float(a) for a in self.amplitude))
 
     @classmethod
@@ -129,6 +178,8 @@ class NominalOutput:
             contacts, at the centre of mass in palm coordinates, shape (6,), (N, N·m).
         u_internal: Internal force u_f per contact in the contact frames, shape (3n,), N
             (in null(G)).
+        u_null_space: tau_null, the joint torque of the null(J_h) posture and damping term,
+            shape (m,), N·m (zero when m = 3n); included in ``u``.
         pose_error: e = r - r_o in Euler coordinates, shape (6,), m and rad.
         pose_error_rate: e_dot = r_dot - r_o_dot, shape (6,), m/s and rad/s.
         object_acceleration_desired: x_o_ddot_des = (a, alpha), palm coordinates, (6,).
@@ -139,26 +190,45 @@ class NominalOutput:
     u: np.ndarray
     u_manipulation_wrench: np.ndarray
     u_internal: np.ndarray
+    u_null_space: np.ndarray
     pose_error: np.ndarray
     pose_error_rate: np.ndarray
     object_acceleration_desired: np.ndarray
     reference_stale: bool
 
 
+#: J_h is reported rank-deficient when a pivot of the Cholesky factorisation of
+#: ``Lambda^-1 = J_h M_h^-1 J_h^T`` (squared) falls below this fraction of its largest
+#: diagonal entry: the M_h-weighted J_h then has a condition number above ~1e6 and the
+#: torques would amplify rounding errors by more than ~1e12.
+RANK_TOLERANCE = 1e-12
+
+
 class NominalController:
     """Computed-torque object manipulation with an internal squeeze (Cole et al. 1989).
 
-    Stateless: :meth:`compute` is a pure function of the grasp state and reference sample.
-    Requires a square hand Jacobian (m = 3n joints, the paper's hand: 9 joints, 3 contacts)
-    and a full-row-rank grasp map (at least three non-collinear contacts).
+    :meth:`compute` is a function of the grasp state and reference sample, except that the
+    null-space posture q_posture, when not given, is the joint positions of the first
+    state it sees (then kept). Requires m >= 3n joints for n contacts, a hand Jacobian of
+    full row rank 3n and a full-row-rank grasp map (three non-collinear contacts or more).
 
     Args:
         config: Gains (the reference fields are used by :meth:`NominalConfig.make_reference`).
+        posture: q_posture, shape (m,), rad, in the model's joint order; None: the first
+            joint positions seen.
 
     """
 
-    def __init__(self, config: NominalConfig | None = None) -> None:
+    def __init__(
+        self, config: NominalConfig | None = None, posture: np.ndarray | None = None
+    ) -> None:
         self.config = config if config is not None else NominalConfig()
+        self._posture = None if posture is None else np.array(posture, dtype=float)
+
+    @property
+    def posture(self) -> np.ndarray | None:
+        """q_posture of the null-space term, shape (m,), rad (None before the first state)."""
+        return None if self._posture is None else self._posture.copy()
 
     def internal_force(self, state: GraspState) -> np.ndarray:
         """Squeeze ``u_f,i = k_f (p_bar_c - p_c,i)`` in the contact frames, shape (3n,), N.
@@ -200,52 +270,114 @@ class NominalController:
         """Nominal joint torque for the current grasp state and reference sample.
 
         Raises:
-            ValueError: The hand Jacobian is not square.
-            numpy.linalg.LinAlgError: The hand Jacobian is exactly singular.
+            ValueError: Fewer joints than contact constraint rows (m < 3n), or a posture of
+                the wrong length.
+            numpy.linalg.LinAlgError: J_h is rank-deficient (rank < 3n), M_h is not
+                positive definite, or G G^T is exactly singular.
 
         """
         J_h = state.J_h
-        if J_h.shape[0] != J_h.shape[1]:
+        rows, m = J_h.shape
+        _check_joint_count(rows, m)
+        if self._posture is None:
+            self._posture = np.array(state.q, dtype=float)
+        elif self._posture.shape != (m,):
             raise ValueError(
-                f'NominalController: expected a square hand Jacobian (m = 3n), got J_h of '
-                f'shape {J_h.shape}'
+                f'NominalController: posture has {self._posture.size} joint angles, the hand '
+                f'{m} joints'
             )
         G = state.G
         M_h = state.M_h
         x_ddot_des, e, e_dot = self.desired_object_acceleration(state, reference)
 
-        m = J_h.shape[1]
-        # A = J_h^-1 G^T maps the object twist to joint rates on the constraint, so
-        # G J_h^-T = A^T and M_ho = M_o + A^T M_h A.
-        # Differentiating J_h dq = G^T x_dot: ddq = J_h^-1 (G^T x_ddot + G_dot^T x_dot
-        # - J_h_dot dq); the velocity part of M_h ddq + C_h dq, pulled back through
-        # G J_h^-T, is the C_ho x_dot term. Using the measured C_h dq and J_h_dot dq
-        # (rather than C_h J_h^-1 G^T x_dot) keeps it exact even off the velocity
-        # constraint, so only the acceleration-level rolling constraint is assumed.
-        # One solve with J_h for both:
-        #   [A | ddq_velocity] = J_h^-1 [G^T | G_dot^T x_dot - J_h_dot dq].
-        rhs = np.empty((m, 7))
-        rhs[:, :6] = G.T
-        rhs[:, 6] = state.G_dot_T_twist - state.Jh_dot_dq
-        solution = np.linalg.solve(J_h, rhs)
-        A, ddq_velocity = solution[:, :6], solution[:, 6]
-        M_ho = state.M_o + A.T @ M_h @ A
+        # X = M_h^-1 J_h^T, Lambda^-1 = J_h X; Lambda = (J_h M_h^-1 J_h^T)^-1 is the
+        # contact-space inertia, J_bar = X Lambda, and J_h M_h^-1 = X^T (M_h symmetric).
         C_h_dq = state.h_bias - state.gravity_torque
-        C_ho_x_dot = state.C_o_twist + A.T @ (C_h_dq + M_h @ ddq_velocity)
+        redundant = m > rows
+        rhs_m = np.empty((m, rows + 1))
+        rhs_m[:, :rows] = J_h.T
+        rhs_m[:, rows] = C_h_dq
+        solution_m = np.linalg.solve(M_h, rhs_m)
+        X, M_inv_C_h_dq = solution_m[:, :rows], solution_m[:, rows]
+        contact_inertia_inv = J_h @ X
+        _check_rank(J_h, contact_inertia_inv)
+        # One solve with Lambda^-1 for G Lambda G^T, the C_ho term and, for a redundant
+        # hand, Lambda J_h a_null (the range-space part of M_h a_null, see tau_null):
+        #   [Lambda G^T | Lambda (J_h M_h^-1 C_h dq + G_dot^T x_dot - J_h_dot dq) | ...].
+        rhs = np.empty((rows, 8 if redundant else 7))
+        rhs[:, :6] = G.T
+        rhs[:, 6] = J_h @ M_inv_C_h_dq + state.G_dot_T_twist - state.Jh_dot_dq
+        if redundant:
+            # a_null = -k_null,p (q - q_posture) - k_null,d dq, a joint acceleration;
+            # tau_null = N^T M_h a_null = M_h a_null - J_h^T Lambda J_h a_null.
+            a_null = (
+                -self.config.null_space_kp * (state.q - self._posture)
+                - self.config.null_space_kd * state.dq
+            )
+            rhs[:, 7] = J_h @ a_null
+        solution = np.linalg.solve(contact_inertia_inv, rhs)
+        M_ho = state.M_o + G @ solution[:, :6]
+        C_ho_x_dot = state.C_o_twist + G @ solution[:, 6]
         u_m = M_ho @ x_ddot_des + C_ho_x_dot - state.w_e
+        if redundant:
+            tau_null = M_h @ a_null - J_h.T @ solution[:, 7]
+        else:
+            tau_null = np.zeros(m)
 
         # G has full row rank: its minimum-norm right inverse is G^+ = G^T (G G^T)^-1
         # (np.linalg.lstsq would take an SVD for the same 6 × 3n system).
         f_manipulation = G.T @ np.linalg.solve(G @ G.T, u_m)
         u_f = self.internal_force(state)
         # -tau_e = g(q): gravity compensation of the fingers.
-        u = J_h.T @ (f_manipulation + u_f) + state.gravity_torque
+        u = J_h.T @ (f_manipulation + u_f) + state.gravity_torque + tau_null
         return NominalOutput(
             u=u,
             u_manipulation_wrench=u_m,
             u_internal=u_f,
+            u_null_space=tau_null,
             pose_error=e,
             pose_error_rate=e_dot,
             object_acceleration_desired=x_ddot_des,
             reference_stale=reference.stale,
         )
+
+
+def _check_joint_count(rows: int, m: int) -> None:
+    """Refuse a hand with fewer joints than contact constraint rows (m < 3n)."""
+    if m < rows:
+        raise ValueError(
+            f'NominalController: the hand has m = {m} joints for n = {rows // 3} contacts; '
+            f'rolling contacts fix 3n = {rows} joint-velocity components, so the law needs '
+            f'm >= 3n (with fewer joints the fingers cannot follow every object motion)'
+        )
+
+
+def _check_rank(J_h: np.ndarray, contact_inertia_inv: np.ndarray) -> None:
+    """Raise LinAlgError naming the rank if J_h has (numerically) less than full row rank.
+
+    ``Lambda^-1 = J_h M_h^-1 J_h^T`` is positive definite exactly when J_h has rank 3n; a
+    Cholesky pivot near zero (:data:`RANK_TOLERANCE`) or a failed factorisation means it is
+    not. The singular values are computed only to word the error.
+    """
+    try:
+        pivots = np.diag(np.linalg.cholesky(contact_inertia_inv))
+        full_rank = pivots.min() ** 2 > RANK_TOLERANCE * contact_inertia_inv.diagonal().max()
+    except np.linalg.LinAlgError:
+        full_rank = False
+    if full_rank:
+        return
+    rows, m = J_h.shape
+    singular_values = np.linalg.svd(J_h, compute_uv=False)
+    values = np.array2string(singular_values, precision=3)
+    rank = np.linalg.matrix_rank(J_h)
+    if rank < rows:
+        raise np.linalg.LinAlgError(
+            f'NominalController: the hand Jacobian J_h ({rows} x {m}) is rank-deficient: '
+            f'rank {rank}, needs 3n = {rows}; singular values {values} m (a finger at a '
+            f'singular configuration, or a contact no joint can move)'
+        )
+    raise np.linalg.LinAlgError(
+        f'NominalController: Lambda^-1 = J_h M_h^-1 J_h^T ({rows} x {rows}) is not positive '
+        f'definite to working precision: J_h ({rows} x {m}) is nearly rank-deficient '
+        f'(singular values {values} m) or M_h is not positive definite'
+    )
