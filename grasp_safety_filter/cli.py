@@ -263,9 +263,24 @@ def _demo(argv: list[str] | None) -> int:
     return 0 if all(v['reproduced'] for v in verdicts.values()) else 1
 
 
+ANALYZE_EPILOG = """\
+A bag whose writer died without closing it (SIGKILL, the OOM killer, a power loss) has no
+metadata.yaml and an unfinished mcap or sqlite3 file. grasp-analyze recovers such a bag in
+place before analysing it and says so in one line (messages recovered, the last stamp):
+the intact messages are rewritten to a new storage file with its metadata.yaml, which
+replace the old file; what was lost is at most the writer's last {period:g} s of stamps.
+--recover does only that, also for a bag with a metadata.yaml whose file cannot be read,
+so that ros2 bag info and rosbags read it. A bag still being written by a live
+grasp-demo or grasp-record is refused.
+"""
+
+
 def analyze_main(argv: list[str] | None = None) -> int:
     """``grasp-analyze BAG``: figures and summary.json of any recorded run of this package."""
     from grasp_safety_filter.analysis.run_data import RunDataError
+    from grasp_safety_filter.io.bag import BagReadError
+    from grasp_safety_filter.io.bag_recovery import needs_recovery, recover_bag
+    from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS
     from grasp_safety_filter.io.files import OutputError
     from grasp_safety_filter.runner import (
         ANALYSIS_DIRECTORY,
@@ -273,7 +288,12 @@ def analyze_main(argv: list[str] | None = None) -> int:
         SUMMARY_FILE,
     )
 
-    parser = argparse.ArgumentParser(prog='grasp-analyze', description=analyze_main.__doc__)
+    parser = argparse.ArgumentParser(
+        prog='grasp-analyze',
+        description=analyze_main.__doc__,
+        epilog=ANALYZE_EPILOG.format(period=FLUSH_PERIOD_NS / 1e9),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument('bag', type=Path, help='rosbag2 directory (mcap or sqlite3)')
     parser.add_argument(
         '--out',
@@ -286,20 +306,22 @@ def analyze_main(argv: list[str] | None = None) -> int:
         action='store_true',
         help='write into OUT even if it holds files that are not a previous output',
     )
+    parser.add_argument(
+        '--recover',
+        action='store_true',
+        help='only make an incomplete bag readable (metadata.yaml, a repaired storage '
+        'file); no analysis',
+    )
     args = parser.parse_args(argv)
-    out_dir = args.out
-    if out_dir is None:
-        out_dir = args.bag.resolve().parent
-        if (out_dir / SUMMARY_FILE).exists() or (out_dir / SUMMARY_FILE).is_symlink():
-            # The run's own summary (it may say "interrupted"): keep it.
-            out_dir = out_dir / ANALYSIS_DIRECTORY
     try:
-        summary, figures = analyze_bag(args.bag, out_dir, force=args.force)
-    except (RunDataError, OutputError) as error:
+        if args.recover or needs_recovery(args.bag):
+            recovery = recover_bag(args.bag)
+            if recovery is not None:
+                print(f'grasp-analyze: {recovery.describe()}')
+            elif args.recover:
+                print(f'grasp-analyze: {args.bag}: complete, nothing to recover')
+    except BagReadError as error:
         print(f'grasp-analyze: {error}', file=sys.stderr)
         return 2
-    _print_summary(summary['mode'], summary, out_dir)
-    print(f'  summary: {out_dir / SUMMARY_FILE}')
-    for figure in figures:
-        print(f'  figure: {figure}')
-    return 0
+    if args.recover:
+        return 0
