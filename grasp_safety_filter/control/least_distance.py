@@ -17,12 +17,13 @@ guess is reduced to independent rows with nonnegative multipliers, which is a va
 point. When the guess is the optimal active set, the method stops after this check, with no
 step: it then certifies the guess exactly.
 
-The safety filter uses it after OSQP (a first-order method), whose iterates converge slowly
-on the filter's typical degenerate problems (several nearly dependent barrier rows active at
-once). The problem is small (m = 9 torques): dense linear algebra per step is cheap.
-Before OSQP, it tries the previous tick's active set with :func:`solve_on_working_set`
-(the start of this method without its rank reduction: one LU solve) and checks the
-optimality conditions this method stops on.
+The OSQP backend (:mod:`~grasp_safety_filter.control.qp_solvers.osqp_backend`) uses it
+after OSQP (a first-order method), whose iterates converge slowly on the filter's typical
+degenerate problems (several nearly dependent barrier rows active at once). The problem is
+small (m = 9 torques): dense linear algebra per step is cheap. Before OSQP, the backend
+tries the previous tick's active set with :func:`solve_on_working_set` (the start of this
+method without its rank reduction: one LU solve) and checks the optimality conditions this
+method stops on.
 """
 
 from __future__ import annotations

@@ -36,8 +36,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-#: Threshold below which a row is treated as independent of u when normalising its slack.
-ROW_NORM_FLOOR = 1e-9
+# The relaxed problem's slack normalisation, one definition for every form of it.
+from grasp_safety_filter.control.qp import ROW_NORM_FLOOR
 
 #: A row ``A u >= lower`` counts as satisfied when ``A u - lower >= -FEASIBILITY_TOLERANCE``
 #: (in the row's unit: N for no slip, rad/s² for the barriers).
