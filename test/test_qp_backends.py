@@ -169,3 +169,21 @@ def test_the_solver_parameter_names_the_backends():
     assert SafetyFilterConfig.from_parameters({'qp.solver': 'daqp'}).solver == 'daqp'
     with pytest.raises(ParameterError, match=r"'qp\.solver'.*'osqp', 'daqp'.*'cvxopt'"):
         SafetyFilterConfig.from_parameters({'qp.solver': 'cvxopt'})
+
+
+def test_a_backend_without_an_answer_gives_the_fallback_never_nan():
+    """daqp held to one iteration answers nothing: the filter falls back, finite, in the box."""
+    model = paper_model()
+    effort = np.asarray(model.effort_limits, dtype=float)
+    filter_ = SafetyFilter.from_config(model, SafetyFilterConfig(solver='daqp'))
+    weights = filter_.relaxed_problem.slack_weights
+    filter_.backend = BACKENDS['daqp'](filter_.problem, weights, {'iter_limit': 1})
+    rng = np.random.default_rng(6)
+    statuses = Counter()
+    for _ in range(12):
+        c = random_configuration(model, rng, 0.3, 1.0)
+        result = filter_.solve(c.state(model), rng.normal(0.0, 3.0, model.n_joints))
+        assert np.isfinite(result.u).all()
+        assert np.all(np.abs(result.u) <= effort)
+        statuses[result.status.value] += 1
+    assert statuses['fallback_last_good'] + statuses['fallback_nominal'] >= 6, statuses
