@@ -36,9 +36,10 @@ def check_urdf_file(path: Path) -> ElementTree.Element:
     """Read a URDF and check what the hand model relies on; return its ``<robot>`` element.
 
     Checks: the file exists and is readable, is well-formed XML with a ``<robot>`` root and
-    at least one ``<link>``; every revolute or prismatic joint has a ``<limit>`` with numeric
-    ``lower``, ``upper``, ``effort`` and ``velocity``; every ``<inertial>`` has a finite
-    mass > 0 and a symmetric positive definite inertia.
+    at least one ``<link>``; every ``<origin>`` and ``<axis>`` vector is three numbers; every
+    revolute or prismatic joint has a ``<limit>`` with numeric ``lower``, ``upper``,
+    ``effort`` and ``velocity``; every ``<inertial>`` has a finite mass > 0 and a symmetric
+    positive definite inertia.
 
     Raises:
         HandModelError: Naming the file and the link or joint, what was expected and what
@@ -60,6 +61,8 @@ def check_urdf_file(path: Path) -> ElementTree.Element:
     links = robot.findall('link')
     if not links:
         raise HandModelError(f'{where}: expected at least one <link> in <robot>, got none')
+    for element in (*links, *robot.findall('joint')):
+        _check_vectors(element, f"{where}: {element.tag} '{element.get('name')}'")
     for joint in robot.findall('joint'):
         _check_joint(joint, where)
     for link in links:
@@ -89,6 +92,25 @@ def _number(
             f'{where}: expected a finite number in <{element.tag} {attribute}>, got {text!r}'
         )
     return value
+
+
+def _check_vectors(element: ElementTree.Element, where: str) -> None:
+    """Every ``<origin xyz rpy>`` and ``<axis xyz>`` under ``element``: three finite numbers."""
+    for child in element.iter():
+        if child.tag not in ('origin', 'axis'):
+            continue
+        for attribute in ('xyz', 'rpy'):
+            text = child.get(attribute)
+            if text is None:
+                continue
+            try:
+                values = [float(part) for part in text.split()]
+            except ValueError:
+                values = []
+            if len(values) != 3 or not all(math.isfinite(value) for value in values):
+                raise HandModelError(
+                    f'{where}: expected three numbers in <{child.tag} {attribute}>, got {text!r}'
+                )
 
 
 def _check_joint(joint: ElementTree.Element, where: str) -> None:
