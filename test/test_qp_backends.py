@@ -172,7 +172,7 @@ def test_the_solver_parameter_names_the_backends():
 
 
 def test_a_backend_without_an_answer_gives_the_fallback_never_nan():
-    """daqp held to one iteration answers nothing: the filter falls back, finite, in the box."""
+    """A daqp held to one iteration answers nothing: the filter falls back, finite, in the box."""
     model = paper_model()
     effort = np.asarray(model.effort_limits, dtype=float)
     filter_ = SafetyFilter.from_config(model, SafetyFilterConfig(solver='daqp'))
