@@ -1008,6 +1008,14 @@ def bench_main(argv: list[str] | None = None) -> int:
     def log(message: str) -> None:
         print(f'grasp-bench: {message}', file=sys.stderr, flush=True)
 
+    from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+    from grasp_safety_filter.model.grasp_check import load_initial_grasp
+
+    try:
+        load_initial_grasp(args.config)  # the simulator's start-up checks
+    except ConfigError as error:
+        print(config_error_line('grasp-bench', error), file=sys.stderr)
+        return EXIT_CONFIG_ERROR
     document = benchmark(
         args.config,
         args.duration,

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.parameters import ParameterError, parse_parameter_value
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.model.quaternion import rotation_matrix
@@ -18,7 +19,7 @@ from grasp_safety_filter.model.quaternion import rotation_matrix
 
 def model_report_main(argv: list[str] | None = None) -> int:
     """``grasp-model-report``: the initial grasp and its distance to every constraint."""
-    from grasp_safety_filter.model.grasp_model import GraspModel
+    from grasp_safety_filter.model.grasp_check import load_initial_grasp
 
     parser = argparse.ArgumentParser(
         prog='grasp-model-report', description=model_report_main.__doc__
@@ -27,11 +28,14 @@ def model_report_main(argv: list[str] | None = None) -> int:
         '--config', type=Path, default=config_path(), help='scenario parameter file'
     )
     args = parser.parse_args(argv)
-    model, params = GraspModel.from_parameter_file(args.config, 'hand_sim_node')
-    p_object = np.asarray(params['initial.object_position'], dtype=float)
-    R_object = rotation_matrix(params['initial.object_orientation'])
-    model.check_grasp(params['initial.joint_positions'], p_object, R_object)
-    q = model.project_to_contact(params['initial.joint_positions'], p_object, R_object)
+    try:
+        model, params = load_initial_grasp(args.config, {})
+        p_object = np.asarray(params['initial.object_position'], dtype=float)
+        R_object = rotation_matrix(params['initial.object_orientation'])
+        q = model.project_to_contact(params['initial.joint_positions'], p_object, R_object)
+    except ConfigError as error:
+        print(config_error_line('grasp-model-report', error), file=sys.stderr)
+        return EXIT_CONFIG_ERROR
     state = model.state(0.0, q, np.zeros(model.n_joints), p_object, R_object, np.zeros(6))
     print(f'scenario: {args.config}')
     print(
@@ -185,6 +189,7 @@ def demo_main(argv: list[str] | None = None) -> int:
 
 def _demo(argv: list[str] | None) -> int:
     from grasp_safety_filter.io.files import OutputError, write_file
+    from grasp_safety_filter.model.grasp_check import load_initial_grasp
     from grasp_safety_filter.runner import (
         check_output_dir,
         run,
@@ -234,6 +239,11 @@ def _demo(argv: list[str] | None) -> int:
     modes = ('nominal', 'filtered') if args.mode == 'both' else (args.mode,)
     verdicts = {}
     try:
+        load_initial_grasp(args.config, dict(args.overrides))
+    except ConfigError as error:
+        print(config_error_line('grasp-demo', error), file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+    try:
         check_output_dir(args.out, args.force)
     except OutputError as error:
         print(f'grasp-demo: {error}', file=sys.stderr)
@@ -251,7 +261,10 @@ def _demo(argv: list[str] | None) -> int:
                 dict(args.overrides),
             )
             result = run(options, out_dir, _progress_printer(mode), force=args.force)
-        except (ParameterError, OutputError) as error:
+        except ConfigError as error:
+            print(config_error_line('grasp-demo', error), file=sys.stderr)
+            return EXIT_CONFIG_ERROR
+        except OutputError as error:
             print(f'grasp-demo: {error}', file=sys.stderr)
             return 2
         except RunInterrupted as interrupt:

@@ -165,7 +165,8 @@ def test_config_accepts_nested_parameters_and_ignores_other_nodes_parameters():
 
 
 BAD_CONFIGS = [
-    ({'time_step': 0.0}, "parameter 'time_step': expected > 0"),
+    ({'time_step': 0.0}, "parameter 'time_step': expected >= 1e-09"),
+    ({'time_step': 1e-9, 'duration': 1e3}, "parameter 'duration': expected at most 1e\\+11 steps"),
     ({'time_step': 0.5, 'duration': 0.1}, "parameter 'time_step': expected <= duration"),
     ({'integrator': 'euler'}, "parameter 'integrator': expected one of"),
     ({'initial_object_position': (0.0, 0.3)}, "parameter 'initial.object_position'"),

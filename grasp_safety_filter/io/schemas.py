@@ -56,6 +56,14 @@ PAPER_FINGER_JOINT_POSITIONS = [3 * math.pi / 4, 0.0, HALF_PI]
 #: M_cf = diag(R, R cos a) is singular [rad].
 FINGERTIP_WORKSPACE_A_MARGIN = 0.15
 
+#: Most faces of a friction pyramid: a pyramid of l_s faces adds l_s QP rows per contact
+#: (memory and time grow with them; 100000 faces asked for 1.3 TiB), and 64 faces already
+#: cover cos(pi/64) = 99.9 % of the cone.
+MAX_PYRAMID_FACES = 64
+
+#: Most OSQP iterations per solve: at about 1 us each, a tick stays below ~0.1 s.
+MAX_OSQP_ITERATIONS = 100_000
+
 MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'model.urdf_file',
@@ -189,14 +197,16 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         'initial.joint_positions',
         DOUBLE_ARRAY,
         PAPER_FINGER_JOINT_POSITIONS * 3,
-        'Joint angles q(0) of the initial static grasp, in model.joint_names order [rad]',
+        'Joint angles q(0) of the initial static grasp, in model.joint_names order; required '
+        '(the default is never used) [rad]',
         read_only=True,
     ),
     ParameterSpec(
         'initial.object_position',
         DOUBLE_ARRAY,
         [0.0, 0.0, 0.3],
-        'Object centre p_o(0) in the palm frame P (x, y, z) [m]',
+        'Object centre p_o(0) in the palm frame P (x, y, z); required (the default is never '
+        'used) [m]',
         length=3,
         read_only=True,
     ),
@@ -222,9 +232,8 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         'time_step',
         DOUBLE,
         0.001,
-        'Integration and control period [s]',
-        min_value=0.0,
-        exclusive_min=True,
+        'Integration and control period (stamps are whole nanoseconds) [s]',
+        min_value=1e-9,
         read_only=True,
     ),
     ParameterSpec(
@@ -362,8 +371,10 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'no_slip.pyramid_faces',
         INTEGER,
         8,
-        'Faces l_s of the friction pyramid inscribed in each cone [-]',
+        'Faces l_s of the friction pyramid inscribed in each cone (at most 64: cos(pi/64) = '
+        '99.9 % of the cone; more only add QP rows) [-]',
         min_value=3,
+        max_value=MAX_PYRAMID_FACES,
         read_only=True,
     ),
     ParameterSpec(
@@ -459,8 +470,9 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'osqp.max_iter',
         INTEGER,
         50,
-        'OSQP iteration limit per solve [-]',
+        'OSQP iteration limit per solve (at most 100000, about 0.1 s per tick) [-]',
         min_value=1,
+        max_value=MAX_OSQP_ITERATIONS,
     ),
     ParameterSpec(
         'osqp.polish',
@@ -657,16 +669,18 @@ def load_node_parameters(
     file_parameters = load_parameter_file(path)
     # A misspelt section would leave its node at the defaults unseen: refused, as by the nodes.
     raise_parameter_errors(source, misspelt_node_sections(file_parameters, NODE_SCHEMAS))
+    given = {**parameters_for_node(file_parameters, node_name, namespace), **(overrides or {})}
     values = validate_parameters(
         schema,
-        {
-            **parameters_for_node(file_parameters, node_name, namespace),
-            **(overrides or {}),
-        },
+        given,
         source,
         other_schemas=[other for name, other in NODE_SCHEMAS.items() if name != node_name],
     )
     check_node_parameters(node_name, values, source)
+    from grasp_safety_filter.io.required_parameters import check_required_parameters
+
+    own_section = any(key.rsplit('/', 1)[-1] == node_name for key in file_parameters)
+    check_required_parameters(node_name, given, source, own_section)
     return resolve_relative_paths(schema, values, Path(path).resolve().parent)
 
 
