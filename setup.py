@@ -67,8 +67,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'grasp-demo = grasp_safety_filter.cli:demo_main',
-            'grasp-analyze = grasp_safety_filter.cli:analyze_main',
+            'grasp-demo = grasp_safety_filter.console:demo',
+            'grasp-analyze = grasp_safety_filter.console:analyze',
             'grasp-bench = grasp_safety_filter.bench:bench_main',
             'grasp-bench-ros = grasp_safety_filter.bench_ros:bench_ros_main',
             'grasp-record = grasp_safety_filter.nodes.recorder_node:main',

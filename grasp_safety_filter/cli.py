@@ -290,6 +290,25 @@ grasp-demo or grasp-record is refused.
 
 def analyze_main(argv: list[str] | None = None) -> int:
     """``grasp-analyze BAG``: figures and summary.json of any recorded run of this package."""
+    try:
+        from grasp_safety_filter.io.interrupts import interrupt_on_signals
+
+        with interrupt_on_signals():  # SIGTERM as SIGINT
+            return _analyze(argv)
+    except KeyboardInterrupt as interrupt:
+        # Each output is written whole (temporary file + rename) and a recovery is staged:
+        # what exists is complete, the original bag untouched.
+        from grasp_safety_filter.io.interrupts import signal_name
+
+        print(
+            f'\ngrasp-analyze: interrupted by {signal_name(interrupt)}: outputs already '
+            'written are complete, the others were not written; the bag is unchanged',
+            file=sys.stderr,
+        )
+        return 130
+
+
+def _analyze(argv: list[str] | None) -> int:
     from grasp_safety_filter.analysis.run_data import RunDataError
     from grasp_safety_filter.io.bag import BagReadError
     from grasp_safety_filter.io.bag_recovery import needs_recovery, recover_bag
@@ -338,3 +357,19 @@ def analyze_main(argv: list[str] | None = None) -> int:
         return 2
     if args.recover:
         return 0
+    out_dir = args.out
+    if out_dir is None:
+        out_dir = args.bag.resolve().parent
+        if (out_dir / SUMMARY_FILE).exists() or (out_dir / SUMMARY_FILE).is_symlink():
+            # The run's own summary (it may say "interrupted"): keep it.
+            out_dir = out_dir / ANALYSIS_DIRECTORY
+    try:
+        summary, figures = analyze_bag(args.bag, out_dir, force=args.force)
+    except (RunDataError, OutputError) as error:
+        print(f'grasp-analyze: {error}', file=sys.stderr)
+        return 2
+    _print_summary(summary['mode'], summary, out_dir)
+    print(f'  summary: {out_dir / SUMMARY_FILE}')
+    for figure in figures:
+        print(f'  figure: {figure}')
+    return 0

@@ -38,13 +38,13 @@ from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.nominal import NominalConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import (
-    BagRecorder,
+from grasp_safety_filter.io.bag import BagRecorder
+from grasp_safety_filter.io.files import OutputError, write_file
+from grasp_safety_filter.io.interrupts import (
     deferred_interrupts,
     interrupt_on_signals,
     signal_name,
 )
-from grasp_safety_filter.io.files import OutputError, write_file
 from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.parameters import ParameterError, suggestion
 from grasp_safety_filter.io.schemas import (

@@ -19,15 +19,8 @@ import yaml
 
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import (
-    bag_topics,
-    BagRecorder,
-    interrupt_on_signals,
-    iter_bag,
-    read_bag,
-    signal_name,
-    SignalInterrupt,
-)
+from grasp_safety_filter.io.bag import bag_topics, BagRecorder, iter_bag, read_bag
+from grasp_safety_filter.io.interrupts import interrupt_on_signals, signal_name, SignalInterrupt
 from grasp_safety_filter.io.messages import ContactData, DiagnosticReport, ObjectReference
 
 REPO = Path(__file__).resolve().parent.parent
@@ -238,7 +231,8 @@ RECORDING_SCRIPT = textwrap.dedent(
     import numpy as np
 
     from grasp_safety_filter.io import messages as m, topics
-    from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals, signal_name
+    from grasp_safety_filter.io.bag import BagRecorder
+    from grasp_safety_filter.io.interrupts import interrupt_on_signals, signal_name
 
     path, storage = sys.argv[1], sys.argv[2]
     joints = [f'finger{i}_joint{j}' for i in (1, 2, 3) for j in (1, 2, 3)]

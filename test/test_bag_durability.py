@@ -29,9 +29,10 @@ from rosbags.typesys import get_typestore, Stores
 import yaml
 
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import bag_topics, BagReadError, BagRecorder, interrupt_on_signals
+from grasp_safety_filter.io.bag import bag_topics, BagReadError, BagRecorder
 from grasp_safety_filter.io.bag_recovery import recover_bag, STAGING_DIRECTORY
 from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS
+from grasp_safety_filter.io.interrupts import interrupt_on_signals
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIG = REPO / 'config' / 'paper_scenario.yaml'

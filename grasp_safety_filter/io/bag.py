@@ -9,12 +9,9 @@ dies without closing (SIGKILL, the OOM killer, a power loss) loses less than
 (:mod:`grasp_safety_filter.io.bag_storage`), and
 :func:`~grasp_safety_filter.io.bag_recovery.recover_bag` makes its bag readable again.
 
-Interrupts: Python turns SIGINT into ``KeyboardInterrupt`` wherever the program happens to
-be, possibly halfway through appending a record; SIGTERM ends the process without any
-clean-up. Inside :func:`interrupt_on_signals`, both raise :class:`SignalInterrupt` (a
-``KeyboardInterrupt``) instead, and not while the recorder is writing a message or
-closing the bag: there the interrupt waits until the bag is consistent again. A runner
-therefore records as::
+Interrupts (:mod:`grasp_safety_filter.io.interrupts`): inside ``interrupt_on_signals``,
+SIGINT and SIGTERM wait while the recorder writes a message or closes the bag, so the bag
+is consistent when the interrupt is raised. A runner therefore records as::
 
     with interrupt_on_signals(), BagRecorder(path) as bag:
         for ...:
@@ -27,13 +24,11 @@ unrecovered bag raises :class:`BagReadError` (one line naming the path and the p
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
-from contextlib import AbstractContextManager, contextmanager
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-import signal
-import threading
-from types import FrameType, TracebackType
+from types import TracebackType
 from typing import Any, Literal
 
 from rosbags.highlevel import AnyReader
@@ -42,6 +37,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.io.bag_storage import DurableWriter, FLUSH_PERIOD_NS, storage_files
+from grasp_safety_filter.io.interrupts import critical_section
 from grasp_safety_filter.io.topics import TOPICS, TopicSpec
 
 Storage = Literal['mcap', 'sqlite3']
@@ -53,114 +49,6 @@ _STORAGE_PLUGINS: dict[str, StoragePlugin] = {
     'mcap': StoragePlugin.MCAP,
     'sqlite3': StoragePlugin.SQLITE3,
 }
-
-
-# ----------------------------------------------------------------------------------------
-# Interrupts
-
-
-class SignalInterrupt(KeyboardInterrupt):
-    """SIGINT or SIGTERM received inside :func:`interrupt_on_signals`.
-
-    Attributes:
-        signum: The signal number.
-
-    """
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(f'interrupted by {signal.Signals(signum).name}')
-        self.signum = signum
-
-
-def signal_name(error: KeyboardInterrupt) -> str:
-    """Return ``"SIGTERM"``/``"SIGINT"`` for a :class:`SignalInterrupt`, else ``"SIGINT"``.
-
-    A plain ``KeyboardInterrupt`` comes from Python's default SIGINT handler.
-    """
-    if isinstance(error, SignalInterrupt):
-        return signal.Signals(error.signum).name
-    return 'SIGINT'
-
-
-class _InterruptState:
-    """Signal bookkeeping of the main thread (handlers run there)."""
-
-    installed = 0
-    critical_depth = 0
-    pending: int | None = None
-
-
-def _in_main_thread() -> bool:
-    return threading.current_thread() is threading.main_thread()
-
-
-def _handle_signal(signum: int, frame: FrameType | None) -> None:
-    if _InterruptState.critical_depth > 0:
-        # Inside a write or close: interrupt once the bag is consistent again.
-        _InterruptState.pending = signum
-        return
-    raise SignalInterrupt(signum)
-
-
-@contextmanager
-def interrupt_on_signals(
-    signals: Sequence[signal.Signals] = (signal.SIGINT, signal.SIGTERM),
-) -> Iterator[None]:
-    """Turn ``signals`` into :class:`SignalInterrupt`, deferred out of bag writes.
-
-    Installs the handlers on entry and restores the previous ones on exit. Must be entered
-    from the main thread (Python delivers signals there only).
-
-    Raises:
-        RuntimeError: Entered from another thread.
-
-    """
-    if not _in_main_thread():
-        raise RuntimeError('interrupt_on_signals: must be entered from the main thread')
-    previous = {s: signal.signal(s, _handle_signal) for s in signals}
-    _InterruptState.installed += 1
-    try:
-        yield
-    finally:
-        _InterruptState.installed -= 1
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-        if _InterruptState.installed == 0:
-            _InterruptState.pending = None
-
-
-@contextmanager
-def _critical_section(raise_pending: bool = True) -> Iterator[None]:
-    """Defer :func:`interrupt_on_signals` interrupts until the block is done.
-
-    Args:
-        raise_pending: Raise a deferred interrupt after the block (when it completed);
-            else drop it (the caller is already stopping).
-
-    """
-    if not _in_main_thread():
-        yield
-        return
-    _InterruptState.critical_depth += 1
-    try:
-        yield
-    finally:
-        _InterruptState.critical_depth -= 1
-    if _InterruptState.critical_depth == 0 and _InterruptState.pending is not None:
-        signum, _InterruptState.pending = _InterruptState.pending, None
-        if raise_pending:
-            raise SignalInterrupt(signum)
-
-
-def deferred_interrupts(raise_pending: bool = True) -> AbstractContextManager[None]:
-    """Hold :func:`interrupt_on_signals` interrupts off a block that must complete.
-
-    Args:
-        raise_pending: Raise a signal that arrived during the block after it; else drop it
-            (the caller is already stopping on an earlier one).
-
-    """
-    return _critical_section(raise_pending)
 
 
 # ----------------------------------------------------------------------------------------
@@ -234,7 +122,7 @@ class BagRecorder:
             storage_plugin=_STORAGE_PLUGINS[self.storage],
             flush_period_ns=self.flush_period_ns,
         )
-        with _critical_section():
+        with critical_section():
             writer.open()
             try:
                 for spec in self.topics.values():
@@ -295,7 +183,7 @@ class BagRecorder:
             raise KeyError(f'topic {topic!r} is not registered; registered: {list(self.topics)}')
         if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int) or stamp_ns < 0:
             raise ValueError(f'stamp_ns: expected an integer >= 0 ns, got {stamp_ns!r}')
-        with _critical_section():
+        with critical_section():
             self._writer.write(self._connections[topic], stamp_ns, data)
             self.counts[topic] += 1
 
@@ -316,7 +204,7 @@ class BagRecorder:
         writer, self._writer = self._writer, None
         if writer is None:
             return
-        with _critical_section(raise_pending=raise_pending_interrupt):
+        with critical_section(raise_pending=raise_pending_interrupt):
             try:
                 writer.close()
             except BaseException:

@@ -31,7 +31,8 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import BagRecorder, interrupt_on_signals
+from grasp_safety_filter.io.bag import BagRecorder
+from grasp_safety_filter.io.interrupts import interrupt_on_signals
 from grasp_safety_filter.io.messages import rclpy_message_class
 from grasp_safety_filter.nodes.base_node import make_executor
 

@@ -1,0 +1,41 @@
+"""Console entry points of ``grasp-demo`` and ``grasp-analyze``: signals handled at once.
+
+A tool spends its first second importing numpy, Pinocchio, rosbags and matplotlib. A
+SIGINT in that time would end it with a ``KeyboardInterrupt`` traceback and a SIGTERM
+without a word; through these entry points both are a :class:`SignalInterrupt` from the
+first instant, and the tool exits with status 130 and one line. This module imports
+nothing heavy before the handlers are in place.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from grasp_safety_filter.io.interrupts import interrupt_on_signals, signal_name
+
+INTERRUPTED = 130
+"""Exit status of a tool stopped by SIGINT or SIGTERM (128 + SIGINT, as a shell reports)."""
+
+
+def _run(prog: str, function: str, argv: list[str] | None) -> int:
+    try:
+        with interrupt_on_signals():
+            from grasp_safety_filter import cli
+
+            return int(getattr(cli, function)(argv))
+    except KeyboardInterrupt as interrupt:
+        print(
+            f'\n{prog}: interrupted by {signal_name(interrupt)} while starting: nothing written',
+            file=sys.stderr,
+        )
+        return INTERRUPTED
+
+
+def demo(argv: list[str] | None = None) -> int:
+    """Run ``grasp-demo`` (:func:`grasp_safety_filter.cli.demo_main`)."""
+    return _run('grasp-demo', 'demo_main', argv)
+
+
+def analyze(argv: list[str] | None = None) -> int:
+    """Run ``grasp-analyze`` (:func:`grasp_safety_filter.cli.analyze_main`)."""
+    return _run('grasp-analyze', 'analyze_main', argv)

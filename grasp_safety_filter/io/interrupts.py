@@ -1,0 +1,181 @@
+"""SIGINT and SIGTERM as one exception, raised where the program can take it.
+
+Python turns SIGINT into ``KeyboardInterrupt`` wherever the program happens to be, possibly
+halfway through appending a record to a bag; SIGTERM ends the process without any clean-up.
+Inside :func:`interrupt_on_signals`, both raise :class:`SignalInterrupt` (a
+``KeyboardInterrupt``) instead, and not inside :func:`critical_section` blocks (a bag
+record being written, a bag being closed): there the interrupt waits until the block is
+done.
+
+An exception that a signal handler raises while Python runs a weak-reference callback or a
+``__del__`` method cannot propagate: Python prints it as "Exception ignored in ..." with a
+traceback and goes on, and the interrupt would be lost. While the handlers are installed,
+such an interrupt is not printed but delivered again (the same signal, raised anew from
+another thread), so it lands in the program's own code.
+
+This module imports nothing heavy: a console script can install the handlers before it
+imports numpy, Pinocchio or rosbags.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import AbstractContextManager, contextmanager
+from queue import SimpleQueue
+import signal
+import sys
+import threading
+import time
+from types import FrameType
+from typing import Any
+
+REDELIVERY_DELAY = 1e-3
+"""Delay before an interrupt that could not be raised is sent again, s."""
+
+
+class SignalInterrupt(KeyboardInterrupt):
+    """SIGINT or SIGTERM received inside :func:`interrupt_on_signals`.
+
+    Attributes:
+        signum: The signal number.
+
+    """
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(f'interrupted by {signal.Signals(signum).name}')
+        self.signum = signum
+
+
+def signal_name(error: KeyboardInterrupt) -> str:
+    """Return ``"SIGTERM"``/``"SIGINT"`` for a :class:`SignalInterrupt`, else ``"SIGINT"``.
+
+    A plain ``KeyboardInterrupt`` comes from Python's default SIGINT handler.
+    """
+    if isinstance(error, SignalInterrupt):
+        return signal.Signals(error.signum).name
+    return 'SIGINT'
+
+
+class _InterruptState:
+    """Signal bookkeeping of the main thread (handlers run there)."""
+
+    installed = 0
+    critical_depth = 0
+    pending: int | None = None
+
+
+def _in_main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+def _handle_signal(signum: int, frame: FrameType | None) -> None:
+    if _InterruptState.critical_depth > 0:
+        # Inside a write or close: interrupt once the block is done.
+        _InterruptState.pending = signum
+        return
+    raise SignalInterrupt(signum)
+
+
+class _Redelivery:
+    """A daemon thread that sends the process a signal again, when asked to."""
+
+    queue: SimpleQueue[int] | None = None
+
+    @classmethod
+    def start(cls) -> None:
+        if cls.queue is None:
+            cls.queue = SimpleQueue()
+            threading.Thread(target=cls._run, name='signal-redelivery', daemon=True).start()
+
+    @classmethod
+    def _run(cls) -> None:
+        assert cls.queue is not None
+        while True:
+            signum = cls.queue.get()
+            time.sleep(REDELIVERY_DELAY)  # let the main thread leave the hook first
+            signal.raise_signal(signum)
+
+
+def _redeliver_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__) -> None:
+    """``sys.unraisablehook``: an interrupt raised where it cannot propagate is sent again.
+
+    The new signal is raised from another thread: raised here, its handler would run inside
+    this hook, where its exception cannot propagate either. A handler that still runs here
+    (the main thread was slow to leave) is caught and sent again the same way.
+    """
+    if not isinstance(unraisable.exc_value, SignalInterrupt) or _Redelivery.queue is None:
+        default(unraisable)
+        return
+    signum = unraisable.exc_value.signum
+    while True:
+        try:
+            _Redelivery.queue.put(signum)
+            return  # no call after the put: the handler cannot run between here and the caller
+        except SignalInterrupt as again:
+            signum = again.signum
+
+
+@contextmanager
+def interrupt_on_signals(
+    signals: Sequence[signal.Signals] = (signal.SIGINT, signal.SIGTERM),
+) -> Iterator[None]:
+    """Turn ``signals`` into :class:`SignalInterrupt`, deferred out of critical sections.
+
+    Installs the handlers (and the hook that re-delivers an interrupt Python could not
+    raise) on entry and restores the previous ones on exit. Must be entered from the main
+    thread (Python delivers signals there only).
+
+    Raises:
+        RuntimeError: Entered from another thread.
+
+    """
+    if not _in_main_thread():
+        raise RuntimeError('interrupt_on_signals: must be entered from the main thread')
+    _Redelivery.start()
+    previous = {s: signal.signal(s, _handle_signal) for s in signals}
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _redeliver_swallowed
+    _InterruptState.installed += 1
+    try:
+        yield
+    finally:
+        _InterruptState.installed -= 1
+        sys.unraisablehook = previous_hook
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if _InterruptState.installed == 0:
+            _InterruptState.pending = None
+
+
+@contextmanager
+def critical_section(raise_pending: bool = True) -> Iterator[None]:
+    """Defer :func:`interrupt_on_signals` interrupts until the block is done.
+
+    Args:
+        raise_pending: Raise a deferred interrupt after the block (when it completed);
+            else drop it (the caller is already stopping).
+
+    """
+    if not _in_main_thread():
+        yield
+        return
+    _InterruptState.critical_depth += 1
+    try:
+        yield
+    finally:
+        _InterruptState.critical_depth -= 1
+    if _InterruptState.critical_depth == 0 and _InterruptState.pending is not None:
+        signum, _InterruptState.pending = _InterruptState.pending, None
+        if raise_pending:
+            raise SignalInterrupt(signum)
+
+
+def deferred_interrupts(raise_pending: bool = True) -> AbstractContextManager[None]:
+    """Hold :func:`interrupt_on_signals` interrupts off a block that must complete.
+
+    Args:
+        raise_pending: Raise a signal that arrived during the block after it; else drop it
+            (the caller is already stopping on an earlier one).
+
+    """
+    return critical_section(raise_pending)
