@@ -480,6 +480,13 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         False,
         'Polish the OSQP solution (active-set refinement; the filter refines it exactly anyway)',
     ),
+    ParameterSpec(
+        'qp.solver',
+        STRING,
+        'osqp',
+        'QP backend: osqp (ADMM, certified or refined exactly) or daqp (dual active set)',
+        choices=('osqp', 'daqp'),
+    ),
 )
 """The safety filter's own parameters (read by ``SafetyFilterConfig``)."""
 
