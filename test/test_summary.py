@@ -133,7 +133,7 @@ def test_summary_counts_failed_rejected_and_watchdog_ticks_from_the_bag(tmp_path
     assert statuses['input_fallback'] == 1  # t_0: no safe command to hold yet
     assert statuses['input_held'] == 3
     assert sum(statuses.values()) == counts['steps']
-    assert Counter(v['status'] for v in run_data.watchdog_values) == {'input_fallback': 2}
+    assert run_data.watchdog_statuses == {'input_fallback': 2}
     assert summary['mode'] == 'filtered'
     assert summary['missed_start'] == {}
     # The watchdog's fallbacks carry the last tick's stamp: the tick's own command is kept.

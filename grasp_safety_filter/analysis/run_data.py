@@ -3,6 +3,13 @@
 Works on bags written by the ROS-free runner and by ``ros2 bag record`` alike: everything
 is taken from the messages (header stamps, ``/grasp/scenario``), nothing from the runner.
 
+The bag is streamed, one message at a time: of each tick only its numbers are kept, packed
+(:mod:`~grasp_safety_filter.analysis.columns`, some 50 float64 per tick), and of the
+filter's statuses and margins only what the summary reads
+(:mod:`~grasp_safety_filter.analysis.filter_statuses`,
+:mod:`~grasp_safety_filter.analysis.barriers`). Memory is a few hundred bytes per tick,
+not the messages (kilobytes per tick: a 15 s run's bag would take hundreds of MB).
+
 A recorder that subscribed late misses the start of the run: every analysed topic whose
 first message is stamped after the run's start (:data:`RUN_START`, the simulator's t_0) is
 listed in :attr:`RunData.missed_start`, and the run is analysed from where its data begin
@@ -11,14 +18,18 @@ listed in :attr:`RunData.missed_start`, and the run is analysed from where its d
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.analysis.barriers import BarrierReader
+from grasp_safety_filter.analysis.columns import Column
+from grasp_safety_filter.analysis.filter_statuses import FilterStatuses, FilterStatusReader
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import bag_topics, BagReadError, read_bag
+from grasp_safety_filter.io.bag import bag_topics, BagReadError, iter_bag
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
 from grasp_safety_filter.io.messages import (
     contacts_from_msg,
@@ -58,12 +69,11 @@ class RunData:
         required_friction: ``beta_i``, shape (K, n).
         t_command: Stamps of the commands, shape (C,), s.
         u_nominal, u_command: Nominal and commanded torques at ``t_command``, (C, m), N·m.
-        filter_values: The safety filter's published tick statuses, in stamp order (one per
-            stamp; keys :class:`~grasp_safety_filter.io.diagnostic_keys.Key`): every tick's,
-            or with ``diagnostics.period`` every event's and one per period of a steady run.
-        t_filter: Stamps of ``filter_values``, shape (F,), s.
-        watchdog_values: The filter's input-watchdog statuses (inputs missing) during the
-            run, bag order.
+        filter_statuses: The safety filter's published tick statuses, one per stamp in stamp
+            order: every tick's, or with ``diagnostics.period`` every event's and one per
+            period of a steady run.
+        watchdog_statuses: The filter's input-watchdog statuses (inputs missing) during the
+            run, counted by ``status``.
         watchdog_after_end: How many came after the simulator's end-of-run status (its inputs
             stop when the run ends: the filter falls back until it is shut down).
         stop_reason: Why the simulator stopped (``"duration"`` when it ran to the end), or None
@@ -71,6 +81,8 @@ class RunData:
         t_end: Time the run reached, s.
         missed_start: Analysed topics whose first message is stamped after the run's start
             (the recording began late): topic -> that first stamp, s. Empty if none.
+        barriers: The filter's smallest barrier value per row family over the run, from
+            ``/safety_filter/margins`` (:meth:`BarrierReader.summary`); None without them.
     """
 
     scenario: dict[str, Any]
@@ -83,13 +95,18 @@ class RunData:
     t_command: np.ndarray
     u_nominal: np.ndarray
     u_command: np.ndarray
-    filter_values: list[dict[str, str]] = field(default_factory=list)
-    t_filter: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    watchdog_values: list[dict[str, str]] = field(default_factory=list)
+    filter_statuses: FilterStatuses = field(default_factory=FilterStatuses)
+    watchdog_statuses: dict[str, int] = field(default_factory=dict)
     watchdog_after_end: int = 0
     stop_reason: str | None = None
     t_end: float = 0.0
     missed_start: dict[str, float] = field(default_factory=dict)
+    barriers: dict[str, Any] | None = None
+
+    @property
+    def t_filter(self) -> np.ndarray:
+        """Stamps of the filter's statuses, shape (F,), s."""
+        return self.filter_statuses.t
 
     @property
     def joint_names(self) -> list[str]:
@@ -130,7 +147,7 @@ class RunData:
 
 
 def load_run(bag: Path | str) -> RunData:
-    """Read a run from a rosbag2 directory (mcap or sqlite3).
+    """Read a run from a rosbag2 directory (mcap or sqlite3), streaming it (module doc).
 
     Raises:
         RunDataError: No readable bag at ``bag``, or a topic the analysis needs is missing,
@@ -145,114 +162,196 @@ def load_run(bag: Path | str) -> RunData:
         raise RunDataError(text if str(bag) in text else f'{bag}: {text}') from error
 
 
+#: Topics the analysis reads (``/safety_filter/margins`` only if of its type).
+ANALYSED_TOPICS = (
+    topics.SCENARIO,
+    topics.CONTACTS,
+    topics.JOINT_STATES,
+    topics.EFFORT_NOMINAL,
+    topics.EFFORT_COMMAND,
+    topics.DIAGNOSTICS,
+)
+
+
+class _Series:
+    """Per-tick numbers of a run, packed as the bag streams (module docstring)."""
+
+    def __init__(self, m: int, n: int) -> None:
+        self.joint_stamps = Column((), np.int64)
+        self.q = Column((m,))
+        self.contact_stamps = Column((), np.int64)
+        self.contact_t = Column(())
+        self.xi_cf = Column((n, 2))
+        self.force = Column((n, 3))
+        self.required_friction = Column((n,))
+        self.effort_stamps = {
+            topics.EFFORT_NOMINAL: Column((), np.int64),
+            topics.EFFORT_COMMAND: Column((), np.int64),
+        }
+        self.efforts = {topics.EFFORT_NOMINAL: Column((m,)), topics.EFFORT_COMMAND: Column((m,))}
+
+
+class _Diagnostics:
+    """What the analysis keeps of ``/diagnostics``, read in bag order."""
+
+    def __init__(self) -> None:
+        self.filter = FilterStatusReader()
+        self.watchdog: Counter[str] = Counter()
+        self.watchdog_after_end = 0
+        self.stop_reason: str | None = None
+        self.t_end: float | None = None
+
+    def add(self, msg: Any) -> None:
+        for report in diagnostics_from_msg(msg).reports:
+            values = report.values
+            if report.name == FILTER_DIAGNOSTIC and Key.STATUS in values:
+                if values.get(Key.INPUT_WATCHDOG) == 'true' and self.stop_reason is not None:
+                    self.watchdog_after_end += 1
+                elif values.get(Key.INPUT_WATCHDOG) == 'true':
+                    self.watchdog[values[Key.STATUS]] += 1
+                else:
+                    self.filter.add(header_stamp_ns(msg), values)
+            elif report.name == SIM_DIAGNOSTIC and 'run.stop_reason' in values:
+                self.stop_reason = values['run.stop_reason']
+                self.t_end = float(values['run.t_end'])
+
+
+def _first_per_stamp(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted distinct stamps and the index of each one's first message."""
+    return np.unique(stamps, return_index=True)
+
+
+def _read_scenario(bag: Path) -> dict[str, Any]:
+    """Read the first ``/grasp/scenario`` message: the names every other message is read by."""
+    for _, _, msg in iter_bag(bag, topics=[topics.SCENARIO]):
+        return scenario_from_msg(msg)
+    raise RunDataError(f'{bag}: no messages on {topics.SCENARIO}; the analysis needs it')
+
+
 def _load_run(bag: Path) -> RunData:
-    wanted = (
-        topics.SCENARIO,
-        topics.CONTACTS,
-        topics.JOINT_STATES,
-        topics.EFFORT_NOMINAL,
-        topics.EFFORT_COMMAND,
-        topics.DIAGNOSTICS,
-    )
     recorded = bag_topics(bag)
-    for name in wanted:
+    for name in ANALYSED_TOPICS:
         if name in recorded and recorded[name].msgtype != topics.topic_spec(name).msgtype:
             raise RunDataError(
                 f'{bag}: {name} has type {recorded[name].msgtype}; the analysis needs '
                 f'{topics.topic_spec(name).msgtype}'
             )
-    messages = read_bag(bag, topics=wanted)
-    for topic in (topics.SCENARIO, topics.CONTACTS, topics.JOINT_STATES):
-        if not messages.get(topic):
-            raise RunDataError(f'{bag}: no messages on {topic}; the analysis needs it')
-    scenario = scenario_from_msg(messages[topics.SCENARIO][0][1])
+    scenario = _read_scenario(bag)
     joint_names, contact_names = scenario['joint_names'], scenario['contact_names']
+    m = len(joint_names)
+    series = _Series(m, len(contact_names))
+    diagnostics = _Diagnostics()
+    barriers = None
+    wanted = [name for name in ANALYSED_TOPICS if name != topics.SCENARIO]
+    margins = recorded.get(topics.MARGINS)
+    if margins is not None and margins.msgtype == topics.topic_spec(topics.MARGINS).msgtype:
+        barriers = BarrierReader()
+        wanted.append(topics.MARGINS)
+    for topic, _, msg in iter_bag(bag, topics=wanted):
+        if topic == topics.JOINT_STATES:
+            series.joint_stamps.append(header_stamp_ns(msg))
+            series.q.append(joint_state_from_msg(msg, joint_names, source=topic).position)
+        elif topic == topics.CONTACTS:
+            contact = contacts_from_msg(msg, contact_names)
+            series.contact_stamps.append(header_stamp_ns(msg))
+            series.contact_t.append(contact.t)
+            series.xi_cf.append(contact.xi_cf)
+            series.force.append(contact.force)
+            series.required_friction.append(contact.required_friction)
+        elif topic in series.efforts:
+            series.effort_stamps[topic].append(header_stamp_ns(msg))
+            series.efforts[topic].append(effort_from_msg(msg, joint_names, source=topic).effort)
+        elif topic == topics.DIAGNOSTICS:
+            diagnostics.add(msg)
+        elif barriers is not None:
+            barriers.add(msg, topic)
+    for topic, column in (
+        (topics.CONTACTS, series.contact_stamps),
+        (topics.JOINT_STATES, series.joint_stamps),
+    ):
+        if not len(column):
+            raise RunDataError(f'{bag}: no messages on {topic}; the analysis needs it')
+    return _assemble(bag, scenario, series, diagnostics, barriers)
 
-    q_by_stamp = {}
-    for _, msg in messages[topics.JOINT_STATES]:
-        q_by_stamp[header_stamp_ns(msg)] = joint_state_from_msg(
-            msg, joint_names, source=topics.JOINT_STATES
-        ).position
-    contact_msgs = sorted((msg for _, msg in messages[topics.CONTACTS]), key=header_stamp_ns)
+
+def _assemble(
+    bag: Path,
+    scenario: dict[str, Any],
+    series: _Series,
+    diagnostics: _Diagnostics,
+    barriers: BarrierReader | None,
+) -> RunData:
+    """Align the streamed series on the simulator's steps (one joint state per contact)."""
+    joint_stamps = series.joint_stamps.array()
+    # The last joint state of a stamp counts (a re-sent state repeats the same values).
+    last_first = len(joint_stamps) - 1 - _first_per_stamp(joint_stamps[::-1])[1]
+    state_stamps = joint_stamps[last_first]
+    order = np.argsort(state_stamps, kind='stable')
+    state_stamps, state_rows = state_stamps[order], last_first[order]
+    all_contact_stamps = series.contact_stamps.array()
     # Samples before the first joint state were missed by the recorder (see missed_start).
-    first_state = min(q_by_stamp)
-    contact_msgs = [msg for msg in contact_msgs if header_stamp_ns(msg) >= first_state]
-    if not contact_msgs:
+    by_stamp = np.argsort(all_contact_stamps, kind='stable')
+    kept = by_stamp[all_contact_stamps[by_stamp] >= state_stamps[0]]
+    if not len(kept):
         raise RunDataError(f'{bag}: no contact sample at or after the first joint state')
-    contacts = [contacts_from_msg(msg, contact_names) for msg in contact_msgs]
-    stamps = [header_stamp_ns(msg) for msg in contact_msgs]
-    missing = [s for s in stamps if s not in q_by_stamp]
-    if missing:
+    contact_stamps = all_contact_stamps[kept]
+    position = np.minimum(np.searchsorted(state_stamps, contact_stamps), len(state_stamps) - 1)
+    matched = state_stamps[position] == contact_stamps
+    if not matched.all():
+        missing = contact_stamps[~matched]
         raise RunDataError(
             f'{bag}: {len(missing)} contact samples have no joint state of the same stamp '
             f'(first at {missing[0] * 1e-9:.9f} s)'
         )
-
-    def efforts(topic: str) -> dict[int, np.ndarray]:
-        # The first message of a stamp is the tick's answer; the filter's watchdog may repeat
-        # a fallback later with the same stamp (the node clock stood still).
-        by_stamp: dict[int, np.ndarray] = {}
-        for _, msg in messages.get(topic, []):
-            stamp = header_stamp_ns(msg)
-            if stamp not in by_stamp:
-                by_stamp[stamp] = effort_from_msg(msg, joint_names, source=topic).effort
-        return by_stamp
-
-    nominal, command = efforts(topics.EFFORT_NOMINAL), efforts(topics.EFFORT_COMMAND)
-    command_stamps = sorted(set(nominal) & set(command))
-    filter_values: dict[int, dict[str, str]] = {}
-    watchdog_values: list[dict[str, str]] = []
-    watchdog_after_end = 0
-    stop_reason, t_end = None, None
-    for _, msg in messages.get(topics.DIAGNOSTICS, []):
-        data = diagnostics_from_msg(msg)
-        for report in data.reports:
-            if report.name == FILTER_DIAGNOSTIC and Key.STATUS in report.values:
-                if report.values.get(Key.INPUT_WATCHDOG) == 'true' and stop_reason is not None:
-                    watchdog_after_end += 1
-                elif report.values.get(Key.INPUT_WATCHDOG) == 'true':
-                    watchdog_values.append(dict(report.values))
-                else:
-                    filter_values[header_stamp_ns(msg)] = dict(report.values)
-            elif report.name == SIM_DIAGNOSTIC and 'run.stop_reason' in report.values:
-                stop_reason = report.values['run.stop_reason']
-                t_end = float(report.values['run.t_end'])
-    enabled = [v.get(Key.FILTER_ENABLED) for v in filter_values.values()]
-    mode = 'filtered' if enabled and all(e == 'true' for e in enabled) else 'nominal'
+    # The first message of a stamp is the tick's answer; the filter's watchdog may repeat
+    # a fallback later with the same stamp (the node clock stood still).
+    nominal_stamps, nominal_first = _first_per_stamp(
+        series.effort_stamps[topics.EFFORT_NOMINAL].array()
+    )
+    command_only, command_first = _first_per_stamp(
+        series.effort_stamps[topics.EFFORT_COMMAND].array()
+    )
+    command_stamps, in_nominal, in_command = np.intersect1d(
+        nominal_stamps, command_only, assume_unique=True, return_indices=True
+    )
+    statuses = diagnostics.filter.finish()
+    mode = 'filtered' if len(statuses) and statuses.enabled.all() else 'nominal'
     first_stamps = {
-        topics.JOINT_STATES: min(q_by_stamp),
-        topics.CONTACTS: min(header_stamp_ns(msg) for _, msg in messages[topics.CONTACTS]),
+        topics.JOINT_STATES: int(state_stamps[0]),
+        topics.CONTACTS: int(all_contact_stamps.min()),
     }
-    for topic, by_stamp in (
-        (topics.EFFORT_NOMINAL, nominal),
-        (topics.EFFORT_COMMAND, command),
-        (topics.DIAGNOSTICS, filter_values),
+    for topic, stamps in (
+        (topics.EFFORT_NOMINAL, nominal_stamps),
+        (topics.EFFORT_COMMAND, command_only),
+        (topics.DIAGNOSTICS, diagnostics.filter.stamps()),
     ):
-        if by_stamp:
-            first_stamps[topic] = min(by_stamp)
+        if len(stamps):
+            first_stamps[topic] = int(stamps.min())
     step = float(scenario['time_step'])
     missed_start = {
         topic: nanoseconds_to_seconds(stamp)
         for topic, stamp in first_stamps.items()
         if nanoseconds_to_seconds(stamp) > RUN_START + 0.5 * step
     }
-    m = len(joint_names)
+    m = len(scenario['joint_names'])
+    nominal_rows, command_rows = nominal_first[in_nominal], command_first[in_command]
+    t_end = diagnostics.t_end
     return RunData(
         scenario=scenario,
         mode=mode,
-        t=np.array([c.t for c in contacts]),
-        q=np.array([q_by_stamp[s] for s in stamps]).reshape(-1, m),
-        xi_cf=np.array([c.xi_cf for c in contacts]),
-        force=np.array([c.force for c in contacts]),
-        required_friction=np.array([c.required_friction for c in contacts]),
-        t_command=np.array(command_stamps, dtype=float) * 1e-9,
-        u_nominal=np.array([nominal[s] for s in command_stamps]).reshape(-1, m),
-        u_command=np.array([command[s] for s in command_stamps]).reshape(-1, m),
-        filter_values=[filter_values[s] for s in sorted(filter_values)],
-        t_filter=np.array(sorted(filter_values), dtype=float) * 1e-9,
-        watchdog_values=watchdog_values,
-        watchdog_after_end=watchdog_after_end,
-        stop_reason=stop_reason,
-        t_end=t_end if t_end is not None else max(q_by_stamp) * 1e-9,
+        t=series.contact_t.array()[kept],
+        q=series.q.array()[state_rows[position]].reshape(-1, m),
+        xi_cf=series.xi_cf.array()[kept],
+        force=series.force.array()[kept],
+        required_friction=series.required_friction.array()[kept],
+        t_command=command_stamps.astype(float) * 1e-9,
+        u_nominal=series.efforts[topics.EFFORT_NOMINAL].array()[nominal_rows].reshape(-1, m),
+        u_command=series.efforts[topics.EFFORT_COMMAND].array()[command_rows].reshape(-1, m),
+        filter_statuses=statuses,
+        watchdog_statuses=dict(diagnostics.watchdog),
+        watchdog_after_end=diagnostics.watchdog_after_end,
+        stop_reason=diagnostics.stop_reason,
+        t_end=t_end if t_end is not None else int(state_stamps[-1]) * 1e-9,
         missed_start=missed_start,
+        barriers=None if barriers is None else barriers.summary(),
     )

@@ -15,7 +15,8 @@ Keys (later additions never rename one)::
                 "statuses": {status: steps},
                 "relaxed_families": {family: steps},
                 "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"},
-                "tick_us": {"median", "p99"}}}
+                "tick_us": {"median", "p99"}},
+     "barriers": {"messages", "unreadable", "min_h": {row family: h}}}
 
 ``missed_start`` lists the topics whose recording began after the run's start (a recorder
 that subscribed late), with their first stamp in s; the verdict is then drawn from the
@@ -29,20 +30,28 @@ watchdog sent while no input came during the run, ``watchdog_statuses_after_end`
 statuses after the simulator's end of run (its inputs stop then: expected, not a fault).
 
 A margin is the smallest barrier value h over the run in its own units (negative =
-violated); infinite values (a separated contact) are written as null. Filter times are the
-node's own, per tick: the QP solve, the whole filter step (``SafetyFilter.solve``) and the
-whole tick (model terms, filter step, messages); in a lockstep run they include the cache
-and allocator effects of the simulator sharing the process.
+violated); infinite values (a separated contact) are written as null. ``barriers`` is what
+the filter itself saw, from ``/safety_filter/margins`` (when recorded): the smallest h of
+each of its row families (``no_slip``, ``joint_limits``, ...; the QP's rows at u*, or at
+u_nom with the filter off), the messages read, and those that could not be read (nameless
+ones before any that named the rows, as in a recording that began late; malformed ones).
+
+Filter times are the node's own, per tick: the QP solve, the whole filter step
+(``SafetyFilter.solve``) and the whole tick (model terms, filter step, messages); in a
+lockstep run they include the cache and allocator effects of the simulator sharing the
+process.
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable
 import math
 from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.analysis.filter_statuses import TIME_KEYS
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.diagnostic_keys import (
     FAILED_STATUSES,
@@ -80,22 +89,19 @@ def _percentiles(
     return {'median': quantile(0.5), 'p99': quantile(0.99)}
 
 
-def _tick_weights(run: RunData) -> list[int]:
+def _tick_weights(run: RunData) -> np.ndarray:
     """How many ticks each published status stands for: those since the previous one.
 
     A steady status published once per ``diagnostics.period`` stands for the ticks of its
     period, so that times are percentiles over ticks, not over published statuses.
     Statuses without counts (an older bag) stand for one tick each.
     """
-    weights: list[int] = []
+    weights = np.ones(len(run.filter_statuses), dtype=np.int64)
     previous = 0
-    for values in run.filter_values:
-        ticks = values.get(Key.TICKS)
-        if ticks is None:
-            weights.append(1)
-            continue
-        weights.append(max(int(ticks) - previous, 1))
-        previous = int(ticks)
+    for k, ticks in enumerate(run.filter_statuses.ticks.tolist()):
+        if ticks >= 0:
+            weights[k] = max(ticks - previous, 1)
+            previous = ticks
     return weights
 
 
@@ -116,19 +122,6 @@ def constraint_log(run: RunData) -> EventLog:
     return log
 
 
-def tick_status(values: dict[str, str]) -> TickStatus | str:
-    """Return the ``status`` of a filter diagnostic: a :class:`TickStatus`, else the text.
-
-    A status this version does not know (a bag from another one) stays text: it is counted
-    in ``statuses`` but as neither failed nor rejected.
-    """
-    text = values.get(Key.STATUS, '')
-    try:
-        return TickStatus(text)
-    except ValueError:
-        return text
-
-
 def tick_counts(run: RunData) -> dict[str, int]:
     """Count the run's ticks by status, including those whose status was not published.
 
@@ -137,19 +130,14 @@ def tick_counts(run: RunData) -> dict[str, int]:
     ``diagnostics.period``). Statuses without counts (a bag of an older version): one tick
     each.
     """
-    counted = [values for values in run.filter_values if Key.TICKS in values]
-    counts: dict[str, int] = {}
-    if counted:
-        for key, value in counted[-1].items():
-            if key.startswith(Key.COUNT_PREFIX):
-                counts[key.removeprefix(Key.COUNT_PREFIX)] = int(value)
+    statuses = run.filter_statuses
+    if statuses.counts is not None:
+        counts = dict(statuses.counts)
     else:
-        for values in run.filter_values:
-            text = values.get(Key.STATUS, '')
-            counts[text] = counts.get(text, 0) + 1
-    if run.filter_values and len(run.t_filter):
-        last = run.filter_values[-1].get(Key.STATUS, '')
-        later = int(np.count_nonzero(run.t_command > run.t_filter[-1] + 0.5e-9))
+        counts = dict(Counter(statuses.status))
+    if len(statuses):
+        last = statuses.status[-1]
+        later = int(np.count_nonzero(run.t_command > statuses.t[-1] + 0.5e-9))
         if later:
             counts[last] = counts.get(last, 0) + later
     return counts
@@ -164,37 +152,40 @@ def filter_summary(run: RunData) -> dict[str, Any]:
     for the ticks since the previous one (:func:`_tick_weights`): exact with
     ``diagnostics.period`` 0, else a steady period's times are those of its published tick.
     """
+    statuses = run.filter_statuses
     counts = tick_counts(run)
     relaxed_families: dict[str, int] = {}
-    for values in run.filter_values:
-        if values.get(Key.RELAXED) == 'true':
-            for family in filter(None, values.get(Key.RELAXED_FAMILIES, '').split(',')):
-                relaxed_families[family] = relaxed_families.get(family, 0) + 1
+    relaxed_lists = Counter(
+        families
+        for families, relaxed in zip(statuses.relaxed_families, statuses.relaxed, strict=True)
+        if relaxed
+    )
+    for families, steps in relaxed_lists.items():
+        for family in filter(None, families.split(',')):
+            relaxed_families[family] = relaxed_families.get(family, 0) + steps
 
-    def count(statuses: Iterable[TickStatus]) -> int:
-        return sum(counts.get(status.value, 0) for status in statuses)
+    def count(kinds: Iterable[TickStatus]) -> int:
+        return sum(counts.get(status.value, 0) for status in kinds)
 
     weights = _tick_weights(run)
 
-    def times(key: str) -> dict[str, float | None]:
-        pairs = zip(run.filter_values, weights, strict=True)
-        timed = [(float(values[key]), w) for values, w in pairs if key in values]
-        return _percentiles([t for t, _ in timed], [w for _, w in timed])
+    def times(column: int) -> dict[str, float | None]:
+        values = statuses.times_us[:, column]
+        timed = ~np.isnan(values)
+        return _percentiles(values[timed].tolist(), weights[timed].tolist())
 
     return {
         'steps': sum(counts.values()),
-        'relaxed_steps': sum(v.get(Key.RELAXED) == 'true' for v in run.filter_values),
+        'relaxed_steps': int(np.count_nonzero(statuses.relaxed)),
         'failed_steps': count(FAILED_STATUSES),
         'rejected_steps': count(INPUT_STATUSES),
-        'watchdog_fallbacks': sum(
-            tick_status(values) is TickStatus.INPUT_FALLBACK for values in run.watchdog_values
-        ),
+        'watchdog_fallbacks': run.watchdog_statuses.get(TickStatus.INPUT_FALLBACK.value, 0),
         'watchdog_statuses_after_end': run.watchdog_after_end,
         'statuses': counts,
         'relaxed_families': relaxed_families,
-        'qp_solve_us': times(Key.SOLVE_TIME_US),
-        'step_us': times(Key.STEP_TIME_US),
-        'tick_us': times(Key.TICK_TIME_US),
+        'qp_solve_us': times(TIME_KEYS.index(Key.SOLVE_TIME_US)),
+        'step_us': times(TIME_KEYS.index(Key.STEP_TIME_US)),
+        'tick_us': times(TIME_KEYS.index(Key.TICK_TIME_US)),
     }
 
 
@@ -221,4 +212,9 @@ def summarize(run: RunData) -> dict[str, Any]:
     }
     if run.mode == 'filtered':
         summary['filter'] = filter_summary(run)
+    if run.barriers is not None:
+        summary['barriers'] = {
+            **run.barriers,
+            'min_h': {k: _finite_or_none(v) for k, v in run.barriers['min_h'].items()},
+        }
     return summary
