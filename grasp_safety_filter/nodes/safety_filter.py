@@ -7,7 +7,8 @@ valid::
     /hand/joint_states (t) + /object/odom (t) + /hand/effort_nominal (t)
         ──▶ GraspModel.state ──▶ SafetyFilter.solve(state, u_nom) ──▶ HoldPolicy.accept
         ──▶ /hand/effort_command stamped t (u* by joint name, N·m)
-            /safety_filter/margins stamped t (barrier value h per row name)
+            /safety_filter/margins stamped t (barrier value h per row; row names in the
+                first message, on change and once a second: io.margin_stream)
             /diagnostics: status ``safety_filter`` (below)
 
 Inputs are parsed by joint name and checked by a :class:`StampGuard` per topic (older than
@@ -79,6 +80,7 @@ from grasp_safety_filter.io.diagnostic_keys import (
     silent_for,
     TickStatus,
 )
+from grasp_safety_filter.io.margin_stream import MarginEncoder
 from grasp_safety_filter.io.messages import (
     bounded_text,
     DiagnosticLevel,
@@ -91,7 +93,6 @@ from grasp_safety_filter.io.messages import (
     header_stamp_ns,
     joint_state_from_msg,
     JointStateData,
-    margins_to_msg,
     MessageError,
     MessageNamespace,
     nanoseconds_to_seconds,
@@ -163,6 +164,7 @@ class SafetyFilterEndpoint:
         filter: The safety filter core.
         hold: The input hold policy.
         guard: Stale and out-of-order stamp checks, per input topic.
+        margin_stream: The ``/safety_filter/margins`` stream (row names only when due).
         enabled: Whether u* is filtered (True) or u_nom passed through (False); change it
             with :meth:`switch`.
         last_result: The last tick's :class:`FilterResult` (None when disabled or before).
@@ -188,6 +190,7 @@ class SafetyFilterEndpoint:
         )
         self.guard = StampGuard(input_policy_config.max_age)
         self.rate = PublicationRate(publication_rate_config)
+        self.margin_stream = MarginEncoder()
         self.last_result: FilterResult | None = None
         self._joint_names = list(model.joint_names)
         self._pending: dict[int, dict[str, Any]] = {}
@@ -524,9 +527,8 @@ class SafetyFilterEndpoint:
             self._accepted_wall = wall
         outgoing = [stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u))]
         if self.rate.margins_due(stamp):
-            outgoing.append(
-                stamped(MARGINS, margins_to_msg(self.msgs, t, margins.names, margins.array))
-            )
+            message = self.margin_stream.encode(self.msgs, t, margins.names, margins.array)
+            outgoing.append(stamped(MARGINS, message))
         status = TickStatus.DISABLED if result is None else TickStatus.of(result.status)
         if self.rate.status_due(stamp, status, force=resumed_after is not None):
             tick_time = time.perf_counter() - start
