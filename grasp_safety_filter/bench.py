@@ -24,6 +24,10 @@
 
 Timings are wall-clock (``time.perf_counter``) with the garbage collector on, as in a
 node. Nothing here asserts a time: the figures are for reading.
+
+``grasp-bench --soak SECONDS`` runs the long-run benchmark instead (memory growth of the
+recording runner, bag size per simulated second, memory of the analysis):
+:mod:`grasp_safety_filter.soak`.
 """
 
 from __future__ import annotations
@@ -993,6 +997,25 @@ def bench_main(argv: list[str] | None = None) -> int:
         help='override a safety-filter parameter, e.g. --set osqp.eps_abs=1e-3',
     )
     parser.add_argument(
+        '--soak',
+        type=float,
+        metavar='SECONDS',
+        help='instead: the soak benchmark, a recorded filtered run of SECONDS simulated s '
+        '(memory growth, bag size, analysis memory; grasp_safety_filter.soak)',
+    )
+    parser.add_argument(
+        '--soak-interval',
+        type=float,
+        default=1.0,
+        help='simulated s between two memory samples of the soak (1)',
+    )
+    parser.add_argument(
+        '--soak-out',
+        type=Path,
+        default=Path('soak'),
+        help='directory of the soak bags and analyses (replaced; default: soak)',
+    )
+    parser.add_argument(
         '--json',
         nargs='?',
         const='-',
@@ -1016,6 +1039,8 @@ def bench_main(argv: list[str] | None = None) -> int:
     except ConfigError as error:
         print(config_error_line('grasp-bench', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
+    if args.soak is not None:
+        return _soak_main(args, parser, log)
     document = benchmark(
         args.config,
         args.duration,
@@ -1026,16 +1051,40 @@ def bench_main(argv: list[str] | None = None) -> int:
         filter_overrides=dict(args.overrides),
         log=log,
     )
-    report = format_report(document)
+    _print(format_report(document), document, args.json)
+    return 0
+
+
+def _soak_main(
+    args: argparse.Namespace, parser: argparse.ArgumentParser, log: Callable[[str], None]
+) -> int:
+    """``grasp-bench --soak SECONDS``: see :mod:`grasp_safety_filter.soak`."""
+    from grasp_safety_filter.soak import format_soak, soak
+
+    if args.soak <= 0 or args.soak_interval <= 0:
+        parser.error('--soak and --soak-interval: expected > 0 s')
+    document = soak(
+        args.config,
+        args.soak,
+        args.soak_out,
+        interval=args.soak_interval,
+        overrides=dict(args.overrides),
+        log=log,
+    )
+    _print(format_soak(document), document, args.json)
+    return 0
+
+
+def _print(report: str, document: dict[str, Any], json_target: str | None) -> None:
+    """Print the table; the JSON to stdout (``-``, table to stderr) or to a file."""
     text = json.dumps(document, indent=2) + '\n'
-    if args.json == '-':
+    if json_target == '-':
         print(report, file=sys.stderr)
         sys.stdout.write(text)
     else:
         print(report)
-        if args.json is not None:
-            Path(args.json).write_text(text)
-    return 0
+        if json_target is not None:
+            Path(json_target).write_text(text)
 
 
 if __name__ == '__main__':
