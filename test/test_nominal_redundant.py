@@ -20,7 +20,7 @@ import pytest
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.pose_error import euler_from_matrix, matrix_from_euler
 from grasp_safety_filter.control.reference import PaperReference, Pose, ReferenceSample
-from grasp_safety_filter.io.schemas import load_node_parameters
+from grasp_safety_filter.io.schemas import load_node_parameters, NODE_SCHEMAS
 from grasp_safety_filter.model.grasp_model import GraspModel
 from hand_sim_node.config import SimConfig
 from hand_sim_node.simulator import SimState, Simulator
@@ -39,8 +39,7 @@ SCENARIO = f"""
       joint_names: {[f'{f}_joint{k}' for f in FINGERS for k in range(1, 5)]}
       fingertip_frames: {[f'{f}_tip' for f in FINGERS]}
       contact_names: {list(FINGERS)}
-      fingertip_radius: 0.012
-      object: {{shape: cube, mass: 0.1, size: 0.05}}
+{{tip_radius}}      object: {{shape: cube, mass: 0.1, size: 0.05}}
       contact_faces: ["-x", "+x", "-y", "+y"]
       friction_coefficient: 0.8
       gravity: [0.0, 0.0, -9.81]
@@ -57,7 +56,12 @@ hand_sim_node:
 def hand(tmp_path_factory):
     """Return the example hand's GraspModel and its grasp configuration (q, p_o)."""
     path = tmp_path_factory.mktemp('four_finger') / 'scenario.yaml'
-    path.write_text(SCENARIO)
+    # A schema with model.fingertip_radius takes the 12 mm tip radius from it; one without
+    # reads it from the tip links' <collision><sphere>, as the URDF declares them.
+    declared = 'model.fingertip_radius' in NODE_SCHEMAS['hand_sim_node'].names
+    path.write_text(
+        SCENARIO.replace('{tip_radius}', '      fingertip_radius: 0.012\n' if declared else '')
+    )
     params = load_node_parameters(path, 'hand_sim_node')
     model = GraspModel.from_parameters(params, path.parent)
     assert (model.n_joints, len(model.contact_names)) == (16, 4)
