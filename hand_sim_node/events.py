@@ -10,6 +10,11 @@ Four families are watched, each with a margin ``h`` in its own units (``h < 0``:
   ``beta_i = ||f_t,i|| / f_n,i`` (``beta_i = inf`` when ``f_n,i <= 0``); ``h < 0`` is a
   violation.
 - ``separation``: per contact, the normal force ``f_n,i``, N; ``f_n,i <= 0`` is a violation.
+
+All margins of one instant live in one flat array, family after family (workspace (n, 4),
+joints (m, 2), slip (n,), separation (n,), each row-major); the per-family arrays are views
+of it. Violations, events and the run's record are evaluated on that array with one numpy
+call per quantity, whatever the number of contacts and joints.
 """
 
 from __future__ import annotations
@@ -19,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.model.grasp_state import GraspState, required_friction
+from grasp_safety_filter.model.grasp_state import GraspState
 
 FINGERTIP_WORKSPACE = 'fingertip_workspace'
 JOINT_LIMITS = 'joint_limits'
@@ -72,6 +77,11 @@ class ConstraintMargins:
         required_friction: ``beta_i``, shape (n,) (``inf`` where ``f_n,i <= 0``).
         friction: ``mu - beta_i``, shape (n,).
         normal_force: ``f_n,i``, shape (n,), N.
+        values: Every margin, family after family in :data:`FAMILIES` order (the four
+            arrays above but ``required_friction``, flattened), shape (6n + 2m,); built
+            from them if not given.
+        violated_mask: ``values`` violated (``<= 0`` for workspace and separation, ``< 0``
+            for joint limits and slip), shape (6n + 2m,); built from ``values`` if not given.
 
     """
 
@@ -81,6 +91,24 @@ class ConstraintMargins:
     required_friction: np.ndarray
     friction: np.ndarray
     normal_force: np.ndarray
+    values: np.ndarray | None = field(default=None, repr=False)
+    violated_mask: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.values is None:
+            flat = np.concatenate([np.ravel(v) for v in self.by_family().values()])
+            object.__setattr__(self, 'values', flat)
+        if self.violated_mask is None:
+            closed = _closed_mask(
+                self.fingertip_workspace.size, self.joint_limits.size, self.friction.size
+            )
+            object.__setattr__(self, 'violated_mask', _violated(self.values, closed))
+
+    @property
+    def family_starts(self) -> np.ndarray:
+        """Index in :attr:`values` where each family's margins start, shape (4,)."""
+        sizes = (self.fingertip_workspace.size, self.joint_limits.size, self.friction.size)
+        return np.cumsum((0, *sizes))
 
     def by_family(self) -> dict[str, np.ndarray]:
         """Return the margins of each family, in :data:`FAMILIES` order (slip: ``mu - beta_i``)."""
@@ -93,12 +121,27 @@ class ConstraintMargins:
 
     def violated(self) -> dict[str, np.ndarray]:
         """Boolean violation masks per family, shaped like the margins."""
+        starts = self.family_starts
         return {
-            FINGERTIP_WORKSPACE: self.fingertip_workspace <= 0.0,
-            JOINT_LIMITS: self.joint_limits < 0.0,
-            SLIP: self.friction < 0.0,
-            SEPARATION: self.normal_force <= 0.0,
+            family: self.violated_mask[start : start + values.size].reshape(values.shape)
+            for (family, values), start in zip(self.by_family().items(), starts, strict=True)
         }
+
+
+def _closed_mask(n_workspace: int, n_joint: int, n_contacts: int) -> np.ndarray:
+    """Entries of the flat margins whose constraint is violated at 0 (workspace, separation)."""
+    return np.concatenate(
+        (
+            np.ones(n_workspace, dtype=bool),
+            np.zeros(n_joint + n_contacts, dtype=bool),
+            np.ones(n_contacts, dtype=bool),
+        )
+    )
+
+
+def _violated(values: np.ndarray, closed: np.ndarray) -> np.ndarray:
+    """``values <= 0`` where ``closed``, ``values < 0`` elsewhere (NaN: not violated)."""
+    return (values < 0.0) | (closed & (values == 0.0))
 
 
 class EventMonitor:
@@ -151,6 +194,24 @@ class EventMonitor:
         self.friction_coefficient = float(friction_coefficient)
         self.joint_names = tuple(joint_names)
         self.contact_names = tuple(contact_names)
+        n = len(self.contact_names)
+        self._ends = tuple(int(end) for end in np.cumsum((4 * n, 2 * m, n, n)))
+        self._closed = _closed_mask(4 * n, 2 * m, n)
+        # (family, index, name, side) of every flat margin, for the events.
+        self._entries = (
+            [
+                (FINGERTIP_WORKSPACE, i, self.contact_names[i], side)
+                for i in range(n)
+                for side in WORKSPACE_SIDES
+            ]
+            + [
+                (JOINT_LIMITS, j, self.joint_names[j], side)
+                for j in range(m)
+                for side in JOINT_SIDES
+            ]
+            + [(SLIP, i, self.contact_names[i], '') for i in range(n)]
+            + [(SEPARATION, i, self.contact_names[i], '') for i in range(n)]
+        )
 
     @classmethod
     def from_model(cls, model: Any) -> EventMonitor:
@@ -185,51 +246,60 @@ class EventMonitor:
         """
         a_b = np.asarray(xi_cf, dtype=float)
         forces = np.asarray(contact_force, dtype=float).reshape(-1, 3)
-        workspace = np.empty((a_b.shape[0], 4))
-        workspace[:, 0::2] = a_b - self.workspace_low
-        workspace[:, 1::2] = self.workspace_high - a_b
-        joints = np.column_stack((q - self.joint_lower_limits, self.joint_upper_limits - q))
+        n, m = a_b.shape[0], self.joint_lower_limits.shape[0]
+        workspace_end, joint_end, slip_end, size = self._ends
+        if forces.shape[0] != n or size != 6 * n + 2 * m:
+            raise ValueError(
+                f'EventMonitor.margins_at: expected {len(self.contact_names)} contacts, got '
+                f'coordinates of {n} and forces of {forces.shape[0]}'
+            )
+        values = np.empty(size)
+        workspace = values[:workspace_end].reshape(n, 4)
+        joints = values[workspace_end:joint_end].reshape(m, 2)
+        workspace_sides = workspace.reshape(n, 2, 2)  # (contact, a or b, lower or upper)
+        np.subtract(a_b, self.workspace_low, out=workspace_sides[:, :, 0])
+        np.subtract(self.workspace_high, a_b, out=workspace_sides[:, :, 1])
+        q = np.asarray(q, dtype=float)
+        np.subtract(q, self.joint_lower_limits, out=joints[:, 0])
+        np.subtract(self.joint_upper_limits, q, out=joints[:, 1])
         normal = forces[:, 2]
-        beta = required_friction(forces)
-        # Unknown forces (the dynamics could not be evaluated) flag nothing.
-        beta[~np.isfinite(normal)] = np.nan
+        # beta = |f_t| / f_n where f_n > 0, inf where f_n <= 0, and NaN where the force is
+        # unknown (the dynamics could not be evaluated): unknown forces flag nothing.
+        known = np.isfinite(normal)
+        beta = np.where(known, np.inf, np.nan)
+        np.divide(
+            np.hypot(forces[:, 0], forces[:, 1]), normal, out=beta, where=known & (normal > 0.0)
+        )
+        friction = values[joint_end:slip_end]
+        np.subtract(self.friction_coefficient, beta, out=friction)
+        values[slip_end:] = normal
         return ConstraintMargins(
             t=float(t),
             fingertip_workspace=workspace,
             joint_limits=joints,
             required_friction=beta,
-            friction=self.friction_coefficient - beta,
-            normal_force=normal.copy(),
+            friction=friction,
+            normal_force=values[slip_end:],
+            values=values,
+            violated_mask=_violated(values, self._closed),
         )
 
     def events(self, margins: ConstraintMargins) -> tuple[Event, ...]:
-        """Every violated constraint of ``margins``, family by family."""
-        violated = margins.violated()
-        if not any(mask.any() for mask in violated.values()):
+        """Every violated constraint of ``margins``, family by family, row-major within one."""
+        mask = margins.violated_mask
+        if not mask.any():
             return ()
-        found: list[Event] = []
-        for family, values in margins.by_family().items():
-            names = self.joint_names if family == JOINT_LIMITS else self.contact_names
-            sides = _SIDES.get(family)
-            for index in np.argwhere(violated[family]):
-                row = int(index[0])
-                found.append(
-                    Event(
-                        margins.t,
-                        family,
-                        row,
-                        names[row],
-                        sides[index[1]] if sides else '',
-                        float(values[tuple(index)]),
-                    )
-                )
-        return tuple(found)
-
-
-def _finite_or_inf_min(values: np.ndarray) -> float:
-    """Smallest value ignoring NaN (unknown), ``inf`` if there is none."""
-    known = values[~np.isnan(values)]
-    return float(known.min()) if known.size else float('inf')
+        if mask.size != len(self._entries):
+            raise ValueError(
+                f'EventMonitor.events: expected {len(self._entries)} margins, got {mask.size}'
+            )
+        t, entries = margins.t, self._entries
+        return tuple(
+            Event(t, *entries[k], value)
+            for k, value in zip(
+                np.flatnonzero(mask).tolist(), margins.values[mask].tolist(), strict=True
+            )
+        )
 
 
 @dataclass
@@ -253,7 +323,6 @@ class EventLog:
     """Accumulates constraint margins over a run: counts, first times, onsets, worst margins.
 
     Attributes:
-        families: Per family, its :class:`FamilyRecord`.
         onsets: Every event at the instant it starts (a constraint that was satisfied at the
             previous evaluation, or the first evaluation), in time order.
         max_required_friction: Largest ``beta_i`` over the run (``inf`` after a separation).
@@ -261,35 +330,59 @@ class EventLog:
 
     """
 
-    families: dict[str, FamilyRecord] = field(
-        default_factory=lambda: {family: FamilyRecord() for family in FAMILIES}
-    )
     onsets: list[Event] = field(default_factory=list)
     max_required_friction: float = 0.0
     n_evaluations: int = 0
-    _active: set[tuple[str, int, str]] = field(default_factory=set, repr=False)
+    # Per family, in FAMILIES order: steps in violation, first time (NaN: none), worst margin.
+    _counts: np.ndarray = field(default_factory=lambda: np.zeros(len(FAMILIES), dtype=np.int64))
+    _first_t: np.ndarray = field(default_factory=lambda: np.full(len(FAMILIES), np.nan))
+    _min_margin: np.ndarray = field(default_factory=lambda: np.full(len(FAMILIES), np.inf))
+    # Flat violation mask of the previous evaluation.
+    _active: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def families(self) -> dict[str, FamilyRecord]:
+        """Per family, its :class:`FamilyRecord` (a snapshot)."""
+        return {
+            family: FamilyRecord(
+                int(count), None if np.isnan(first) else float(first), float(minimum)
+            )
+            for family, count, first, minimum in zip(
+                FAMILIES, self._counts, self._first_t, self._min_margin, strict=True
+            )
+        }
 
     def record(self, margins: ConstraintMargins, events: tuple[Event, ...]) -> None:
-        """Add one instant: its margins and the events found in them."""
+        """Add one instant: its margins and their events (``EventMonitor.events(margins)``).
+
+        Raises:
+            ValueError: ``events`` are not the violated entries of ``margins``.
+
+        """
+        mask = margins.violated_mask
+        if np.count_nonzero(mask) != len(events):
+            raise ValueError(
+                f'EventLog.record: expected the {np.count_nonzero(mask)} events of the '
+                f'margins, got {len(events)}'
+            )
         self.n_evaluations += 1
-        for family, values in margins.by_family().items():
-            record = self.families[family]
-            record.min_margin = min(record.min_margin, _finite_or_inf_min(values))
-        self.max_required_friction = max(
-            self.max_required_friction, -_finite_or_inf_min(-margins.required_friction)
+        starts = margins.family_starts[: len(FAMILIES)]
+        # fmin/fmax skip NaN (unknown margins); a family of unknowns leaves the record as is.
+        np.fmin(self._min_margin, np.fmin.reduceat(margins.values, starts), out=self._min_margin)
+        self.max_required_friction = float(
+            np.fmax(self.max_required_friction, np.fmax.reduce(margins.required_friction))
         )
-        active = {(event.family, event.index, event.side) for event in events}
-        for family in {event.family for event in events}:
-            record = self.families[family]
-            record.count += 1
-            if record.first_t is None:
-                record.first_t = margins.t
+        previous = self._active
+        self._active = mask
+        if not events:
+            return
+        violated = np.logical_or.reduceat(mask, starts)
+        self._counts += violated
+        self._first_t[violated & np.isnan(self._first_t)] = margins.t
+        starting = mask if previous is None or previous.shape != mask.shape else mask & ~previous
         self.onsets.extend(
-            event
-            for event in events
-            if (event.family, event.index, event.side) not in self._active
+            event for event, new in zip(events, starting[mask].tolist(), strict=True) if new
         )
-        self._active = active
 
     def violations(self) -> dict[str, dict[str, int | float | None]]:
         """``{family: {"count": steps in violation, "first_t": s or None}}`` for the summary."""
@@ -304,8 +397,9 @@ class EventLog:
         Keys ``fingertip_workspace`` (rad), ``joint_limits`` (rad) and ``friction``
         (``min(mu - beta_i)``, ``-inf`` if a contact separated); ``inf`` before any record.
         """
+        minimum = dict(zip(FAMILIES, self._min_margin.tolist(), strict=True))
         return {
-            FINGERTIP_WORKSPACE: self.families[FINGERTIP_WORKSPACE].min_margin,
-            JOINT_LIMITS: self.families[JOINT_LIMITS].min_margin,
-            'friction': self.families[SLIP].min_margin,
+            FINGERTIP_WORKSPACE: minimum[FINGERTIP_WORKSPACE],
+            JOINT_LIMITS: minimum[JOINT_LIMITS],
+            'friction': minimum[SLIP],
         }
