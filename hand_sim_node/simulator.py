@@ -25,9 +25,11 @@ gives ``e_dot = -K_v e - K_p [0, 0, δ_i]``: on the normal ``δ_ddot + K_v δ_do
 (the gap decays), tangentially the slip velocity decays at rate ``K_v``. On the exact
 solution ``e = 0, δ = 0`` and the correction vanishes, so it does no work there.
 
-The contact coordinates, frames and every model term are recomputed from the
-configuration at every Runge–Kutta stage (one :class:`GraspState` per stage; the first
-stage's is the state the controller reads, computed once).
+The contact coordinates, frames and model terms are recomputed from the configuration at
+every Runge–Kutta stage. The first stage reads the :class:`GraspState` the controller
+reads (computed once per state, or handed to :meth:`Simulator.step` by an in-process loop
+that has built it already); the other stages evaluate only the terms the rate needs
+(:mod:`hand_sim_node.stage`).
 """
 
 from __future__ import annotations
@@ -38,7 +40,11 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.grasp_state import GraspState
-from grasp_safety_filter.model.quaternion import normalized, quaternion_derivative, rotation_matrix
+from grasp_safety_filter.model.quaternion import (
+    from_rotation_matrix,
+    normalized,
+    rotation_matrix,
+)
 from hand_sim_node.config import SimConfig
 from hand_sim_node.events import (
     ConstraintMargins,
@@ -49,6 +55,7 @@ from hand_sim_node.events import (
     SLIP,
 )
 from hand_sim_node.integrators import integrator
+from hand_sim_node.stage import PlantRate
 
 NUMERICAL_FAILURE = 'numerical_failure'
 """Stop reason when the dynamics cannot be evaluated (singular B_ho or M_h, non-finite state)."""
@@ -171,6 +178,7 @@ class Simulator:
         self.config = config
         self.monitor = EventMonitor.from_model(model)
         self._tableau = integrator(config.integrator)
+        self._rate = PlantRate(model)
         self._m = model.n_joints
         self.reset()
 
@@ -243,13 +251,7 @@ class Simulator:
 
     def contact_force(self, state: GraspState, effort: np.ndarray) -> np.ndarray:
         """Stabilised contact forces ``f_c(u) + B_ho^-1 (K_v e + K_p [0, 0, δ_i])``, (3n,), N."""
-        force = state.contact_force(effort)
-        K_p, K_v = self.config.position_gain, self.config.velocity_gain
-        if K_p == 0.0 and K_v == 0.0:
-            return force
-        correction = K_v * contact_velocity_residual(state)
-        correction[2::3] += K_p * state.penetration
-        return force + np.linalg.solve(state.B_ho, correction)
+        return self.derivative(state, effort, from_rotation_matrix(state.R_object_to_palm))[1]
 
     def derivative(
         self, state: GraspState, effort: np.ndarray, quaternion_xyzw: np.ndarray
@@ -266,22 +268,13 @@ class Simulator:
             ``x_dot`` with the layout of :meth:`SimState.to_vector`, and ``f_c`` (3n,).
 
         """
-        f_c = self.contact_force(state, effort)
-        ddq = np.linalg.solve(state.M_h, effort - state.h_bias - state.J_h.T @ f_c)
-        x_o_ddot = np.linalg.solve(state.M_o, state.G @ f_c + state.w_e - state.C_o_twist)
-        x_dot = np.concatenate(
-            (
-                state.dq,
-                ddq,
-                state.twist_object[:3],
-                quaternion_derivative(quaternion_xyzw, state.twist_object[3:]),
-                x_o_ddot,
-            )
+        config = self.config
+        return self._rate.from_state(
+            state, effort, quaternion_xyzw, config.position_gain, config.velocity_gain
         )
-        return x_dot, f_c
 
     # ------------------------------------------------------------------------------ step
-    def step(self, effort: np.ndarray) -> StepReport:
+    def step(self, effort: np.ndarray, state: GraspState | None = None) -> StepReport:
         """Integrate one ``time_step`` with the joint torque ``effort`` held constant.
 
         The constraint families are evaluated at the start of the step (the instant the
@@ -292,10 +285,17 @@ class Simulator:
 
         Args:
             effort: Joint torque u in the model's joint order, shape (m,), N·m.
+            state: The model terms of the current state if the caller has built them
+                already (``model.state(s.t, s.q, s.dq, s.p_object_in_palm,
+                s.R_object_to_palm, s.twist_object)`` of ``s = simulator.state``, with this
+                simulator's model): used as the first Runge–Kutta stage instead of a new
+                evaluation. Its time, joint angles and rates, object pose and twist must
+                equal the simulator's own exactly.
 
         Raises:
             RuntimeError: The run has already stopped (call :meth:`reset`).
-            ValueError: ``effort`` has the wrong shape or is not finite.
+            ValueError: ``effort`` has the wrong shape or is not finite, or ``state`` is
+                not the current state.
 
         """
         if self._stop_reason is not None:
@@ -305,6 +305,9 @@ class Simulator:
             raise ValueError(
                 f'Simulator.step: expected {self._m} finite joint torques, got {u.tolist()}'
             )
+        if state is not None and state is not self._grasp_state:
+            self._check_current(state)
+            self._grasp_state = state
         start = self._state
         x0 = start.to_vector()
         m = self._m
@@ -323,9 +326,10 @@ class Simulator:
             stop_reason = NUMERICAL_FAILURE
         if stop_reason is None:
             t0, dt = start.t, self.config.time_step
+            gains = (self.config.position_gain, self.config.velocity_gain)
 
-            def rate(t: float, x: np.ndarray) -> np.ndarray:
-                return self.derivative(self._model_state(t, x), u, x[quaternion])[0]
+            def rate(_t: float, x: np.ndarray) -> np.ndarray:
+                return self._rate.at(x, u, *gains)
 
             try:
                 x1 = self._tableau.step(rate, t0, x0, dt, k1=k1)
@@ -352,6 +356,28 @@ class Simulator:
             events=events,
             stop_reason=stop_reason,
         )
+
+    def _check_current(self, state: GraspState) -> None:
+        """Refuse a grasp state that is not exactly the simulator's current state (ValueError)."""
+        current = self._state
+        mismatched = [
+            name
+            for name, theirs, ours in (
+                ('t', np.float64(state.t), np.float64(current.t)),
+                ('q', state.q, current.q),
+                ('dq', state.dq, current.dq),
+                ('p_object_in_palm', state.p_object_in_palm, current.p_object_in_palm),
+                ('R_object_to_palm', state.R_object_to_palm, current.R_object_to_palm),
+                ('twist_object', state.twist_object, current.twist_object),
+            )
+            if not np.array_equal(theirs, ours)
+        ]
+        if mismatched:
+            raise ValueError(
+                f'Simulator.step: the given grasp state is not the current state (t = '
+                f'{current.t} s): its {", ".join(mismatched)} differ; build it from '
+                'simulator.state or pass none'
+            )
 
     def _stopping(self, events: tuple[Event, ...]) -> str | None:
         families = {event.family for event in events}

@@ -312,28 +312,95 @@ def test_sim_state_vector_round_trip():
     assert not back.q.flags.writeable
 
 
+class CountingModel:
+    """The model, counting its full-state evaluations (their times)."""
+
+    def __init__(self, model):
+        self.calls = []
+        self._model = model
+
+    def __getattr__(self, name):
+        return getattr(self._model, name)
+
+    def state(self, *args):
+        self.calls.append(args[0])
+        return self._model.state(*args)
+
+
 @pytest.mark.parametrize('integrator, stages', [('ode3', 3), ('rk4', 4)])
-def test_one_model_evaluation_per_stage(model, config, integrator, stages):
-    calls = []
-
-    class CountingModel:
-        def __getattr__(self, name):
-            return getattr(model, name)
-
-        def state(self, *args):
-            calls.append(args[0])
-            return model.state(*args)
-
+def test_one_full_state_per_step_and_one_rate_per_other_stage(model, config, integrator, stages):
+    # The controller's state is the first stage; the other stages evaluate only the rate.
     u, _ = holding_torque(Simulator(model, config).grasp_state(), 10.0)
-    simulator = Simulator(CountingModel(), dataclasses.replace(config, integrator=integrator))
+    counting = CountingModel(model)
+    simulator = Simulator(counting, dataclasses.replace(config, integrator=integrator))
+    rates = []
+    at = simulator._rate.at
+    simulator._rate.at = lambda x, *args: rates.append(x) or at(x, *args)
     for _ in range(5):
         simulator.grasp_state()  # what a controller reads before computing u
         simulator.step(u)
-    assert len(calls) == 5 * stages
     dt = config.time_step
-    nodes = [0.0, 0.5, 0.75] if integrator == 'ode3' else [0.0, 0.5, 0.5, 1.0]
-    expected_times = [(k + c) * dt for k in range(5) for c in nodes]
-    np.testing.assert_allclose(calls, expected_times, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(counting.calls, [k * dt for k in range(5)], rtol=0, atol=1e-15)
+    assert len(rates) == 5 * (stages - 1)
+
+
+def test_given_first_stage_state_replaces_the_simulators_own(model, config):
+    counting = CountingModel(model)
+    simulator = Simulator(counting, config)
+    plain = Simulator(model, config)
+    u, _ = holding_torque(plain.grasp_state(), 10.0)
+    u = u + np.linspace(-0.05, 0.05, 9)  # the object moves
+    for _ in range(4):
+        s = simulator.state
+        built = model.state(s.t, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
+        report = simulator.step(u, state=built)
+        expected = plain.step(u)
+        assert report.grasp_state is built
+        np.testing.assert_array_equal(report.state.to_vector(), expected.state.to_vector())
+        np.testing.assert_array_equal(report.contact_force, expected.contact_force)
+    assert counting.calls == []  # never evaluated its own first stage
+    assert simulator.state.p_object_in_palm[2] != config.initial_object_position[2]
+
+
+def _shifted(s, name):
+    """Return ``s`` with one field changed by the smallest step a float allows.
+
+    The orientation turns by 1e-12 rad instead (one ulp of a quaternion component may
+    round away in its rotation matrix).
+    """
+    if name == 't':
+        return dataclasses.replace(s, t=np.nextafter(s.t, 1.0))
+    value = np.array(getattr(s, name))
+    if name == 'quaternion_object':
+        value[0] += 0.5e-12
+        return dataclasses.replace(s, quaternion_object=value / np.linalg.norm(value))
+    value.flat[-1] = np.nextafter(value.flat[-1], np.inf)
+    return dataclasses.replace(s, **{name: value})
+
+
+@pytest.mark.parametrize(
+    'name', ['t', 'q', 'dq', 'p_object_in_palm', 'quaternion_object', 'twist_object']
+)
+def test_given_first_stage_state_of_another_state_is_refused(model, config, name):
+    simulator = Simulator(model, config)
+    u, _ = holding_torque(simulator.grasp_state(), 10.0)
+    simulator.step(u)
+    other = _shifted(simulator.state, name)
+    built = model.state(
+        other.t,
+        other.q,
+        other.dq,
+        other.p_object_in_palm,
+        other.R_object_to_palm,
+        other.twist_object,
+    )
+    start = simulator.state
+    differing = 'R_object_to_palm' if name == 'quaternion_object' else name
+    with pytest.raises(ValueError, match=f'not the current state.*{differing}'):
+        simulator.step(u, state=built)
+    assert simulator.state is start and simulator.step_index == 1  # nothing integrated
+    assert simulator.log.n_evaluations == 1
+    simulator.step(u)  # the run goes on with its own state
 
 
 def test_time_is_step_count_times_step(model, config):
