@@ -23,13 +23,15 @@ Two evaluations of the same equations:
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
+from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.grasp_state import GraspState
-from grasp_safety_filter.model.quaternion import quaternion_derivative, rotation_matrix
+from grasp_safety_filter.model.quaternion import quaternion_derivative
 from grasp_safety_filter.model.rolling import contact_stack
 
 # skew(v)_ij = -eps_ijk v_k as a (9, 3) matrix: stacked cross-product matrices in one matmul.
@@ -51,6 +53,47 @@ _SKEW_FROM_VECTOR = np.array(
 def _skew(v: np.ndarray) -> np.ndarray:
     """Cross-product matrices ``v×`` of stacked vectors (k, 3), shape (k, 3, 3)."""
     return (v @ _SKEW_FROM_VECTOR.T).reshape(*v.shape[:-1], 3, 3)
+
+
+def _rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a quaternion ``(x, y, z, w)``, normalised first, (3, 3).
+
+    Eigen's ``toRotationMatrix`` (which ``model.quaternion.rotation_matrix`` calls) written
+    out in floats: its numpy normalisation and Pinocchio round trip cost ~10 µs a stage.
+
+    Raises:
+        ValueError: The quaternion is zero or not finite.
+
+    """
+    x, y, z, w = quaternion_xyzw.tolist()
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if not (math.isfinite(norm) and norm >= 1e-12):
+        raise ValueError(f'quaternion: expected a non-zero finite quaternion, got {(x, y, z, w)}')
+    x, y, z, w = x / norm, y / norm, z / norm, w / norm
+    tx, ty, tz = 2.0 * x, 2.0 * y, 2.0 * z
+    twx, twy, twz = tx * w, ty * w, tz * w
+    txx, txy, txz = tx * x, ty * x, tz * x
+    tyy, tyz, tzz = ty * y, tz * y, tz * z
+    return np.array(
+        [
+            [1.0 - (tyy + tzz), txy - twz, txz + twy],
+            [txy + twz, 1.0 - (txx + tzz), tyz - twx],
+            [txz - twy, tyz + twx, 1.0 - (txx + tyy)],
+        ]
+    )
+
+
+def _solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``A^-1 b`` by LAPACK's gesv, without np.linalg.solve's per-call checks (~8 µs).
+
+    Raises:
+        numpy.linalg.LinAlgError: A is singular.
+
+    """
+    _, _, solution, info = dgesv(A, b)
+    if info != 0:
+        raise np.linalg.LinAlgError(f'B_ho is singular (LAPACK gesv info {info})')
+    return solution
 
 
 def baumgarte_correction(
@@ -94,6 +137,8 @@ class PlantRate:
         self._object = model.object
         self._m = model.n_joints
         self._n = model.n_contacts
+        # Scratch arrays of `at` (nothing returned aliases them).
+        self._work = tuple(np.empty((k, self._n, 3)) for k in (2, 2, 2, 4, 4))
         self._contact_pairs: list[Any] | None = None
         self._contact_stack: Any = None
 
@@ -132,6 +177,7 @@ class PlantRate:
         ddq = state.joint_acceleration(effort)
         x_o_ddot = state.object_acceleration(effort)
         if position_gain != 0.0 or velocity_gain != 0.0:
+            # np.linalg.solve as before: the reported contact forces stay bit for bit.
             correction = np.linalg.solve(
                 state.B_ho,
                 baumgarte_correction(
@@ -161,17 +207,16 @@ class PlantRate:
             ValueError: The quaternion is zero or not finite.
 
         """
-        m = self._m
+        m, n = self._m, self._n
         dq = x[m : 2 * m]
         p_o = x[2 * m : 2 * m + 3]
         quaternion = x[2 * m + 3 : 2 * m + 7]
         twist_o = x[2 * m + 7 :]
-        R_o = rotation_matrix(quaternion)
+        R_o = _rotation_matrix(quaternion)
         v_o, w_o = twist_o[:3], twist_o[3:]
         hand = self._hand.terms(x[:m], dq)
         p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
         v_f, w_f = hand.twist_fingertip[:, :3], hand.twist_fingertip[:, 3:]
-        a_f0, alpha_f0 = hand.J_fingertip_dot_dq[:, :3], hand.J_fingertip_dot_dq[:, 3:]
 
         contacts = self._contacts()
         geometry = contacts.geometry(p_f, R_pf, p_o, R_o)
@@ -179,25 +224,33 @@ class PlantRate:
         R_cp = R_pc.transpose(0, 2, 1)
         rates = contacts.rolling_rates(geometry, matvec(R_cp, w_f - w_o))
         p_c = geometry.p_contact_in_palm
-        p_fc, p_oc = p_c - p_f, p_c - p_o
-        skew_fc, skew_oc = _skew(p_fc), _skew(p_oc)
-        J_h = (R_cp @ (J_s[:, :3] - skew_fc @ J_s[:, 3:])).reshape(3 * self._n, m)
+        # Finger-side and object-side quantities stacked along a first axis of 2 (and the
+        # four cross products below along one of 4), filled into preallocated arrays: one
+        # numpy call per formula for both sides (np.stack costs ~10 µs).
+        lever, w_fo, v_fo, left, right = self._work
+        np.subtract(p_c, p_f, out=lever[0])
+        np.subtract(p_c, p_o, out=lever[1])
+        skew_fc, skew_oc = skews = _skew(lever)
+        J_h = (R_cp @ (J_s[:, :3] - skew_fc @ J_s[:, 3:])).reshape(3 * n, m)
         G = np.concatenate((R_pc, skew_oc @ R_pc), axis=1).transpose(1, 0, 2).reshape(6, -1)
 
-        # J_h_dot dq - G_dot^T x_o_dot (GraspModel.state has the derivation).
-        skew_contact = _skew(w_f + matvec(R_pc, rates.frame_angular_velocity))
-        v_cf = v_f - matvec(skew_fc, w_f)
-        v_co = v_o - skew_oc @ w_o
-        p_c_dot = v_cf + matvec(R_pc[:, :, :2], rates.sliding_velocity)
-        Jh_dot_dq = matvec(
-            R_cp,
-            a_f0
-            - matvec(skew_fc, alpha_f0)
-            + matvec(_skew(w_f), p_c_dot - v_f)
-            - matvec(skew_contact, v_cf),
-        ).reshape(-1)
-        G_dot_T_twist = matvec(
-            R_cp, matvec(_skew(w_o), p_c_dot - v_o) - matvec(skew_contact, v_co)
+        # J_h_dot dq - G_dot^T x_o_dot (GraspModel.state has the derivation), with
+        # -(p_fc×) alpha_f0 = alpha_f0 × p_fc:
+        #   R_cp (a_f0 + alpha_f0 × p_fc + w_f × (p_c_dot - v_f) - w_o × (p_c_dot - v_o)
+        #         - w_c × (v_cf - v_co)),   v_cf = v_f + w_f × p_fc,  v_co = v_o + w_o × p_oc.
+        w_fo[0], w_fo[1] = w_f, w_o
+        v_fo[0], v_fo[1] = v_f, v_o
+        v_cfo = v_fo - matvec(skews, w_fo)  # material velocities at the contact
+        p_c_dot = v_cfo[0] + matvec(R_pc[:, :, :2], rates.sliding_velocity)
+        a_f0, alpha_f0 = hand.J_fingertip_dot_dq[:, :3], hand.J_fingertip_dot_dq[:, 3:]
+        left[0], left[1:3] = alpha_f0, w_fo
+        np.add(w_f, matvec(R_pc, rates.frame_angular_velocity), out=left[3])  # w_c
+        right[0] = lever[0]
+        np.subtract(p_c_dot, v_fo, out=right[1:3])
+        np.subtract(v_cfo[0], v_cfo[1], out=right[3])
+        crosses = matvec(_skew(left), right)
+        relative_rate = matvec(
+            R_cp, a_f0 + crosses[0] + crosses[1] - crosses[2] - crosses[3]
         ).reshape(-1)
 
         rigid_object = self._object
@@ -209,12 +262,12 @@ class PlantRate:
         M_h_inv_J_hT = M_h_inv @ J_h.T
         M_o_inv_G = M_o_inv @ G
         B_ho = J_h @ M_h_inv_J_hT + G.T @ M_o_inv_G
-        rhs = J_h @ ddq_free + (Jh_dot_dq - G_dot_T_twist - G.T @ x_free)
+        rhs = J_h @ ddq_free + (relative_rate - G.T @ x_free)
         if position_gain != 0.0 or velocity_gain != 0.0:
             rhs += baumgarte_correction(
                 J_h, G, dq, twist_o, geometry.penetration, position_gain, velocity_gain
             )
-        f_c = np.linalg.solve(B_ho, rhs)
+        f_c = _solve(B_ho, rhs)
         ddq = ddq_free - M_h_inv_J_hT @ f_c
         x_o_ddot = M_o_inv_G @ f_c + x_free
         return self._assemble(dq, ddq, twist_o, quaternion, x_o_ddot)
