@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from grasp_states import paper_model, random_configuration
+from grasp_states import P_OBJECT_PAPER, paper_model, Q_PAPER, random_configuration
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -34,7 +34,7 @@ def _opaque(pair: ContactPair) -> ContactPair:
     if isinstance(surface, FlatSurface):
         frame = surface.frame(np.zeros(2))
         return ContactPair(pair.fingertip, _Plane(surface.origin, frame[:, 0], frame[:, 1]))
-    return ContactPair(pair.fingertip, _Ball(surface.radius))
+    return ContactPair(pair.fingertip, _Ball(surface.radius, surface.R_chart_to_body))
 
 
 def _stacks(model):
@@ -103,6 +103,7 @@ def test_stacks_match_the_per_contact_formulas(shape):
 def test_the_selected_stack_uses_the_closed_forms_only_for_planes():
     assert isinstance(contact_stack(paper_model().contacts), SphereOnPlaneStack)
     sphere = paper_model(**MODELS['sphere'])
+    sphere.bind_contacts(Q_PAPER, P_OBJECT_PAPER, np.eye(3))
     assert type(contact_stack(sphere.contacts)) is ContactStack
     opaque = ContactStack([_opaque(pair) for pair in sphere.contacts])
     assert isinstance(opaque.object_surfaces, SurfaceList)

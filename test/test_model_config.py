@@ -91,7 +91,18 @@ CASES = [
         None,
         r'object\.mass',
     ),
-    ('zero radius', set_in(model_section, 'fingertip_radius', 0.0), None, r'fingertip_radius'),
+    (
+        'negative radius',
+        set_in(model_section, 'fingertip_radius', -0.06),
+        None,
+        r'fingertip_radius',
+    ),
+    (
+        'radius not the URDF sphere',
+        set_in(model_section, 'fingertip_radius', 0.05),
+        None,
+        r"fingertip_radius: contact 'finger1'.*link 'finger1_tip' \(0\.06 m\), got 0\.05 m",
+    ),
     (
         'unknown key',
         set_in(model_section, 'frction_coefficient', 0.9),

@@ -11,6 +11,7 @@ import types
 from typing import ClassVar
 
 import pytest
+import yaml
 
 from grasp_safety_filter.io.parameters import (
     declare_node_parameters,
@@ -34,6 +35,7 @@ from grasp_safety_filter.io.schemas import (
     NODE_SCHEMAS,
     NOMINAL_CONTROLLER_NODE,
     parameter_table_markdown,
+    REQUIRED_MODEL_PARAMETERS,
     SAFETY_FILTER_NODE,
 )
 
@@ -482,7 +484,7 @@ def test_every_schema_parameter_is_documented_and_typed():
 
 def test_model_section_is_shared_and_read_only():
     model = [name for name in NODE_SCHEMAS[HAND_SIM_NODE].names if name.startswith('model.')]
-    assert len(model) == 15
+    assert len(model) == 18
     for schema in NODE_SCHEMAS.values():
         assert [n for n in schema.names if n.startswith('model.')] == model
         assert all(schema[name].read_only for name in model)
@@ -601,9 +603,18 @@ def test_load_node_parameters_runs_cross_checks_and_resolves_paths(tmp_path):
     )
     with pytest.raises(ParameterError, match=r"\(node 'safety_filter_node'\): parameters"):
         load_node_parameters(path, SAFETY_FILTER_NODE)
-    good = write(
-        tmp_path, '/**:\n  ros__parameters: {model: {urdf_file: sub/h.urdf}}\n', 'ok.yaml'
-    )
+    schema = NODE_SCHEMAS[NOMINAL_CONTROLLER_NODE]
+    required = {name: schema[name].default for name in REQUIRED_MODEL_PARAMETERS}
+    required['model.object.size'] = 0.2
+    required['model.urdf_file'] = 'sub/h.urdf'
+    nested: dict = {}
+    for name, value in required.items():
+        *sections, key = name.split('.')
+        node = nested
+        for section in sections:
+            node = node.setdefault(section, {})
+        node[key] = value
+    good = write(tmp_path, yaml.safe_dump({'/**': {'ros__parameters': nested}}), 'ok.yaml')
     values = load_node_parameters(good, NOMINAL_CONTROLLER_NODE)
     assert values['model.urdf_file'] == str(tmp_path.resolve() / 'sub' / 'h.urdf')
     with pytest.raises(KeyError, match="unknown node 'planner_node'"):

@@ -9,13 +9,18 @@ node, with a message naming the section.
 Every other parameter keeps its documented default when no file section gives it: the
 nominal controller's gains and the safety filter's settings are the paper's and do not
 depend on the hand's geometry, and a filter run on a real hand with only the shared
-``/**`` section (README, "The filter on your own hand") is the intended use. The model's
-``model.*`` defaults describe the paper's hand (``model.urdf_file`` its URDF).
+``/**`` section (README, "The filter on your own hand") is the intended use.
+
+The ``model.*`` parameters that describe the hand and the object
+(:data:`grasp_safety_filter.io.schemas.REQUIRED_MODEL_PARAMETERS`, and the object's
+dimensions for its shape) are required by every node: their schema defaults are the paper's
+hand's, which would silently describe a different hand (a 6 cm fingertip on a 12 mm one).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 from grasp_safety_filter.io.parameters import ParameterError
 
@@ -26,17 +31,34 @@ REQUIRED_PARAMETERS: dict[str, tuple[str, ...]] = {
 
 
 def check_required_parameters(
-    node_name: str, given: Iterable[str], source: str, has_own_section: bool | None = None
+    node_name: str,
+    given: Mapping[str, Any] | Iterable[str],
+    source: str,
+    has_own_section: bool | None = None,
 ) -> None:
-    """Raise ParameterError unless every parameter of :data:`REQUIRED_PARAMETERS` is given.
+    """Raise ParameterError unless every required parameter is given.
+
+    The model's (:func:`~grasp_safety_filter.io.schemas.required_model_parameters`) first,
+    then the node's own (:data:`REQUIRED_PARAMETERS`).
 
     Args:
         node_name: The node's schema name, e.g. ``"hand_sim_node"``.
-        given: The names the files and the command line give the node.
+        given: The parameters (name: value, or names) the files and the command line give
+            the node.
         source: Where they come from (file and node), prefixed to the message.
         has_own_section: Whether a file has a section for this very node (None: unknown).
     """
-    names = set(given)
+    from grasp_safety_filter.io.schemas import required_model_parameters
+
+    values = given if isinstance(given, Mapping) else dict.fromkeys(given)
+    names = set(values)
+    missing_model = [name for name in required_model_parameters(values) if name not in names]
+    if missing_model:
+        quoted = ', '.join(f"'{name}'" for name in missing_model)
+        raise ParameterError(
+            f'{source}: expected {quoted} (they describe the hand and the object: no default, '
+            "e.g. in the '/**' section), got none"
+        )
     missing = [name for name in REQUIRED_PARAMETERS.get(node_name, ()) if name not in names]
     if not missing:
         return

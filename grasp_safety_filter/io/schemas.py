@@ -64,12 +64,54 @@ MAX_PYRAMID_FACES = 64
 #: Most OSQP iterations per solve: at about 1 us each, a tick stays below ~0.1 s.
 MAX_OSQP_ITERATIONS = 100_000
 
+#: Contact-face entry asking for the box face nearest to the fingertip at the first state.
+NEAREST_FACE = 'nearest'
+
+#: The model parameters that describe the hand and the object: a scenario must give them (the
+#: schema's defaults, the paper's hand's, only fix their ROS types and are never used).
+#: ``model.object.size`` (cube, sphere) or ``model.object.edge_lengths`` (box) depends on
+#: ``model.object.shape`` (:func:`required_model_parameters`).
+REQUIRED_MODEL_PARAMETERS = (
+    'model.urdf_file',
+    'model.joint_names',
+    'model.fingertip_frames',
+    'model.contact_names',
+    'model.object.shape',
+    'model.object.mass',
+    'model.friction_coefficient',
+    'model.fingertip_workspace.a_min',
+    'model.fingertip_workspace.a_max',
+    'model.fingertip_workspace.b_min',
+    'model.fingertip_workspace.b_max',
+)
+
+
+def required_model_parameters(given: Mapping[str, Any]) -> tuple[str, ...]:
+    """:data:`REQUIRED_MODEL_PARAMETERS` and the object's dimensions for its given shape."""
+    shape = given.get('model.object.shape')
+    if shape == 'box':
+        return (*REQUIRED_MODEL_PARAMETERS, 'model.object.edge_lengths')
+    if shape in ('cube', 'sphere'):
+        return (*REQUIRED_MODEL_PARAMETERS, 'model.object.size')
+    return REQUIRED_MODEL_PARAMETERS
+
+
+def _required(description: str) -> str:
+    """Mark ``description`` required, before its ``[unit]`` if it ends with one."""
+    text, bracket, unit = description.rpartition(' [')
+    if bracket and description.endswith(']'):
+        return f'{text}; required (the default is never used) [{unit}'
+    return description + '; required (the default is never used)'
+
+
 MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'model.urdf_file',
         STRING,
         'hand.urdf',
-        "Hand URDF; a relative path resolves against the parameter file's directory",
+        _required(
+            "Hand URDF; a relative path resolves against the parameter file's directory"
+        ),
         read_only=True,
         is_path=True,
     ),
@@ -77,45 +119,57 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         'model.joint_names',
         STRING_ARRAY,
         PAPER_JOINT_NAMES,
-        'Actuated URDF joints, in the order of every joint vector and torque command',
+        _required(
+            'Actuated URDF joints, in the order of every joint vector and torque command'
+        ),
         read_only=True,
     ),
     ParameterSpec(
         'model.fingertip_frames',
         STRING_ARRAY,
         ['finger1_tip', 'finger2_tip', 'finger3_tip'],
-        'URDF frames at the fingertip sphere centres, one per contact',
+        _required(
+            'URDF frames of the fingertips, one per contact (z out of the tip); each fingertip is '
+            "the <collision><sphere> on its frame's link (or a link fixed to it): radius R_i, and "
+            "its centre the fingertip frame's origin"
+        ),
         read_only=True,
     ),
     ParameterSpec(
         'model.contact_names',
         STRING_ARRAY,
         ['finger1', 'finger2', 'finger3'],
-        'Contact labels, one per fingertip frame (topics, diagnostics, figures)',
+        _required(
+            'Contact labels, one per fingertip frame (topics, diagnostics, figures)'
+        ),
         read_only=True,
     ),
     ParameterSpec(
         'model.fingertip_radius',
         DOUBLE,
-        0.06,
-        'Radius R of the hemispherical fingertips [m]',
+        0.0,
+        'Deprecated check: 0 (default): each R_i from its collision sphere; > 0: every '
+        'fingertip collision sphere must have this radius [m]',
         min_value=0.0,
-        exclusive_min=True,
         read_only=True,
     ),
     ParameterSpec(
         'model.object.shape',
         STRING,
         'cube',
-        'Shape of the grasped object',
-        choices=('cube', 'sphere'),
+        _required(
+            'Shape of the grasped object (a box of three edge lengths, a cube, a sphere)'
+        ),
+        choices=('cube', 'box', 'sphere'),
         read_only=True,
     ),
     ParameterSpec(
         'model.object.mass',
         DOUBLE,
         0.11,
-        'Mass of the object [kg]',
+        _required(
+            'Mass of the object [kg]'
+        ),
         min_value=0.0,
         exclusive_min=True,
         read_only=True,
@@ -124,24 +178,38 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         'model.object.size',
         DOUBLE,
         0.2604,
-        'Cube edge length or sphere diameter [m]',
+        'Cube edge length or sphere diameter; required for a cube or a sphere [m]',
         min_value=0.0,
         exclusive_min=True,
         read_only=True,
     ),
     ParameterSpec(
+        'model.object.edge_lengths',
+        DOUBLE_ARRAY,
+        [0.2604, 0.2604, 0.2604],
+        'Box edge lengths along the object frame O (x, y, z); required for a box [m]',
+        min_value=0.0,
+        exclusive_min=True,
+        length=3,
+        read_only=True,
+    ),
+    ParameterSpec(
         'model.contact_faces',
         STRING_ARRAY,
-        ['-x', '+x', '+y'],
-        'Cube face (outward normal in the object frame) touched by each fingertip',
-        choices=CUBE_FACES,
+        [NEAREST_FACE],
+        "Box face (outward normal in the object frame O) of each contact, or 'nearest': the "
+        'face nearest the fingertip at the first state; a declared face must be that one; one '
+        'entry applies to every contact; ignored for a sphere',
+        choices=(*CUBE_FACES, NEAREST_FACE),
         read_only=True,
     ),
     ParameterSpec(
         'model.friction_coefficient',
         DOUBLE,
         0.9,
-        'Coulomb friction coefficient mu between fingertips and object [-]',
+        _required(
+            'Coulomb friction coefficient mu between fingertips and object [-]'
+        ),
         min_value=0.0,
         exclusive_min=True,
         read_only=True,
@@ -155,10 +223,27 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         read_only=True,
     ),
     ParameterSpec(
+        'model.palm_frame',
+        STRING,
+        '',
+        "Palm frame P: the URDF's root link when empty; the frame_id of /object/odom and "
+        '/object/reference (checked on receipt)',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object_frame',
+        STRING,
+        'object',
+        'Object frame O: the child_frame_id of /object/odom (checked on receipt)',
+        read_only=True,
+    ),
+    ParameterSpec(
         'model.fingertip_workspace.a_min',
         DOUBLE,
         -HALF_PI + FINGERTIP_WORKSPACE_A_MARGIN,
-        'Lower bound of the fingertip contact coordinate a [rad]',
+        _required(
+            'Lower bound of the fingertip contact coordinate a [rad]'
+        ),
         min_value=-HALF_PI,
         max_value=HALF_PI,
         read_only=True,
@@ -167,7 +252,9 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         'model.fingertip_workspace.a_max',
         DOUBLE,
         HALF_PI - FINGERTIP_WORKSPACE_A_MARGIN,
-        'Upper bound of the fingertip contact coordinate a [rad]',
+        _required(
+            'Upper bound of the fingertip contact coordinate a [rad]'
+        ),
         min_value=-HALF_PI,
         max_value=HALF_PI,
         read_only=True,
@@ -176,7 +263,9 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         'model.fingertip_workspace.b_min',
         DOUBLE,
         -math.pi,
-        'Lower bound of the fingertip contact coordinate b [rad]',
+        _required(
+            'Lower bound of the fingertip contact coordinate b [rad]'
+        ),
         min_value=-math.pi,
         max_value=0.0,
         read_only=True,
@@ -185,7 +274,9 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         'model.fingertip_workspace.b_max',
         DOUBLE,
         0.0,
-        'Upper bound of the fingertip contact coordinate b [rad]',
+        _required(
+            'Upper bound of the fingertip contact coordinate b [rad]'
+        ),
         min_value=-math.pi,
         max_value=0.0,
         read_only=True,
@@ -569,7 +660,8 @@ def check_model_parameters(values: Mapping[str, Any], source: str = 'parameters'
 
     - each workspace interval is non-empty: ``a_min < a_max``, ``b_min < b_max``;
     - joint names, fingertip frames and contact names are non-empty and unique;
-    - one fingertip frame per contact name and, for a cube, one face per contact.
+    - one fingertip frame per contact name and, for a box or cube, one face per contact (or
+      one face entry for all).
 
     Raises:
         ParameterError: Listing every violation, each naming the parameters and values.
@@ -592,7 +684,7 @@ def check_model_parameters(values: Mapping[str, Any], source: str = 'parameters'
             errors.append(f"parameter '{name}': expected unique names, got {duplicates} twice")
     contacts = len(values['model.contact_names'])
     lists = ['model.fingertip_frames']
-    if values['model.object.shape'] == 'cube':
+    if values['model.object.shape'] != 'sphere' and len(values['model.contact_faces']) != 1:
         lists.append('model.contact_faces')
     for name in lists:
         if len(values[name]) != contacts:

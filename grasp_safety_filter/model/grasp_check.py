@@ -5,9 +5,10 @@ At its first state a run must hold the object the way the model assumes (DESIGN.
 - every joint strictly inside its URDF limits;
 - per contact, the fingertip sphere touches its object surface: the gap (or the
   penetration) between them is at most :data:`GAP_TOLERANCE`;
-- per contact on a cube face, the contact point lies on that face, within its edges (the
+- per contact on a box face, the contact point lies on that face, within its edges (the
   model's chart of a face is the whole plane: without this check a fingertip far from the
-  object, touching the face's plane, would pass);
+  object, touching the face's plane, would pass), and a face declared in
+  ``model.contact_faces`` is the face nearest to the fingertip;
 - per contact, the fingertip coordinates are inside the fingertip workspace;
 - the hand's inertia M_h is positive definite, J_h has full row rank 3n (every contact
   velocity reachable) and G has rank 6 (the contacts can move the object in every
@@ -62,11 +63,35 @@ class GraspFinding:
 
 
 def _face_label(surface: FlatSurface) -> str:
-    """Name the cube face (``"face +x"``...) with ``surface``'s outward normal, or ``"plane"``."""
+    """Name the box face (``"face +x"``...) with ``surface``'s outward normal, or ``"plane"``."""
     for label, (axis, sign) in CUBE_FACE_AXES.items():
         if surface.normal[axis] * sign > 1.0 - 1e-9:
             return f'face {label}'
     return 'plane'
+
+
+def _declared_face_findings(
+    model: GraspModel, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
+) -> list[GraspFinding]:
+    """Find each declared ``model.contact_faces`` face that is not its fingertip's nearest."""
+    shape = model.object_shape
+    if shape is None or not shape.has_faces:
+        return []
+    p_f, _, _ = model.hand.fingertip_placements(np.asarray(q, dtype=float))
+    p_centres = (p_f - np.asarray(p_object_in_palm, dtype=float)) @ np.asarray(R_object_to_palm)
+    findings = []
+    for name, face, p in zip(model.contact_names, model.declared_faces, p_centres, strict=True):
+        nearest = shape.nearest_face(p)
+        if face is not None and face != nearest:
+            findings.append(
+                GraspFinding(
+                    f'contact {name!r}',
+                    f'model.contact_faces declares face {face!r}, but the fingertip is nearest '
+                    f'face {nearest!r} (expected the declared face to be the nearest, or '
+                    "'nearest')",
+                )
+            )
+    return findings
 
 
 def grasp_findings(
@@ -102,12 +127,18 @@ def grasp_findings(
                 )
             )
     geometries = model.contact_geometry(q, p_object_in_palm, R_object_to_palm)
+    # A declared face that is not the nearest one is named when nothing else is wrong with
+    # the contact (a contact beyond its face's edge is usually nearer another face).
+    wrong_face = {
+        finding.subject: finding
+        for finding in _declared_face_findings(model, q, p_object_in_palm, R_object_to_palm)
+    }
     for name, contact, geometry in zip(
         model.contact_names, model.contacts, geometries, strict=True
     ):
-        findings += _contact_findings(
-            model, f'contact {name!r}', contact.object_surface, geometry, gap_tolerance
-        )
+        subject = f'contact {name!r}'
+        own = _contact_findings(model, subject, contact.object_surface, geometry, gap_tolerance)
+        findings += own or ([wrong_face[subject]] if subject in wrong_face else [])
     if findings:
         return findings
     return _hand_findings(model, q, p_object_in_palm, R_object_to_palm)
@@ -144,12 +175,13 @@ def _contact_findings(
         outside = surface.outside_distance(geometry.xi_co)
         if outside > 0.0:
             u, v = geometry.xi_co
+            h_u, h_v = surface.half_widths
             findings.append(
                 GraspFinding(
                     subject,
                     f'the contact point lies {outside:.3g} m beyond the edge of {where} '
-                    f'((u, v) = ({u:.4f}, {v:.4f}) m, expected within +-{surface.half_width:.4g} '
-                    'm of its centre)',
+                    f'((u, v) = ({u:.4f}, {v:.4f}) m, expected |u| <= {h_u:.4g} m and '
+                    f'|v| <= {h_v:.4g} m about its centre)',
                 )
             )
     margins = model.fingertip_workspace.margins(geometry.xi_cf)[0]

@@ -34,7 +34,8 @@ from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
-from grasp_safety_filter.model.rigid_object import object_surface, RigidObject
+from grasp_safety_filter.model.object_shapes import ObjectShape
+from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import contact_stack, ContactGeometry, ContactPair
 from grasp_safety_filter.model.surfaces import SphereSurface
 
@@ -105,23 +106,41 @@ class GraspModel:
         hand: Kinematics and dynamics of the hand.
         rigid_object: The grasped object.
         contacts: One fingertip–object surface pair per fingertip, in the hand's fingertip
-            frame order.
+            frame order; None to choose them at the first configuration the model is given
+            (:meth:`bind_contacts`), from ``object_shape``.
         contact_names: A name per contact (e.g. the finger's).
         friction_coefficient: Coulomb friction coefficient mu (> 0).
         fingertip_workspace: Admissible fingertip coordinates.
+        object_shape: The object's shape, which gives the surfaces when ``contacts`` is None.
+        declared_faces: Per contact, a face label of a box to use as declared, or None for the
+            face nearest to the fingertip (with ``contacts`` None).
+        palm_frame: Name of the palm frame P (the frame_id of poses in P).
+        object_frame: Name of the object frame O.
     """
 
     def __init__(
         self,
         hand: HandModel,
         rigid_object: RigidObject,
-        contacts: Sequence[ContactPair],
+        contacts: Sequence[ContactPair] | None,
         contact_names: Sequence[str],
         friction_coefficient: float,
         fingertip_workspace: FingertipWorkspace,
+        *,
+        object_shape: ObjectShape | None = None,
+        declared_faces: Sequence[str | None] | None = None,
+        palm_frame: str = 'palm',
+        object_frame: str = 'object',
     ) -> None:
-        n = len(contacts)
-        if len(hand.frame_ids) != n or len(contact_names) != n:
+        n = len(hand.frame_ids)
+        if contacts is not None and len(contacts) != n:
+            raise GraspConfigError(
+                f'model: expected one contact per fingertip frame ({n} frames), got '
+                f'{len(contacts)}'
+            )
+        if contacts is None and object_shape is None:
+            raise GraspConfigError('model: expected the contacts or the object shape, got neither')
+        if len(contact_names) != n:
             raise GraspConfigError(
                 f'model: expected one fingertip frame and one name per contact ({n} contacts), '
                 f'got {len(hand.frame_ids)} frames and {len(contact_names)} names'
@@ -137,75 +156,84 @@ class GraspModel:
             )
         self.hand = hand
         self.object = rigid_object
-        self.contacts = list(contacts)
-        self._contact_stack = contact_stack(self.contacts)
+        self.object_shape = object_shape
+        self.declared_faces = list(declared_faces) if declared_faces is not None else [None] * n
+        self._contacts: list[ContactPair] | None = None
+        self._contact_stack = None
+        if contacts is not None:
+            self._set_contacts(contacts)
         # [I | 0], (m, m + 1): the joint torque u as an affine map of (u, 1).
         self._unit_torque = np.eye(hand.n_joints, hand.n_joints + 1)
         self.contact_names = list(contact_names)
         self.friction_coefficient = float(friction_coefficient)
         self.fingertip_workspace = fingertip_workspace
+        self.palm_frame = palm_frame
+        self.object_frame = object_frame
+
+    # ----------------------------------------------------------------------------- contacts
+    def _set_contacts(self, contacts: Sequence[ContactPair]) -> None:
+        self._contacts = list(contacts)
+        self._contact_stack = contact_stack(self._contacts)
+
+    @property
+    def contacts_bound(self) -> bool:
+        """Whether every contact's object surface is chosen."""
+        return self._contacts is not None
+
+    @property
+    def contacts(self) -> list[ContactPair]:
+        """The fingertip–object surface pairs, in contact order.
+
+        Raises:
+            GraspConfigError: They are chosen at a configuration and none was given yet.
+        """
+        if self._contacts is None:
+            raise GraspConfigError(
+                'model: the contact surfaces are chosen at the first configuration (nearest '
+                'box face, sphere chart centred on the contact), and none was given yet: call '
+                'bind_contacts(q, p_o, R_po) or state(...) first'
+            )
+        return self._contacts
+
+    def bind_contacts(
+        self, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
+    ) -> None:
+        """Choose each contact's object surface at ``(q, p_o, R_po)``; no-op once chosen.
+
+        A declared face is used as declared; otherwise
+        :meth:`~grasp_safety_filter.model.object_shapes.ObjectShape.surface_at` the fingertip
+        sphere's centre in the object frame, ``R_po^T (p_f,i - p_o)``: the nearest box face,
+        or the sphere in a chart centred on the contact.
+        """
+        if self._contacts is not None:
+            return
+        p_f, _, _ = self.hand.fingertip_placements(np.asarray(q, dtype=float))
+        p_centres = (p_f - np.asarray(p_object_in_palm, dtype=float)) @ np.asarray(
+            R_object_to_palm, dtype=float
+        )
+        contacts = []
+        for tip, face, name, p in zip(
+            self.hand.fingertips, self.declared_faces, self.contact_names, p_centres, strict=True
+        ):
+            try:
+                surface = (
+                    self.object_shape.face(face) if face else self.object_shape.surface_at(p)
+                )
+            except ValueError as error:
+                raise GraspConfigError(f'model: contact {name!r}: {error}') from None
+            contacts.append(ContactPair(SphereSurface(tip.radius), surface))
+        self._set_contacts(contacts)
 
     # ----------------------------------------------------------------------------- loading
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], base_dir: Path | str = '.') -> GraspModel:
         """Build from validated ``model.*`` parameters (dotted names, see io/schemas.py).
 
-        Relative ``model.urdf_file`` paths resolve against ``base_dir`` (the directory of
-        the parameter file).
+        See :func:`grasp_safety_filter.model.grasp_parameters.grasp_model_from_parameters`.
         """
+        from grasp_safety_filter.model.grasp_parameters import grasp_model_from_parameters
 
-        def get(name: str) -> Any:
-            if name not in params:
-                raise GraspConfigError(f"parameter '{name}' is missing")
-            return params[name]
-
-        urdf = Path(get('model.urdf_file'))
-        if not urdf.is_absolute():
-            urdf = Path(base_dir) / urdf
-        gravity = np.asarray(get('model.gravity'), dtype=float)
-        if gravity.shape != (3,):
-            raise GraspConfigError(f'model.gravity: expected 3 elements, got {len(gravity)}')
-        frames = list(get('model.fingertip_frames'))
-        names = list(get('model.contact_names'))
-        faces = list(get('model.contact_faces'))
-        shape = get('model.object.shape')
-        if len(names) != len(frames):
-            raise GraspConfigError(
-                f'model.contact_names: expected one name per fingertip frame ({len(frames)}), '
-                f'got {len(names)}'
-            )
-        if shape == 'cube' and len(faces) != len(frames):
-            raise GraspConfigError(
-                f'model.contact_faces: expected one cube face per fingertip ({len(frames)}), got '
-                f'{len(faces)}'
-            )
-        if shape == 'sphere':
-            faces = [''] * len(frames)
-        hand = HandModel(urdf, list(get('model.joint_names')), frames, gravity)
-        size, mass = float(get('model.object.size')), float(get('model.object.mass'))
-        if shape == 'cube':
-            rigid_object = RigidObject.cube(mass, size, gravity)
-        elif shape == 'sphere':
-            rigid_object = RigidObject.sphere(mass, size, gravity)
-        else:
-            raise GraspConfigError(
-                f"model.object.shape: expected 'cube' or 'sphere', got {shape!r}"
-            )
-        fingertip = SphereSurface(float(get('model.fingertip_radius')))
-        contacts = []
-        for name, face in zip(names, faces, strict=True):
-            try:
-                contacts.append(ContactPair(fingertip, object_surface(shape, size, face)))
-            except ValueError as error:
-                raise GraspConfigError(f'model.contact_faces: contact {name!r}: {error}') from None
-        workspace = FingertipWorkspace(
-            float(get('model.fingertip_workspace.a_min')),
-            float(get('model.fingertip_workspace.a_max')),
-            float(get('model.fingertip_workspace.b_min')),
-            float(get('model.fingertip_workspace.b_max')),
-        )
-        friction = float(get('model.friction_coefficient'))
-        return cls(hand, rigid_object, contacts, names, friction, workspace)
+        return grasp_model_from_parameters(cls, params, base_dir)
 
     @classmethod
     def from_parameter_file(
@@ -236,7 +264,7 @@ class GraspModel:
     @property
     def n_contacts(self) -> int:
         """Number of contacts n."""
-        return len(self.contacts)
+        return len(self.hand.frame_ids)
 
     @property
     def joint_lower_limits(self) -> np.ndarray:
@@ -258,6 +286,7 @@ class GraspModel:
         self, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
     ) -> list[ContactGeometry]:
         """Contact coordinates and frames of every contact at a configuration."""
+        self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
         p_f, R_f, _ = self.hand.fingertip_placements(np.asarray(q, dtype=float))
         return [
             contact.geometry(p_f[i], R_f[i], p_object_in_palm, R_object_to_palm)
@@ -278,6 +307,7 @@ class GraspModel:
         object's outward normal at the contact, J_v,i the fingertip centre's Jacobian).
         """
         q = np.array(q, dtype=float)
+        self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
         for _ in range(max_iterations):
             p_f, R_f, J_f = self.hand.fingertip_placements(q)
             delta = np.empty(self.n_contacts)
@@ -357,6 +387,8 @@ class GraspModel:
         dq = np.array(dq, dtype=float)
         p_o = np.array(p_object_in_palm, dtype=float)
         R_o = np.array(R_object_to_palm, dtype=float)
+        if self._contacts is None:
+            self.bind_contacts(q, p_o, R_o)
         twist_o = np.array(twist_object, dtype=float)
         v_o, w_o = twist_o[:3], twist_o[3:]
         hand = self.hand.terms(q, dq)

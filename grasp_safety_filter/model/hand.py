@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from grasp_safety_filter.model.fingertips import fingertip_spheres
 from grasp_safety_filter.model.urdf import check_urdf_file, HandModelError
 
 __all__ = ['HandModel', 'HandModelError', 'HandTerms']
@@ -50,12 +51,15 @@ class HandModel:
     Args:
         urdf_path: The hand's URDF.
         joint_names: Actuated joints, in command order; exactly the URDF's movable joints.
-        fingertip_frames: URDF frames at the fingertip sphere centres (z out of the tip).
+        fingertip_frames: URDF frames of the fingertips, one per contact (z out of the tip);
+            each one's fingertip is the ``<collision><sphere>`` of its body, whose centre
+            becomes the fingertip frame's origin (:mod:`grasp_safety_filter.model.fingertips`).
         gravity: Gravity in the palm frame, (3,), m/s².
 
     Raises:
         HandModelError: unreadable URDF, unknown or non-revolute joint, a movable URDF joint
-            missing from ``joint_names``, unknown frame, or invalid joint limits.
+            missing from ``joint_names``, unknown frame, a fingertip frame without a collision
+            sphere, or invalid joint limits.
     """
 
     def __init__(
@@ -116,13 +120,9 @@ class HandModel:
         self.joint_lower_limits = lower.copy()
         self.joint_upper_limits = upper.copy()
         self.effort_limits = effort.copy()
-        self.frame_ids = []
-        for frame in fingertip_frames:
-            if not self.model.existFrame(frame):
-                raise HandModelError(
-                    f'model.fingertip_frames: frame {frame!r} is not in {urdf_path.name}'
-                )
-            self.frame_ids.append(self.model.getFrameId(frame))
+        #: Per contact: its fingertip's collision sphere (radius, link, centre frame).
+        self.fingertips = fingertip_spheres(self.model, urdf_path, list(fingertip_frames))
+        self.frame_ids = [tip.frame_id for tip in self.fingertips]
         gravity = np.asarray(gravity, dtype=float)
         self.model.gravity = pin.Motion(gravity, np.zeros(3))
         self.data = self.model.createData()

@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 
 from grasp_safety_filter.model.arrays import read_only
-from grasp_safety_filter.model.surfaces import cube_face, SphereSurface, Surface
 
 
 class RigidObject:
@@ -123,12 +122,3 @@ class RigidObject:
         inertia = R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
         kinetic = 0.5 * self.mass * v @ v + 0.5 * w @ inertia @ w
         return float(kinetic - self.mass * self.gravity @ p_object_in_palm)
-
-
-def object_surface(shape: str, size: float, face: str) -> Surface:
-    """Return the surface a fingertip touches: a cube face (``face`` = "+x", ...) or the sphere."""
-    if shape == 'cube':
-        return cube_face(face, size)
-    if shape == 'sphere':
-        return SphereSurface(0.5 * size)
-    raise ValueError(f"model.object.shape: expected 'cube' or 'sphere', got {shape!r}")

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from grasp_safety_filter.model.arrays import read_only
+from grasp_safety_filter.model.arrays import matvec, read_only
 
 
 class Surface(ABC):
@@ -91,28 +91,55 @@ class SphereSurface(Surface):
         n = c / R,  M = diag(R, R cos a),  K = I / R,  T = [0, -tan(a) / R]
 
     The chart is singular at ``a = ±pi/2`` (|c_b| = 0), so workspace bounds on ``a`` need a
-    margin from ``±pi/2``.
+    margin from ``±pi/2``; ``b`` jumps by 2 pi across the half circle ``b = ±pi``.
+
+    ``R_chart_to_body`` turns the chart in the body frame: the formulas above hold in a chart
+    frame K, and every point, tangent and frame is returned as ``R_chart_to_body`` times its
+    K components (metric, curvature and torsion do not change). The chart's centre
+    ``(a, b) = (0, -pi/2)`` is then the body direction ``R_chart_to_body e_z``, its poles
+    ``±R_chart_to_body e_y``. A fingertip uses the identity (the paper's chart in F_i); a
+    sphere object turns one chart per contact so that its centre is the contact's initial
+    normal (:func:`grasp_safety_filter.model.object_shapes.sphere_chart_centred_on`).
     """
 
-    def __init__(self, radius: float) -> None:
+    def __init__(self, radius: float, R_chart_to_body: np.ndarray | None = None) -> None:
         if not np.isfinite(radius) or radius <= 0.0:
             raise ValueError(
                 f'SphereSurface: radius must be a positive finite length, got {radius!r}'
             )
         self.radius = float(radius)
+        if R_chart_to_body is not None:
+            R_chart_to_body = np.array(R_chart_to_body, dtype=float)
+            if R_chart_to_body.shape != (3, 3) or not np.allclose(
+                R_chart_to_body @ R_chart_to_body.T, np.eye(3), atol=1e-12
+            ):
+                raise ValueError(
+                    'SphereSurface: R_chart_to_body must be a rotation matrix, got '
+                    f'{R_chart_to_body!r}'
+                )
+            R_chart_to_body = read_only(R_chart_to_body)
+        self.R_chart_to_body = R_chart_to_body
+
+    def _to_body(self, chart_components: np.ndarray) -> np.ndarray:
+        """``R_chart_to_body @ x`` (``x`` itself without a turned chart)."""
+        if self.R_chart_to_body is None:
+            return chart_components
+        return self.R_chart_to_body @ chart_components
 
     def point(self, xi: np.ndarray) -> np.ndarray:
         """``c = R (-cos a cos b, sin a, -cos a sin b)``."""
         a, b = xi
         r = self.radius
-        return np.array([-r * np.cos(a) * np.cos(b), r * np.sin(a), -r * np.cos(a) * np.sin(b)])
+        return self._to_body(
+            np.array([-r * np.cos(a) * np.cos(b), r * np.sin(a), -r * np.cos(a) * np.sin(b)])
+        )
 
     def tangents(self, xi: np.ndarray) -> np.ndarray:
         """``c_a = R (sin a cos b, cos a, sin a sin b)``, ``c_b = R cos a (sin b, 0, -cos b)``."""
         a, b = xi
         r = self.radius
         sa, ca, sb, cb = np.sin(a), np.cos(a), np.sin(b), np.cos(b)
-        return r * np.array([[sa * cb, ca * sb], [ca, 0.0], [sa * sb, -ca * cb]])
+        return self._to_body(r * np.array([[sa * cb, ca * sb], [ca, 0.0], [sa * sb, -ca * cb]]))
 
     def frame(self, xi: np.ndarray) -> np.ndarray:
         """``rho1 = c_a / R``, ``rho2 = (sin b, 0, -cos b)``, ``n = c / R``."""
@@ -121,7 +148,7 @@ class SphereSurface(Surface):
         rho1 = [sa * cb, ca, sa * sb]
         rho2 = [sb, 0.0, -cb]
         normal = [-ca * cb, sa, -ca * sb]
-        return np.array([rho1, rho2, normal]).T
+        return self._to_body(np.array([rho1, rho2, normal]).T)
 
     def frame_rate(self, xi: np.ndarray, xi_dot: np.ndarray) -> np.ndarray:
         """Differentiate :meth:`frame` along ``xi_dot`` (entrywise chain rule)."""
@@ -131,7 +158,7 @@ class SphereSurface(Surface):
         rho1_dot = [ca * cb * da - sa * sb * db, -sa * da, ca * sb * da + sa * cb * db]
         rho2_dot = [cb * db, 0.0, sb * db]
         normal_dot = [sa * cb * da + ca * sb * db, ca * da, sa * sb * da - ca * cb * db]
-        return np.array([rho1_dot, rho2_dot, normal_dot]).T
+        return self._to_body(np.array([rho1_dot, rho2_dot, normal_dot]).T)
 
     def metric(self, xi: np.ndarray) -> np.ndarray:
         """``M = diag(R, R cos a)``."""
@@ -156,8 +183,11 @@ class SphereSurface(Surface):
     def coordinates_of_normal(self, normal: np.ndarray) -> np.ndarray:
         """Inverse Gauss map: the ``(a, b)`` whose outward normal is ``normal`` (unit, (3,)).
 
-        ``a = asin(n_y)``, ``b = atan2(-n_z, -n_x)`` (b in (-pi, pi]).
+        ``a = asin(n_y)``, ``b = atan2(-n_z, -n_x)`` (b in (-pi, pi]), with ``n`` in chart
+        components ``R_chart_to_body^T normal``.
         """
+        if self.R_chart_to_body is not None:
+            normal = self.R_chart_to_body.T @ normal
         a = np.arcsin(np.clip(normal[1], -1.0, 1.0))
         b = np.arctan2(-normal[2], -normal[0])
         return np.array([a, b])
@@ -176,9 +206,9 @@ class FlatSurface(Surface):
 
     c(u, v) = origin + u e1 + v e2,   M = I,  K = 0,  T = 0   (u, v in m)
 
-    The chart is the whole plane; ``half_width`` bounds the face itself (a square of
-    ``|u|, |v| <= half_width`` about ``origin``; infinite by default) for
-    :meth:`outside_distance`.
+    The chart is the whole plane; ``half_width`` bounds the face itself (the rectangle
+    ``|u| <= h_u, |v| <= h_v`` about ``origin`` for ``half_width = (h_u, h_v)``, a square for
+    one number; infinite by default) for :meth:`outside_distance`.
     """
 
     def __init__(
@@ -186,7 +216,7 @@ class FlatSurface(Surface):
         origin: np.ndarray,
         e1: np.ndarray,
         e2: np.ndarray,
-        half_width: float = np.inf,
+        half_width: float | tuple[float, float] = np.inf,
     ) -> None:
         origin, e1, e2 = (np.asarray(x, dtype=float) for x in (origin, e1, e2))
         for name, vec in (('origin', origin), ('e1', e1), ('e2', e2)):
@@ -196,15 +226,20 @@ class FlatSurface(Surface):
             raise ValueError(f'FlatSurface: e1, e2 must be unit vectors, got {e1}, {e2}')
         if abs(e1 @ e2) > 1e-12:
             raise ValueError(f'FlatSurface: e1, e2 must be orthogonal, got e1·e2 = {e1 @ e2}')
-        if not half_width > 0.0:
+        half_widths = np.broadcast_to(np.asarray(half_width, dtype=float), (2,)).copy()
+        if not np.all(half_widths > 0.0):
             raise ValueError(f'FlatSurface: half_width must be > 0, got {half_width!r}')
         self.origin = origin
-        self.half_width = float(half_width)
+        #: ``(h_u, h_v)``: the face is ``|u| <= h_u, |v| <= h_v``, m.
+        self.half_widths = read_only(half_widths)
         self._frame = np.column_stack([e1, e2, np.cross(e1, e2)])
 
     def outside_distance(self, xi: np.ndarray) -> float:
-        """How far the point ``(u, v)`` lies beyond the face's edges, m (<= 0: on the face)."""
-        return float(np.max(np.abs(np.asarray(xi, dtype=float))) - self.half_width)
+        """How far ``(u, v)`` lies beyond the face's edges, ``max(|u| - h_u, |v| - h_v)``, m.
+
+        At most 0 on the face.
+        """
+        return float(np.max(np.abs(np.asarray(xi, dtype=float)) - self.half_widths))
 
     @property
     def normal(self) -> np.ndarray:
@@ -263,23 +298,43 @@ CUBE_FACE_AXES: dict[str, tuple[int, float]] = {
 }
 
 
-def cube_face(label: str, edge_length: float) -> FlatSurface:
-    """Return the face ``label`` (``"+x"``, ``"-y"``, ...) of a cube centred at the origin.
+def box_face(label: str, edge_lengths: Sequence[float]) -> FlatSurface:
+    """Return the face ``label`` (``"+x"``, ``"-y"``, ...) of a box centred at the origin.
 
-    Chart axes follow the cyclic order so that ``e1 × e2`` is the outward normal, and
-    ``(u, v) = (0, 0)`` is the face centre.
+    ``edge_lengths = (l_x, l_y, l_z)``, m, along the object frame's axes. The face ``±k`` lies
+    at ``±l_k / 2`` along axis k; its chart axes follow the cyclic order so that ``e1 × e2``
+    is the outward normal, ``(u, v) = (0, 0)`` is the face centre, and the face is
+    ``|u| <= l_e1 / 2, |v| <= l_e2 / 2`` (e1, e2 the face's in-plane axes).
     """
     if label not in CUBE_FACE_AXES:
-        raise ValueError(f'cube face: expected one of {list(CUBE_FACE_AXES)}, got {label!r}')
-    if not np.isfinite(edge_length) or edge_length <= 0.0:
-        raise ValueError(f'cube face: edge length must be positive, got {edge_length!r}')
+        raise ValueError(f'box face: expected one of {list(CUBE_FACE_AXES)}, got {label!r}')
+    lengths = np.asarray(edge_lengths, dtype=float)
+    if lengths.shape != (3,) or not np.all(np.isfinite(lengths)) or not np.all(lengths > 0.0):
+        raise ValueError(
+            f'box face: edge lengths must be three positive lengths, got {edge_lengths!r}'
+        )
     axis, sign = CUBE_FACE_AXES[label]
     basis = np.eye(3)
     normal = sign * basis[axis]
-    e1, e2 = basis[(axis + 1) % 3], basis[(axis + 2) % 3]
+    first, second = (axis + 1) % 3, (axis + 2) % 3
     if sign < 0:
-        e1, e2 = e2, e1
-    return FlatSurface(0.5 * edge_length * normal, e1, e2, half_width=0.5 * edge_length)
+        first, second = second, first
+    half = 0.5 * lengths
+    return FlatSurface(
+        half[axis] * normal,
+        basis[first],
+        basis[second],
+        half_width=(float(half[first]), float(half[second])),
+    )
+
+
+def cube_face(label: str, edge_length: float) -> FlatSurface:
+    """Return the face ``label`` of a cube of edge ``edge_length`` (:func:`box_face`)."""
+    if not np.isfinite(edge_length) or edge_length <= 0.0:
+        raise ValueError(f'cube face: edge length must be positive, got {edge_length!r}')
+    if label not in CUBE_FACE_AXES:
+        raise ValueError(f'cube face: expected one of {list(CUBE_FACE_AXES)}, got {label!r}')
+    return box_face(label, (edge_length,) * 3)
 
 
 # ------------------------------------------------------------------------- stacked surfaces
@@ -342,6 +397,13 @@ class SphereStack(SurfaceStack):
     def __init__(self, spheres: Sequence[SphereSurface]) -> None:
         self.radius = np.array([sphere.radius for sphere in spheres])
         k = self.radius.size
+        # Turned charts (a sphere object's): R_chart_to_body per sphere, else None.
+        turned = [sphere.R_chart_to_body for sphere in spheres]
+        self._rotation = (
+            None
+            if all(R is None for R in turned)
+            else read_only(np.array([np.eye(3) if R is None else R for R in turned]))
+        )
         self._zero = read_only(np.zeros(k))
         self._curvature = read_only(np.eye(2) / self.radius[:, None, None])
         self._zeros = read_only(np.zeros((k, 2, 2)))
@@ -353,7 +415,8 @@ class SphereStack(SurfaceStack):
         columns = np.array(
             [[sa * cb, ca, sa * sb], [sb, self._zero, -cb], [-ca * cb, sa, -ca * sb]]
         )
-        return columns.transpose(2, 1, 0)
+        frames = columns.transpose(2, 1, 0)
+        return frames if self._rotation is None else self._rotation @ frames
 
     def metric(self, xi: np.ndarray) -> np.ndarray:
         """``(R, R cos a)``."""
@@ -377,6 +440,8 @@ class SphereStack(SurfaceStack):
 
     def coordinates_of_normal(self, normal: np.ndarray) -> np.ndarray:
         """Invert the Gauss map of unit normals (k, 3), as ``SphereSurface`` does."""
+        if self._rotation is not None:
+            normal = matvec(self._rotation.transpose(0, 2, 1), normal)
         a = np.arcsin(np.clip(normal[:, 1], -1.0, 1.0))
         b = np.arctan2(-normal[:, 2], -normal[:, 0])
         return np.array([a, b]).T
