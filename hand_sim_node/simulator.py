@@ -35,6 +35,7 @@ that has built it already); the other stages evaluate only the terms the rate ne
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -89,10 +90,12 @@ class SimState:
             object.__setattr__(self, name, value)
         object.__setattr__(self, 't', float(self.t))
 
-    @property
+    @cached_property
     def R_object_to_palm(self) -> np.ndarray:
-        """Object orientation as a rotation matrix, shape (3, 3)."""
-        return rotation_matrix(self.quaternion_object)
+        """Object orientation as a rotation matrix, shape (3, 3) (computed once, read-only)."""
+        R = rotation_matrix(self.quaternion_object)
+        R.setflags(write=False)
+        return R
 
     def to_vector(self) -> np.ndarray:
         """Flat state ``(q, dq, p_o, quat_o, x_o_dot)``, shape (2m + 13,)."""
@@ -234,21 +237,13 @@ class Simulator:
     def grasp_state(self) -> GraspState:
         """Model terms of the current state (computed once per state)."""
         if self._grasp_state is None:
-            self._grasp_state = self._model_state(self._state.t, self._state.to_vector())
+            s = self._state
+            self._grasp_state = self.model.state(
+                s.t, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object
+            )
         return self._grasp_state
 
     # -------------------------------------------------------------------------- dynamics
-    def _model_state(self, t: float, x: np.ndarray) -> GraspState:
-        m = self._m
-        return self.model.state(
-            t,
-            x[:m],
-            x[m : 2 * m],
-            x[2 * m : 2 * m + 3],
-            rotation_matrix(x[2 * m + 3 : 2 * m + 7]),
-            x[2 * m + 7 :],
-        )
-
     def contact_force(self, state: GraspState, effort: np.ndarray) -> np.ndarray:
         """Stabilised contact forces ``f_c(u) + B_ho^-1 (K_v e + K_p [0, 0, δ_i])``, (3n,), N."""
         return self.derivative(state, effort, from_rotation_matrix(state.R_object_to_palm))[1]
@@ -370,7 +365,7 @@ class Simulator:
                 ('R_object_to_palm', state.R_object_to_palm, current.R_object_to_palm),
                 ('twist_object', state.twist_object, current.twist_object),
             )
-            if not np.array_equal(theirs, ours)
+            if np.shape(theirs) != np.shape(ours) or not (theirs == ours).all()
         ]
         if mismatched:
             raise ValueError(
