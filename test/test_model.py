@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from grasp_states import Configuration, moved, paper_model, random_configuration
+from pathlib import Path
+
+from grasp_states import CONFIG_DIR, Configuration, moved, paper_model, random_configuration
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -12,9 +14,56 @@ EPS = 1e-6
 RTOL = 1e-5
 
 
-@pytest.fixture(scope='module')
-def model():
-    return paper_model()
+def _hand_with_tip_radii(directory: Path, radii: np.ndarray) -> Path:
+    """The paper's hand.urdf with fingertip collision spheres of the given radii, m."""
+    text = (CONFIG_DIR / 'hand.urdf').read_text()
+    tip = '<collision>\n      <geometry><sphere radius="0.06"/></geometry>'
+    assert text.count(tip) == len(radii)
+    for radius in radii:
+        text = text.replace(tip, tip.replace('0.06', repr(float(radius))).replace('<c', '<C'), 1)
+    path = directory / 'hand_random_tips.urdf'
+    path.write_text(text.replace('<Collision>', '<collision>'))
+    return path
+
+
+#: The models every test runs on: each object surface type, faces declared or found, the
+#: paper's tips and random ones (one radius per contact, from the URDF's collision spheres).
+MODELS = {
+    'paper cube, declared faces': {},
+    'box 0.2604 x 0.2604 x 0.34, nearest faces': {
+        'model.object.shape': 'box',
+        'model.object.edge_lengths': [0.2604, 0.2604, 0.34],
+        'model.contact_faces': ['nearest'],
+    },
+    'sphere object, charts turned per contact': {
+        'model.object.shape': 'sphere',
+        'model.object.size': 0.3,
+    },
+    'random tip radii, box': 'random',
+    'random tip radii, sphere object': 'random sphere',
+}
+
+
+@pytest.fixture(scope='module', params=list(MODELS))
+def model(request, tmp_path_factory):
+    overrides = MODELS[request.param]
+    if isinstance(overrides, str):
+        rng = np.random.default_rng(len(overrides))
+        radii = rng.uniform(0.045, 0.075, 3)
+        urdf = _hand_with_tip_radii(tmp_path_factory.mktemp('tips'), radii)
+        shape = (
+            {'model.object.shape': 'sphere', 'model.object.size': 0.28}
+            if 'sphere' in overrides
+            else {
+                'model.object.shape': 'box',
+                'model.object.edge_lengths': [0.25, 0.27, 0.3],
+                'model.contact_faces': ['nearest'],
+            }
+        )
+        model = paper_model(**{'model.urdf_file': str(urdf), **shape})
+        np.testing.assert_array_equal([tip.radius for tip in model.hand.fingertips], radii)
+        return model
+    return paper_model(**overrides)
 
 
 @pytest.fixture(scope='module')

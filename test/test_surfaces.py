@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grasp_safety_filter.model.surfaces import cube_face, FlatSurface, SphereSurface
+from grasp_safety_filter.model.object_shapes import sphere_chart_centred_on
+from grasp_safety_filter.model.surfaces import box_face, cube_face, FlatSurface, SphereSurface
 
 EPS = 1e-6
 
@@ -18,7 +19,15 @@ SURFACES = {
         SphereSurface(0.2),
         lambda rng: np.array([rng.uniform(-1.3, 1.3), rng.uniform(-3.0, 3.0)]),
     ),
+    'sphere object R=0.025, chart turned to a contact normal': (
+        SphereSurface(0.025, sphere_chart_centred_on(np.array([0.3, -0.8, 0.52]))),
+        lambda rng: np.array([rng.uniform(-1.3, 1.3), rng.uniform(-3.0, 3.0)]),
+    ),
     'cube face -x': (cube_face('-x', 0.2604), lambda rng: rng.uniform(-0.13, 0.13, 2)),
+    'box face +y of 0.05 x 0.06 x 0.08': (
+        box_face('+y', (0.05, 0.06, 0.08)),
+        lambda rng: rng.uniform(-0.02, 0.02, 2),
+    ),
     'tilted plane': (
         FlatSurface(
             np.array([0.1, -0.2, 0.3]), np.array([0.6, 0.8, 0.0]), np.array([0.0, 0.0, 1.0])
@@ -135,3 +144,39 @@ def test_sphere_closed_forms_of_the_design_notes():
 def test_invalid_surfaces_are_rejected(make, message):
     with pytest.raises(ValueError, match=message):
         make()
+
+
+def test_a_box_face_is_the_rectangle_of_its_two_in_plane_edges():
+    # Face +y of a 0.05 x 0.06 x 0.08 m box: at y = 0.03, chart axes (e1, e2) = (z, x).
+    face = box_face('+y', (0.05, 0.06, 0.08))
+    np.testing.assert_allclose(face.origin, [0.0, 0.03, 0.0])
+    np.testing.assert_allclose(face.normal, [0.0, 1.0, 0.0])
+    np.testing.assert_allclose(face.point(np.array([0.01, 0.02])), [0.02, 0.03, 0.01])
+    assert face.outside_distance(np.array([0.039, 0.024])) < 0.0
+    assert face.outside_distance(np.array([0.041, 0.0])) == pytest.approx(0.001)
+    assert face.outside_distance(np.array([0.0, -0.03])) == pytest.approx(0.005)
+    # A cube is the box of three equal edges, face by face.
+    for label in ('+x', '-x', '+y', '-y', '+z', '-z'):
+        cube, box = cube_face(label, 0.2604), box_face(label, (0.2604,) * 3)
+        np.testing.assert_array_equal(cube.origin, box.origin)
+        np.testing.assert_array_equal(cube.frame(np.zeros(2)), box.frame(np.zeros(2)))
+
+
+def test_a_turned_sphere_chart_is_centred_on_its_normal_far_from_its_poles():
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        normal = rng.normal(size=3)
+        normal /= np.linalg.norm(normal)
+        R_chart = sphere_chart_centred_on(normal)
+        np.testing.assert_allclose(R_chart.T @ R_chart, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R_chart) == pytest.approx(1.0)
+        sphere = SphereSurface(0.025, R_chart)
+        xi = sphere.coordinates_of_normal(normal)
+        np.testing.assert_allclose(xi, [0.0, -np.pi / 2], atol=1e-12)
+        np.testing.assert_allclose(sphere.point(xi), 0.025 * normal, atol=1e-15)
+        # The chart's poles (|c_b| = 0) are the directions +-R_chart e_y: a quarter circle away.
+        poles = [sphere.point(np.array([s * np.pi / 2, -np.pi / 2])) / 0.025 for s in (1, -1)]
+        for pole in poles:
+            assert abs(pole @ normal) < 1e-12
+        # The metric there is R I: the chart is as regular as at the fingertip's tip.
+        np.testing.assert_allclose(sphere.metric(xi), 0.025 * np.eye(2), atol=1e-15)

@@ -110,6 +110,24 @@ def two_contacts(document: dict[str, Any]) -> None:
         model(document)[key] = model(document)[key][:2]
 
 
+def drop_model_key(*keys: str):
+    def edit(document: dict[str, Any]) -> None:
+        section = model(document)
+        for key in keys[:-1]:
+            section = section[key]
+        del section[keys[-1]]
+
+    return edit
+
+
+def box_at(edge_lengths: list[float], height: float):
+    def edit(document: dict[str, Any]) -> None:
+        model(document)['object'] = {'shape': 'box', 'mass': 0.11, 'edge_lengths': edge_lengths}
+        simulator(document)['initial']['object_position'] = [0.0, 0.0, height]
+
+    return edit
+
+
 def without_inertials(text: str) -> str:
     stripped = re.sub(r'<inertial>.*?</inertial>', '', text, flags=re.DOTALL)
     assert '<inertial>' in text and '<inertial>' not in stripped
@@ -212,6 +230,59 @@ CASES = [
         'missing simulator section',
         ('hand_sim_node', 'initial.joint_positions'),
         drop_section('hand_sim_node'),
+    ),
+    Case(
+        'tip link without a collision sphere',
+        ('model.fingertip_frames', "'finger1_tip'", '<collision><sphere>'),
+        urdf=replace_once(
+            '<collision>\n      <geometry><sphere radius="0.06"/></geometry>\n    </collision>\n',
+            '',
+        ),
+    ),
+    Case(
+        'fingertip frame on a link with no sphere on its body',
+        ('model.fingertip_frames', "'finger2_proximal'", '<collision><sphere>'),
+        setter(model, 'fingertip_frames', ['finger1_tip', 'finger2_proximal', 'finger3_tip']),
+    ),
+    Case(
+        'radius not the URDF sphere',
+        ('model.fingertip_radius', "'finger1'", "'finger1_tip'", '0.06 m', '0.012 m'),
+        setter(model, 'fingertip_radius', 0.012),
+    ),
+    Case(
+        'missing object mass',
+        ('model.object.mass', 'no default'),
+        drop_model_key('object', 'mass'),
+    ),
+    Case(
+        'missing friction coefficient',
+        ('model.friction_coefficient', 'no default'),
+        drop_model_key('friction_coefficient'),
+    ),
+    Case(
+        'missing fingertip frames',
+        ('model.fingertip_frames', 'no default'),
+        drop_model_key('fingertip_frames'),
+    ),
+    Case(
+        'box without edge lengths',
+        ('model.object.edge_lengths', 'no default'),
+        setter(model, 'object', {'shape': 'box', 'mass': 0.11}),
+    ),
+    Case(
+        'contact off a finite box face',
+        ("contact 'finger1'", 'face -x', 'edge', '0.01 m'),
+        box_at([0.2604, 0.2604, 0.1], PAPER_HEIGHT + 0.06),
+    ),
+    Case(
+        'declared face not the nearest',
+        ("contact 'finger2'", "declares face '+y'", "nearest face '+x'"),
+        setter(model, 'contact_faces', ['-x', '+y', '+y']),
+    ),
+    Case(
+        'sphere object apart from the fingertips',
+        ("contact 'finger1'", 'separated', '0.0302', 'sphere'),
+        setter(model, 'object', {'shape': 'sphere', 'mass': 0.11, 'size': 0.2}),
     ),
 ]
 

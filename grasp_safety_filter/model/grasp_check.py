@@ -127,8 +127,8 @@ def grasp_findings(
                 )
             )
     geometries = model.contact_geometry(q, p_object_in_palm, R_object_to_palm)
-    # A declared face that is not the nearest one is named when nothing else is wrong with
-    # the contact (a contact beyond its face's edge is usually nearer another face).
+    # A declared face that is not the nearest one comes first among its contact's findings
+    # (the gap and edge findings on the wrong face are its consequences).
     wrong_face = {
         finding.subject: finding
         for finding in _declared_face_findings(model, q, p_object_in_palm, R_object_to_palm)
@@ -137,8 +137,10 @@ def grasp_findings(
         model.contact_names, model.contacts, geometries, strict=True
     ):
         subject = f'contact {name!r}'
-        own = _contact_findings(model, subject, contact.object_surface, geometry, gap_tolerance)
-        findings += own or ([wrong_face[subject]] if subject in wrong_face else [])
+        findings += [wrong_face[subject]] if subject in wrong_face else []
+        findings += _contact_findings(
+            model, subject, contact.object_surface, geometry, gap_tolerance
+        )
     if findings:
         return findings
     return _hand_findings(model, q, p_object_in_palm, R_object_to_palm)
