@@ -15,7 +15,7 @@ RTOL = 1e-5
 
 
 def _hand_with_tip_radii(directory: Path, radii: np.ndarray) -> Path:
-    """The paper's hand.urdf with fingertip collision spheres of the given radii, m."""
+    """Write the paper's hand.urdf with fingertip collision spheres of radii ``radii`` (m)."""
     text = (CONFIG_DIR / 'hand.urdf').read_text()
     tip = '<collision>\n      <geometry><sphere radius="0.06"/></geometry>'
     assert text.count(tip) == len(radii)
