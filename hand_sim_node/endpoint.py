@@ -388,6 +388,8 @@ class HandSimEndpoint:
                     state.p_object_in_palm,
                     state.R_object_to_palm,
                     state.twist_object,
+                    frame_id=self.model.palm_frame,
+                    child_frame_id=self.model.object_frame,
                 ),
             )
         )

@@ -44,6 +44,9 @@ import numpy as np
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.quaternion import from_rotation_matrix, rotation_matrix
 
+#: Default frame names of the message functions: the paper's hand's palm (its URDF's root
+#: link) and the object. A model names its own (``GraspModel.palm_frame``, ``object_frame``:
+#: ``model.palm_frame``, ``model.object_frame``), and the endpoints pass those.
 PALM_FRAME = 'palm'
 OBJECT_FRAME = 'object'
 REFERENCE_JOINT = 'object'

@@ -111,7 +111,9 @@ class NominalControllerEndpoint:
     def on_odom(self, msg: Any) -> list[Outgoing]:
         """Handle ``/object/odom``; tick if the joint state of its stamp is in hand."""
         try:
-            data = odometry_from_msg(msg, source=OBJECT_ODOM)
+            data = odometry_from_msg(
+                msg, self.model.palm_frame, self.model.object_frame, source=OBJECT_ODOM
+            )
             stamp = seconds_to_nanoseconds(data.t)
         except MessageError as error:
             return self._rejected(error)
@@ -127,7 +129,9 @@ class NominalControllerEndpoint:
 
         """
         try:
-            self._trajectory = reference_from_msg(msg, source=OBJECT_REFERENCE)
+            self._trajectory = reference_from_msg(
+                msg, self.model.palm_frame, source=OBJECT_REFERENCE
+            )
         except MessageError as error:
             return self._rejected(error)
         return []

@@ -228,7 +228,13 @@ class SafetyFilterEndpoint:
     ) -> list[Outgoing]:
         """Handle ``/object/odom`` (see :meth:`on_effort_nominal`)."""
         return self._on_input(
-            OBJECT_ODOM, msg, now, wall, lambda: odometry_from_msg(msg, source=OBJECT_ODOM)
+            OBJECT_ODOM,
+            msg,
+            now,
+            wall,
+            lambda: odometry_from_msg(
+                msg, self.model.palm_frame, self.model.object_frame, source=OBJECT_ODOM
+            ),
         )
 
     def on_effort_nominal(
