@@ -12,6 +12,7 @@ import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
+from grasp_safety_filter.analysis.filter_statuses import FilterStatusReader
 from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.analysis.summary import summarize
 from grasp_safety_filter.cli import analyze_main
@@ -203,3 +204,28 @@ def test_a_bag_that_missed_the_start_is_analysed_and_says_so(runner_bag, tmp_pat
     assert 'recording missed the start of the run' in printed
     assert f'{topics.EFFORT_COMMAND} from 0.005 s' in printed
     assert f'{topics.JOINT_STATES} from 0.003 s' in printed
+
+
+# ----------------------------------------------------------------------------------------
+# The statuses as columns
+
+
+def test_the_last_status_of_a_stamp_counts_in_stamp_order():
+    reader = FilterStatusReader()
+    reader.add(2_000_000, {'status': 'solved', 'ticks': '3', 'solve_time_us': '5.0'})
+    reader.add(1_000_000, {'status': 'relaxed', 'relaxed': 'true', 'ticks': '2'})
+    reader.add(2_000_000, {'status': 'nominal', 'ticks': '3', 'count.nominal': '3'})
+    statuses = reader.finish()
+    assert statuses.t.tolist() == [0.001, 0.002]
+    assert statuses.status == ('relaxed', 'nominal')
+    assert statuses.relaxed.tolist() == [True, False]
+    assert np.isnan(statuses.times_us).all()  # the re-sent status of t = 2 ms has no time
+    assert statuses.counts == {'nominal': 3}
+
+
+def test_a_status_value_that_is_no_number_is_one_clean_error():
+    reader = FilterStatusReader()
+    with pytest.raises(m.MessageError, match="'solve_time_us' is not float: 'fast'"):
+        reader.add(0, {'status': 'solved', 'solve_time_us': 'fast'})
+    with pytest.raises(m.MessageError, match="'ticks' is not int"):
+        reader.add(0, {'status': 'solved', 'ticks': '1.5e3'})

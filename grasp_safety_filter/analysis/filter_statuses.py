@@ -12,11 +12,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+import math
+from typing import Any
 
 import numpy as np
 
 from grasp_safety_filter.analysis.columns import Column
-from grasp_safety_filter.io.diagnostic_keys import Key
+from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
+from grasp_safety_filter.io.messages import bounded_text, MessageError
 
 #: The timing keys kept, in column order (µs; NaN where a status has none).
 TIME_KEYS = (Key.SOLVE_TIME_US, Key.STEP_TIME_US, Key.TICK_TIME_US)
@@ -54,6 +57,22 @@ class FilterStatuses:
         return len(self.t)
 
 
+def _number(values: Mapping[str, str], key: str, kind: type) -> Any:
+    """Return ``values[key]`` as ``kind`` (int or float).
+
+    Raises:
+        MessageError: It is not one (names the key and the text, bounded).
+
+    """
+    try:
+        return kind(values[key])
+    except ValueError:
+        text = bounded_text(repr(values[key]), 80)
+        raise MessageError(
+            f"{FILTER_DIAGNOSTIC} status: '{key}' is not {kind.__name__}: {text}"
+        ) from None
+
+
 class FilterStatusReader:
     """Collects the filter's tick statuses from a bag in bag order (module docstring)."""
 
@@ -74,21 +93,30 @@ class FilterStatusReader:
         return self._texts.setdefault(text, len(self._texts))
 
     def add(self, stamp_ns: int, values: Mapping[str, str]) -> None:
-        """Add one status (its header stamp, ns, and its values)."""
+        """Add one status (its header stamp, ns, and its values).
+
+        Raises:
+            MessageError: A count or time that is not a number.
+
+        """
+        ticks = values.get(Key.TICKS)
+        ticks_value = -1 if ticks is None else _number(values, Key.TICKS, int)
+        times = [
+            _number(values, key, float) if key in values else math.nan for key in TIME_KEYS
+        ]
         self._stamps.append(stamp_ns)
         self._status.append(self._code(values.get(Key.STATUS, '')))
         self._families.append(self._code(values.get(Key.RELAXED_FAMILIES, '')))
-        ticks = values.get(Key.TICKS)
-        self._ticks.append(-1 if ticks is None else int(ticks))
-        self._times.append([float(values.get(key, 'nan')) for key in TIME_KEYS])
+        self._ticks.append(ticks_value)
+        self._times.append(times)
         self._flags.append(
             (values.get(Key.RELAXED) == 'true', values.get(Key.FILTER_ENABLED) == 'true')
         )
         if ticks is not None and (self._counts_stamp is None or stamp_ns >= self._counts_stamp):
             self._counts_stamp = stamp_ns
             self._counts = {
-                key.removeprefix(Key.COUNT_PREFIX): int(value)
-                for key, value in values.items()
+                key.removeprefix(Key.COUNT_PREFIX): _number(values, key, int)
+                for key in values
                 if key.startswith(Key.COUNT_PREFIX)
             }
 
