@@ -1,0 +1,116 @@
+"""The example hand's scenarios (config/four_finger_box.yaml, four_finger_sphere.yaml).
+
+Each loads through ``GraspModel.from_parameters``, passes the start-up grasp check, finds
+its contact surfaces from the initial grasp, has rolling rates that match finite
+differences of the geometric contact coordinates, and the safety filter turns a nominal
+command that does not squeeze (gravity compensation) into one that holds the object: every
+normal force positive and every contact force inside its friction cone.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from grasp_states import Configuration, moved
+import numpy as np
+import pytest
+
+from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+from grasp_safety_filter.control.safety_filter import SafetyFilter
+from grasp_safety_filter.io.schemas import load_node_parameters, SAFETY_FILTER_NODE
+from grasp_safety_filter.model.grasp_check import grasp_findings, load_initial_grasp
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.model.quaternion import rotation_matrix
+from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
+
+CONFIG = Path(__file__).resolve().parent.parent / 'config'
+SCENARIOS = ('four_finger_box.yaml', 'four_finger_sphere.yaml')
+EPS = 1e-6
+
+
+@pytest.fixture(scope='module', params=SCENARIOS)
+def scenario(request):
+    """Return the path, the checked model and the initial grasp (q, p_o, R_po) on contact."""
+    path = CONFIG / request.param
+    model, params = load_initial_grasp(path)
+    p_o = np.array(params['initial.object_position'])
+    R_o = rotation_matrix(params['initial.object_orientation'])
+    q = model.project_to_contact(params['initial.joint_positions'], p_o, R_o)
+    return path, model, (q, p_o, R_o)
+
+
+def test_the_example_objects_are_a_box_that_is_not_a_cube_and_a_sphere(scenario):
+    path, model, (q, p_o, R_o) = scenario
+    assert model.n_joints == 16 and model.n_contacts == 4
+    assert [tip.radius for tip in model.hand.fingertips] == [0.012] * 4
+    links = [tip.link for tip in model.hand.fingertips]
+    assert links == [f'finger{i}_distal' for i in (1, 2, 3, 4)]
+    assert grasp_findings(model, q, p_o, R_o) == []
+    geometry = model.contact_geometry(q, p_o, R_o)
+    if path.name == 'four_finger_box.yaml':
+        assert model.object_shape.kind == 'box'
+        assert len(set(model.object_shape.edge_lengths)) > 1
+        # The faces found are the ones the fingers stand in front of: -x, +x, -y, +y.
+        normals = [contact.object_surface.normal for contact in model.contacts]
+        expected = [[-1, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0]]
+        np.testing.assert_allclose(normals, expected, atol=1e-15)
+        assert all(isinstance(c.object_surface, FlatSurface) for c in model.contacts)
+    else:
+        assert model.object_shape.kind == 'sphere' and model.object_shape.radius == 0.025
+        assert all(isinstance(c.object_surface, SphereSurface) for c in model.contacts)
+        # Each chart is centred on its contact: far from its poles (a = +-pi/2).
+        for g in geometry:
+            assert abs(g.xi_co[0]) < 1e-3 and abs(g.xi_co[1] + np.pi / 2) < 1e-3
+    for g in geometry:
+        assert abs(g.penetration) < 1e-12
+
+
+def test_the_rolling_rates_match_finite_differences_at_the_initial_grasp(scenario):
+    _, model, (q, p_o, R_o) = scenario
+    rng = np.random.default_rng(9)
+    for _ in range(5):
+        twist = rng.normal(0.0, 0.3, 6) * np.array([0.1, 0.1, 0.1, 1.0, 1.0, 1.0])
+        dq = model.rolling_joint_velocity(q, p_o, R_o, twist)
+        c = Configuration(q, dq, p_o, R_o, twist)
+        state = c.state(model)
+
+        def coordinates(x: Configuration) -> np.ndarray:
+            geometry = model.contact_geometry(x.q, x.p_object, x.R_object)
+            return np.array([np.concatenate([g.xi_cf, g.xi_co, [g.psi]]) for g in geometry])
+
+        step = coordinates(moved(c, EPS)) - coordinates(moved(c, -EPS))
+        # psi is an angle in (-pi, pi]: its step is taken modulo 2 pi.
+        step[:, 4] = np.angle(np.exp(1j * step[:, 4]))
+        rates = step / (2 * EPS)
+        scale = max(np.max(np.abs(rates)), 1e-3)
+        for name, value, expected in (
+            ('xi_cf_dot', state.xi_cf_dot, rates[:, :2]),
+            ('xi_co_dot', state.xi_co_dot, rates[:, 2:4]),
+            ('psi_dot', state.psi_dot, rates[:, 4]),
+        ):
+            error = np.max(np.abs(value - expected)) / scale
+            assert error < 1e-5, f'{name}: relative error {error:.2e}'
+
+
+def test_the_filter_turns_gravity_compensation_into_a_grasp_that_holds(scenario):
+    path, model, (q, p_o, R_o) = scenario
+    params = load_node_parameters(path, SAFETY_FILTER_NODE)
+    filter_model = GraspModel.from_parameters(params, path.parent)
+    safety_filter = SafetyFilter.from_config(
+        filter_model, SafetyFilterConfig.from_parameters(params)
+    )
+    state = filter_model.state(0.0, q, np.zeros(16), p_o, R_o, np.zeros(6))
+    u_nom = np.array(state.gravity_torque)
+    # Without a squeeze the fingertips press on nothing: u_nom is not a safe command.
+    forces_nom = state.contact_force(u_nom).reshape(4, 3)
+    assert np.min(forces_nom[:, 2]) < 0.01
+    result = safety_filter.solve(state, u_nom)
+    assert result.status in ('solved', 'solved_active_set'), result.status
+    assert not result.relaxed
+    assert np.all(np.isfinite(result.u))
+    assert np.all(np.abs(result.u) <= model.effort_limits + 1e-9)
+    forces = state.contact_force(result.u).reshape(4, 3)
+    mu = model.friction_coefficient
+    assert np.all(forces[:, 2] > 0.0)
+    assert np.all(np.linalg.norm(forces[:, :2], axis=1) <= mu * forces[:, 2])
+    assert min(result.margins.values()) >= -1e-6
