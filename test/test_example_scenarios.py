@@ -82,14 +82,14 @@ def test_the_rolling_rates_match_finite_differences_at_the_initial_grasp(scenari
         # psi is an angle in (-pi, pi]: its step is taken modulo 2 pi.
         step[:, 4] = np.angle(np.exp(1j * step[:, 4]))
         rates = step / (2 * EPS)
-        scale = max(np.max(np.abs(rates)), 1e-3)
-        for name, value, expected in (
-            ('xi_cf_dot', state.xi_cf_dot, rates[:, :2]),
-            ('xi_co_dot', state.xi_co_dot, rates[:, 2:4]),
-            ('psi_dot', state.psi_dot, rates[:, 4]),
-        ):
-            error = np.max(np.abs(value - expected)) / scale
-            assert error < 1e-5, f'{name}: relative error {error:.2e}'
+        model_rates = np.column_stack([state.xi_cf_dot, state.xi_co_dot, state.psi_dot])
+        # The object moves at |w_o| <= ~1 rad/s: every chart rate is of that order where the
+        # charts are regular (at a chart's pole xi_co_dot and psi_dot grow without bound).
+        assert np.max(np.abs(model_rates)) < 20.0, model_rates
+        for i in range(model.n_contacts):
+            scale = max(np.max(np.abs(rates[i])), 1e-3)
+            error = np.max(np.abs(model_rates[i] - rates[i])) / scale
+            assert error < 1e-5, f'contact {i}: relative error {error:.2e}'
 
 
 def test_the_filter_turns_gravity_compensation_into_a_grasp_that_holds(scenario):
