@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.model.quaternion import quaternion_derivative
+from grasp_safety_filter.model.quaternion import quaternion_derivative, rotation_matrix
 from hand_sim_node.config import SimConfig
 from hand_sim_node.simulator import SimState, Simulator
-from hand_sim_node.stage import PlantRate
+from hand_sim_node.stage import _rotation_matrix, PlantRate
 
 SCENARIO = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
 
@@ -110,3 +110,12 @@ def test_stage_rate_uses_the_normalised_rotation_and_the_raw_quaternion(scenario
         atol=1e-12,
     )
     np.testing.assert_allclose(long[quaternion], 1.5 * unit[quaternion], rtol=1e-12, atol=1e-15)
+
+
+def test_stage_rotation_matrix_has_the_models_bits():
+    rng = np.random.default_rng(9)
+    for quaternion in rng.normal(0.0, 1.0, (2000, 4)) * rng.uniform(0.5, 2.0, (2000, 1)):
+        np.testing.assert_array_equal(_rotation_matrix(quaternion), rotation_matrix(quaternion))
+    for bad in (np.zeros(4), np.array([np.nan, 0.0, 0.0, 1.0]), np.array([np.inf, 0, 0, 1.0])):
+        with pytest.raises(ValueError, match='non-zero finite quaternion'):
+            _rotation_matrix(bad)
