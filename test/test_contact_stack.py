@@ -13,7 +13,8 @@ from grasp_safety_filter.model.rolling import (
     ContactStack,
     SphereOnPlaneStack,
 )
-from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface, SurfaceList
+from grasp_safety_filter.model.surface_stacks import SurfaceList
+from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
 
 MODELS = {
     'cube': {},

@@ -23,15 +23,14 @@ the contact frame.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.model.affine import AffineMap
-from grasp_safety_filter.model.arrays import matvec
+from grasp_safety_filter.model.arrays import cross, matvec, skew
+from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
@@ -39,64 +38,7 @@ from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import contact_stack, ContactGeometry, ContactPair
 from grasp_safety_filter.model.surfaces import SphereSurface
 
-
-class GraspConfigError(ConfigError):
-    """The configuration does not describe a valid grasp (names the parameter and the values)."""
-
-
-@dataclass(frozen=True)
-class FingertipWorkspace:
-    """Admissible fingertip coordinates ``a_min ≤ a ≤ a_max, b_min ≤ b ≤ b_max``, rad."""
-
-    a_min: float
-    a_max: float
-    b_min: float
-    b_max: float
-
-    def __post_init__(self) -> None:
-        if not -np.pi / 2 <= self.a_min < self.a_max <= np.pi / 2:
-            raise GraspConfigError(
-                'model.fingertip_workspace: expected -pi/2 <= a_min < a_max <= pi/2, got '
-                f'a_min={self.a_min}, a_max={self.a_max}'
-            )
-        if not self.b_min < self.b_max:
-            raise GraspConfigError(
-                'model.fingertip_workspace: expected b_min < b_max, got '
-                f'b_min={self.b_min}, b_max={self.b_max}'
-            )
-
-    def __iter__(self):  # noqa: ANN204 - tuple-like unpacking: a_min, a_max, b_min, b_max
-        return iter((self.a_min, self.a_max, self.b_min, self.b_max))
-
-    def margins(self, xi_cf: np.ndarray) -> np.ndarray:
-        """Barrier values ``(a - a_min, a_max - a, b - b_min, b_max - b)`` per contact, (n, 4)."""
-        xi = np.atleast_2d(xi_cf)
-        a, b = xi[:, 0], xi[:, 1]
-        return np.column_stack([a - self.a_min, self.a_max - a, b - self.b_min, self.b_max - b])
-
-
-# skew(v)_ij = -eps_ijk v_k: the Levi-Civita tensor as a (9, 3) matrix builds stacked skew
-# matrices in one matmul.
-_LEVI_CIVITA = np.zeros((3, 3, 3))
-_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
-_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
-_SKEW_FROM_VECTOR = -_LEVI_CIVITA.reshape(9, 3)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """Cross-product matrices ``v× = [[0, -v_z, v_y], [v_z, 0, -v_x], [-v_y, v_x, 0]]``.
-
-    A vector (3,) gives (3, 3); stacked vectors (k, 3) give (k, 3, 3).
-    """
-    return (v @ _SKEW_FROM_VECTOR.T).reshape(*v.shape[:-1], 3, 3)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross products ``a × b`` of vectors (3,) or stacked (k, 3), broadcast.
-
-    Written as ``(a×) b``: np.cross costs ~20 µs of axis handling per call here.
-    """
-    return matvec(_skew(a), b)
+__all__ = ['FingertipWorkspace', 'GraspConfigError', 'GraspModel']
 
 
 class GraspModel:
@@ -409,7 +351,7 @@ class GraspModel:
         p_c = geometry.p_contact_in_palm
         p_fc = p_c - p_f
         p_oc = p_c - p_o
-        skew_fc, skew_oc = _skew(p_fc), _skew(p_oc)
+        skew_fc, skew_oc = skew(p_fc), skew(p_oc)
         J_h = (R_cp @ (J_s[:, :3] - skew_fc @ J_w)).reshape(3 * n, m)
         # (n, 6, 3) blocks G_i, laid side by side: G[r, 3i + c] = G_i[r, c].
         G = np.concatenate((R_pc, skew_oc @ R_pc), axis=1).transpose(1, 0, 2).reshape(6, 3 * n)
@@ -421,7 +363,7 @@ class GraspModel:
         #   G_dot^T x_o_dot = R_cp (w_o × (p_c_dot - v_o) - w_c × v_co)
         # with v_cf = v_f + w_f × p_fc and v_co = v_o + w_o × p_oc the velocities of the
         # finger's and the object's material points at the contact.
-        skew_contact = _skew(w_f + matvec(R_pc, rates.frame_angular_velocity))
+        skew_contact = skew(w_f + matvec(R_pc, rates.frame_angular_velocity))
         v_cf = v_f - matvec(skew_fc, w_f)
         v_co = v_o - skew_oc @ w_o
         p_c_dot = v_cf + matvec(R_pc[:, :, :2], rates.sliding_velocity)
@@ -429,11 +371,11 @@ class GraspModel:
             R_cp,
             a_f0
             - matvec(skew_fc, alpha_f0)
-            + _cross(w_f, p_c_dot - v_f)
+            + cross(w_f, p_c_dot - v_f)
             - matvec(skew_contact, v_cf),
         ).reshape(3 * n)
         G_dot_T_twist = matvec(
-            R_cp, _cross(w_o, p_c_dot - v_o) - matvec(skew_contact, v_co)
+            R_cp, cross(w_o, p_c_dot - v_o) - matvec(skew_contact, v_co)
         ).reshape(3 * n)
 
         # ---- object

@@ -24,6 +24,7 @@ from typing import Any, TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
+from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
 from grasp_safety_filter.model.quaternion import rotation_matrix
@@ -55,8 +56,6 @@ def palm_frame_name(hand: HandModel, configured: str) -> str:
         GraspConfigError: ``configured`` names a URDF frame that is not fixed to the root at
             the identity (the model's poses are in the root link's frame).
     """
-    from grasp_safety_filter.model.grasp_model import GraspConfigError
-
     root = _root_link(hand)
     if not configured:
         return root
@@ -74,8 +73,6 @@ def palm_frame_name(hand: HandModel, configured: str) -> str:
 
 
 def _object_shape(params: Mapping[str, Any]) -> ObjectShape:
-    from grasp_safety_filter.model.grasp_model import GraspConfigError
-
     kind = params['model.object.shape']
     try:
         if kind == 'box':
@@ -92,8 +89,6 @@ def _object_shape(params: Mapping[str, Any]) -> ObjectShape:
 
 def _declared_faces(params: Mapping[str, Any], names: list[str], shape: ObjectShape) -> list:
     """Per contact the declared face label, or None for the nearest (always for a sphere)."""
-    from grasp_safety_filter.model.grasp_model import GraspConfigError
-
     if not shape.has_faces:
         return [None] * len(names)
     faces = list(params.get('model.contact_faces', [NEAREST_FACE]))
@@ -120,8 +115,6 @@ def grasp_model_from_parameters(
             contact or the link).
         HandModelError: The URDF cannot be used.
     """
-    from grasp_safety_filter.model.grasp_model import FingertipWorkspace, GraspConfigError
-
     def get(name: str) -> Any:
         if name not in params:
             raise GraspConfigError(f"parameter '{name}' is missing")

@@ -26,14 +26,8 @@ import math
 import numpy as np
 
 from grasp_safety_filter.model.arrays import matvec
-from grasp_safety_filter.model.surfaces import (
-    FlatStack,
-    FlatSurface,
-    SphereStack,
-    SphereSurface,
-    stack_surfaces,
-    Surface,
-)
+from grasp_safety_filter.model.surface_stacks import FlatStack, SphereStack, stack_surfaces
+from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface, Surface
 
 # [-w_y, w_x] = ROLL_SELECT @ w: the tangential components of the relative rotation.
 ROLL_SELECT = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
