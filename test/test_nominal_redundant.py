@@ -20,6 +20,7 @@ import pytest
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.pose_error import euler_from_matrix, matrix_from_euler
 from grasp_safety_filter.control.reference import PaperReference, Pose, ReferenceSample
+from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.io.schemas import load_node_parameters, NODE_SCHEMAS
 from grasp_safety_filter.model.grasp_model import GraspModel
 from hand_sim_node.config import SimConfig
@@ -266,6 +267,16 @@ def test_a_rank_deficient_hand_jacobian_is_reported_with_its_rank(hand):
     hold = ReferenceSample.from_pose(Pose(state.p_object_in_palm, state.R_object_to_palm))
     with pytest.raises(np.linalg.LinAlgError, match=r'\(12 x 16\) is rank-deficient: rank 11'):
         NominalController().compute(dataclasses.replace(state, J_h=J_h), hold)
+
+
+def test_null_space_gains_are_parameters_with_units_and_bounds():
+    config = NominalConfig.from_parameters({'null_space': {'kp': 4.0, 'kd': 4.0}})
+    assert (config.null_space_kp, config.null_space_kd) == (4.0, 4.0)
+    defaults = NominalConfig.from_parameters({})
+    assert defaults.null_space_kd**2 >= 4.0 * defaults.null_space_kp  # not underdamped
+    for name in ('null_space.kp', 'null_space.kd'):
+        with pytest.raises(ParameterError, match=rf"'{name}'.*expected >= 0"):
+            NominalConfig.from_parameters({name: -1.0})
 
 
 def test_held_box_internal_finger_motion_decays_as_designed_in_closed_loop(hand):

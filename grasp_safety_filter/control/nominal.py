@@ -57,7 +57,6 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-import math
 from typing import Any
 
 import numpy as np
@@ -114,6 +113,8 @@ class NominalConfig:
             'gains.kp': self.kp,
             'gains.kd': self.kd,
             'gains.kf': self.kf,
+            'null_space.kp': self.null_space_kp,
+            'null_space.kd': self.null_space_kd,
             'reference.source': self.reference_source,
             'reference.amplitude': list(self.amplitude),
             'reference.frequency': self.frequency,
@@ -121,11 +122,6 @@ class NominalConfig:
         }
         for spec in NOMINAL_CONTROLLER_PARAMETERS:
             spec.validate(values[spec.name])
-        for name, gain in (('kp', self.null_space_kp), ('kd', self.null_space_kd)):
-            if not (isinstance(gain, int | float) and math.isfinite(gain) and gain >= 0.0):
-                raise ParameterError(
-                    f'null_space.{name}: expected a finite gain >= 0, got {gain!r}'
-                )
         object.__setattr__(self, 'amplitude', tuple(float(a) for a in self.amplitude))
 
     @classmethod
@@ -150,6 +146,8 @@ class NominalConfig:
             kp=float(values['gains.kp']),
             kd=float(values['gains.kd']),
             kf=float(values['gains.kf']),
+            null_space_kp=float(values['null_space.kp']),
+            null_space_kd=float(values['null_space.kd']),
             reference_source=values['reference.source'],
             amplitude=tuple(values['reference.amplitude']),
             frequency=float(values['reference.frequency']),

@@ -419,6 +419,22 @@ NOMINAL_CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
         min_value=0.0,
     ),
     ParameterSpec(
+        'null_space.kp',
+        DOUBLE,
+        25.0,
+        'Posture gain per unit joint inertia on the internal finger motion (null(J_h), '
+        'hands with m > 3n joints), tau_null = N^T M_h (-kp (q - q_posture) - kd dq), '
+        'q_posture the first joint positions seen [1/s^2]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
+        'null_space.kd',
+        DOUBLE,
+        10.0,
+        'Damping gain per unit joint inertia on the internal finger motion (null(J_h)) [1/s]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
         'reference.source',
         STRING,
         'paper',
