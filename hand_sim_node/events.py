@@ -337,8 +337,9 @@ class EventLog:
     _counts: np.ndarray = field(default_factory=lambda: np.zeros(len(FAMILIES), dtype=np.int64))
     _first_t: np.ndarray = field(default_factory=lambda: np.full(len(FAMILIES), np.nan))
     _min_margin: np.ndarray = field(default_factory=lambda: np.full(len(FAMILIES), np.inf))
-    # Flat violation mask of the previous evaluation.
+    # Flat violation mask of the previous evaluation, and where each family starts in it.
     _active: np.ndarray | None = field(default=None, repr=False)
+    _starts: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def families(self) -> dict[str, FamilyRecord]:
@@ -366,7 +367,9 @@ class EventLog:
                 f'margins, got {len(events)}'
             )
         self.n_evaluations += 1
-        starts = margins.family_starts[: len(FAMILIES)]
+        if self._starts is None or self._active is None or self._active.size != mask.size:
+            self._starts = margins.family_starts[: len(FAMILIES)]
+        starts = self._starts
         # fmin/fmax skip NaN (unknown margins); a family of unknowns leaves the record as is.
         np.fmin(self._min_margin, np.fmin.reduceat(margins.values, starts), out=self._min_margin)
         self.max_required_friction = float(
