@@ -197,13 +197,15 @@ def test_relative_urdf_from_the_command_line_resolves_against_the_current_direct
     assert node.parameters['model.urdf_file'] == str(robot_directory / 'my_hand.urdf')
 
 
-def test_default_urdf_resolves_against_the_packages_config_directory(
+def test_a_node_without_the_hands_parameters_is_refused_naming_them(
     context, tmp_path, monkeypatch
 ):
+    # The schema's model defaults are the paper's hand: never used for another hand.
     monkeypatch.chdir(tmp_path)
-    node = build(context, NominalControllerNode)
-    assert node.get_parameter('model.urdf_file').value == 'hand.urdf'
-    assert node.parameters['model.urdf_file'] == str(REPO / 'config' / 'hand.urdf')
+    with pytest.raises(ParameterError, match=r"'model\.urdf_file'.*no default") as error:
+        build(context, NominalControllerNode)
+    for name in ('model.fingertip_frames', 'model.object.mass', 'model.friction_coefficient'):
+        assert name in str(error.value)
 
 
 # --------------------------------------------------------------------------------------------
