@@ -179,22 +179,21 @@ class PlantRate:
         ddq = state.joint_acceleration(effort)
         x_o_ddot = state.object_acceleration(effort)
         if position_gain != 0.0 or velocity_gain != 0.0:
-            # np.linalg.solve as before: the reported contact forces stay bit for bit.
-            correction = np.linalg.solve(
-                state.B_ho,
-                baumgarte_correction(
-                    state.J_h,
-                    state.G,
-                    state.dq,
-                    state.twist_object,
-                    state.penetration,
-                    position_gain,
-                    velocity_gain,
-                ),
+            stabilisation = baumgarte_correction(
+                state.J_h,
+                state.G,
+                state.dq,
+                state.twist_object,
+                state.penetration,
+                position_gain,
+                velocity_gain,
             )
+            # np.linalg.solve as before: the reported contact forces stay bit for bit.
+            correction = np.linalg.solve(state.B_ho, stabilisation)
             f_c = f_c + correction
-            # contact_force.matrix = B_ho^-1 J_h M_h^-1, so M_h^-1 J_h^T = matrix^T B_ho.
-            ddq = ddq - state.contact_force.matrix.T @ (state.B_ho @ correction)
+            # contact_force.matrix = B_ho^-1 J_h M_h^-1 (B_ho, M_h symmetric), so
+            # M_h^-1 J_h^T correction = matrix^T B_ho correction = matrix^T stabilisation.
+            ddq = ddq - state.contact_force.matrix.T @ stabilisation
             M_o_inv = self._object.inverse_inertia_matrix(state.R_object_to_palm)
             x_o_ddot = x_o_ddot + M_o_inv @ (state.G @ correction)
         return self._assemble(state.dq, ddq, state.twist_object, quaternion_xyzw, x_o_ddot), f_c
