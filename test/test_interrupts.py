@@ -30,4 +30,3 @@ def test_an_interrupt_raised_inside_a_finaliser_reaches_the_program(signum, caps
                 time.sleep(0.001)
     assert interrupt.value.signum == signum
     assert 'Exception ignored' not in capsys.readouterr().err
-
