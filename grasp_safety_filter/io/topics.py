@@ -222,7 +222,9 @@ TOPICS: tuple[TopicSpec, ...] = (
         'sensor_msgs/msg/JointState',
         (SAFETY_FILTER_NODE,),
         STREAM_QOS,
-        'Barrier values by row name: position = h, velocity = dh/dt where defined else 0.',
+        'Barrier values h per row (position; velocity dh/dt when known, else empty). The '
+        'row names only in the first message, on a change and at least once a second; the '
+        'others have no names: their rows are those last named (layout: margin_stream).',
     ),
     TopicSpec(
         CLOCK,
