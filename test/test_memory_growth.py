@@ -18,6 +18,7 @@ from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
+from grasp_safety_filter.model.quaternion import from_rotation_matrix
 from grasp_safety_filter.runner import build_endpoints, RunOptions
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
@@ -56,17 +57,20 @@ def _libc_in_use():
     return in_use
 
 
-def test_rotation_to_quaternion_frees_what_it_allocates():
+@pytest.mark.parametrize(
+    'to_quaternion', [m.quaternion_xyzw_from_matrix, from_rotation_matrix], ids=lambda f: f.__name__
+)
+def test_rotation_to_quaternion_frees_what_it_allocates(to_quaternion):
     in_use = _libc_in_use()
     # A C-ordered rotation, as every state and reference message carries.
     R = m.matrix_from_quaternion_xyzw(np.array([0.1, 0.2, 0.3, 0.9]))
     assert R.flags['C_CONTIGUOUS']
     for _ in range(500):
-        m.quaternion_xyzw_from_matrix(R)
+        to_quaternion(R)
     calls = 20_000
     before = in_use()
     for _ in range(calls):
-        m.quaternion_xyzw_from_matrix(R)
+        to_quaternion(R)
     # One leaked copy of R would be 72 bytes a call.
     assert (in_use() - before) / calls < 8.0
 

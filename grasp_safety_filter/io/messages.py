@@ -408,9 +408,7 @@ def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
             f'rotation matrix: expected orthonormal with det +1 (within '
             f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {np.linalg.det(R):.6g}'
         )
-    # Column-major: pinocchio 3 / eigenpy 3.13's Quaternion(matrix) leaks its copy of a
-    # row-major matrix (80 bytes a call: once per tick in the simulator's odometry).
-    return from_rotation_matrix(np.asfortranarray(R))
+    return from_rotation_matrix(R)
 
 
 def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:

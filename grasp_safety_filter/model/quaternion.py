@@ -61,5 +61,7 @@ def rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
 
 def from_rotation_matrix(R: np.ndarray) -> np.ndarray:
     """Return the unit quaternion ``(x, y, z, w)``, ``w >= 0``, of a rotation matrix."""
-    quaternion = normalized(pin.Quaternion(np.asarray(R, dtype=float)).coeffs())
+    # Column-major: pinocchio 3 / eigenpy 3.13's Quaternion(matrix) leaks its copy of a
+    # row-major matrix (80 bytes a call: once per tick in the simulator's odometry).
+    quaternion = normalized(pin.Quaternion(np.asfortranarray(R, dtype=float)).coeffs())
     return quaternion if quaternion[3] >= 0.0 else -quaternion
