@@ -58,7 +58,9 @@ def _libc_in_use():
 
 
 @pytest.mark.parametrize(
-    'to_quaternion', [m.quaternion_xyzw_from_matrix, from_rotation_matrix], ids=lambda f: f.__name__
+    'to_quaternion',
+    [m.quaternion_xyzw_from_matrix, from_rotation_matrix],
+    ids=lambda f: f.__name__,
 )
 def test_rotation_to_quaternion_frees_what_it_allocates(to_quaternion):
     in_use = _libc_in_use()
