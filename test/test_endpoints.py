@@ -446,6 +446,17 @@ def test_nominal_controller_gains_change_live(params):
         nominal.update_config(dataclasses.replace(nominal.config, reference_source='topic'))
 
 
+def test_a_live_gain_change_keeps_the_null_space_posture(params):
+    _, joints, odometry = first_state_messages(params)
+    nominal = make_nominal(params)
+    nominal.on_joint_states(joints)
+    nominal.on_odom(odometry)
+    posture = nominal.controller.posture
+    assert posture is not None
+    nominal.update_config(dataclasses.replace(nominal.config, kf=20.0))
+    np.testing.assert_array_equal(nominal.controller.posture, posture)
+
+
 # ----------------------------------------------------------------------------------------
 # The safety filter endpoint: bad input is reported and never filtered
 

@@ -86,7 +86,8 @@ class NominalControllerEndpoint:
         self.model = model
         self.msgs = msgs
         self.config = nominal_config
-        self.controller = NominalController(nominal_config)
+        # New gains, same posture: re-latching it to the current q would undo the hold.
+        self.controller = NominalController(nominal_config, posture=self.controller.posture)
         self.reference: ReferenceSource | None = None
         self.last_output: NominalOutput | None = None
         self._joint_names = list(model.joint_names)
@@ -149,7 +150,8 @@ class NominalControllerEndpoint:
                 f'{self.config.reference_source!r}'
             )
         self.config = nominal_config
-        self.controller = NominalController(nominal_config)
+        # New gains, same posture: re-latching it to the current q would undo the hold.
+        self.controller = NominalController(nominal_config, posture=self.controller.posture)
         if self._initial_pose is not None and self._t0 is not None:
             previous = self.reference
             self.reference = nominal_config.make_reference(self._initial_pose, self._t0)

@@ -9,8 +9,9 @@ the joint ``object``, palm frame); publishes ``/hand/effort_nominal`` and ``/dia
 Everything else is
 :class:`grasp_safety_filter.nodes.nominal_controller.NominalControllerEndpoint`.
 
-Live parameters: ``gains.kp``, ``gains.kd``, ``gains.kf``, ``reference.amplitude``,
-``reference.frequency`` and ``reference.timeout`` apply from the next tick;
+Live parameters: ``gains.kp``, ``gains.kd``, ``gains.kf``, ``null_space.kp``,
+``null_space.kd``, ``reference.amplitude``, ``reference.frequency`` and
+``reference.timeout`` apply from the next tick (the null-space posture is kept);
 ``reference.source`` and the model are read-only (read at start-up).
 """
 
