@@ -86,8 +86,7 @@ class NominalControllerEndpoint:
         self.model = model
         self.msgs = msgs
         self.config = nominal_config
-        # New gains, same posture: re-latching it to the current q would undo the hold.
-        self.controller = NominalController(nominal_config, posture=self.controller.posture)
+        self.controller = NominalController(nominal_config)
         self.reference: ReferenceSource | None = None
         self.last_output: NominalOutput | None = None
         self._joint_names = list(model.joint_names)
