@@ -247,3 +247,35 @@ def test_live_parameters_apply_and_read_only_ones_are_refused(ros_context):
     finally:
         for node in (sim, nominal, safety_filter):
             node.destroy_node()
+
+
+def test_a_signal_whose_exit_an_import_swallowed_still_ends_the_node(tmp_path, monkeypatch):
+    """An extension's initialisation may drop the SystemExit the handler raised in it."""
+    import signal
+
+    from grasp_safety_filter.nodes import entry_points
+
+    module = tmp_path / 'swallowing_node.py'
+    module.write_text(
+        'import os, signal, time\n'
+        'try:  # as an extension module initialising itself may: the exception is dropped\n'
+        '    os.kill(os.getpid(), signal.SIGINT)\n'
+        '    time.sleep(0.5)\n'
+        'except BaseException:\n'
+        '    pass\n'
+        'STARTED = []\n'
+        'def main(args):\n'
+        '    STARTED.append(args)\n'
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(entry_points.NODE_MODULES, 'swallowing_node', 'swallowing_node')
+    monkeypatch.setattr(entry_points, '_received', [], raising=False)
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with pytest.raises(SystemExit) as stop:
+            entry_points.run_node('swallowing_node', ['swallowing_node'])
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    assert stop.value.code == 0
+    assert sys.modules['swallowing_node'].STARTED == []

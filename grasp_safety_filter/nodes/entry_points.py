@@ -21,15 +21,28 @@ NODE_MODULES: dict[str, str] = {
 }
 
 
+#: Signals received while the node's module was imported (see :func:`run_node`).
+_received: list[int] = []
+
+
 def _exit_quietly(signum: int, frame: FrameType | None) -> None:
+    _received.append(signum)
     raise SystemExit(0)
 
 
 def run_node(name: str, args: list[str] | None = None) -> None:
-    """Import the node's module with SIGINT and SIGTERM ending the process quietly, run it."""
+    """Import the node's module with SIGINT and SIGTERM ending the process quietly, run it.
+
+    The handler raises ``SystemExit`` wherever the import is; an extension module's
+    initialisation may run Python code and drop the exception it raised, so the request is
+    also recorded and honoured once the import is done.
+    """
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _exit_quietly)
-    importlib.import_module(NODE_MODULES[name]).main(args)
+    module = importlib.import_module(NODE_MODULES[name])
+    if _received:
+        raise SystemExit(0)
+    module.main(args)
 
 
 def hand_sim_node(args: list[str] | None = None) -> None:
