@@ -10,6 +10,7 @@ nothing heavy before the handlers are in place.
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 from grasp_safety_filter.io.interrupts import interrupt_on_signals, signal_name
 
@@ -17,18 +18,27 @@ INTERRUPTED = 130
 """Exit status of a tool stopped by SIGINT or SIGTERM (128 + SIGINT, as a shell reports)."""
 
 
+def _ignore_unraisable(unraisable: Any) -> None:
+    """``sys.unraisablehook`` of a tool that was stopped: its one line is all it says."""
+
+
 def _run(prog: str, function: str, argv: list[str] | None) -> int:
     try:
         with interrupt_on_signals():
             from grasp_safety_filter import cli
 
-            return int(getattr(cli, function)(argv))
+            status = int(getattr(cli, function)(argv))
     except KeyboardInterrupt as interrupt:
         print(
             f'\n{prog}: interrupted by {signal_name(interrupt)} while starting: nothing written',
             file=sys.stderr,
         )
-        return INTERRUPTED
+        status = INTERRUPTED
+    if status == INTERRUPTED:
+        # An interrupt can leave a library's object half-built (pyparsing's, while matplotlib
+        # imports), whose __del__ then fails as the interpreter exits, with a traceback.
+        sys.unraisablehook = _ignore_unraisable
+    return status
 
 
 def demo(argv: list[str] | None = None) -> int:

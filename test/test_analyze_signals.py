@@ -83,3 +83,24 @@ def test_a_signal_at_any_moment_leaves_whole_files_and_one_line(bag, tmp_path, s
             assert text == '', text
             assert _check_outputs(out) == complete
     assert _bag_files(bag) == before
+
+
+def test_a_stopped_tool_says_one_line_even_if_a_half_built_object_fails_later(tmp_path):
+    """An interrupt may leave a library object half-built; its __del__ fails at exit."""
+    script = tmp_path / 'stopped.py'
+    script.write_text(
+        'import sys\n'
+        'from grasp_safety_filter import cli, console\n'
+        'class HalfBuilt:\n'
+        '    def __del__(self):\n'
+        '        self.expr  # never set: the interrupt came first\n'
+        'LEFT = HalfBuilt()\n'
+        'def stopped(argv):\n'
+        '    print("grasp-analyze: interrupted by SIGINT", file=sys.stderr)\n'
+        '    return console.INTERRUPTED\n'
+        'cli.analyze_main = stopped\n'
+        'sys.exit(console.analyze([]))\n'
+    )
+    result = subprocess.run([sys.executable, script], capture_output=True, text=True)
+    assert result.returncode == 130
+    assert result.stderr.strip().splitlines() == ['grasp-analyze: interrupted by SIGINT']
