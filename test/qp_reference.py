@@ -8,6 +8,7 @@ on either one is still checked against the other.
 
 import daqp
 import numpy as np
+from scipy.optimize import linprog
 
 from grasp_safety_filter.control.least_distance import LeastDistanceStatus, solve_least_distance
 
@@ -76,3 +77,24 @@ def relaxed_optimum(A, lower, weights, u_nom, u_min, u_max):
     gap = np.abs(np.asarray(x[:m]) - exact.u[:m]).max()
     assert gap <= REFERENCE_AGREEMENT * (1.0 + np.abs(u_nom).max()), gap
     return np.asarray(x[:m]), np.asarray(x[m:])
+
+
+def chebyshev_radius(A, lower, effort):
+    """Largest torque-space ball inside ``{A u >= lower, |u| <= effort}`` (LP), N·m.
+
+    Negative when the set is empty: the most violated row's distance at the best u.
+    """
+    m = A.shape[1]
+    norms = np.linalg.norm(A, axis=1)
+    A_ub = np.vstack(
+        (
+            np.column_stack((-A, norms)),
+            np.column_stack((np.eye(m), np.ones(m))),
+            np.column_stack((-np.eye(m), np.ones(m))),
+        )
+    )
+    b_ub = np.concatenate((-lower, effort, effort))
+    bounds = [(None, None)] * m + [(None, float(effort.max()))]
+    result = linprog(-np.eye(m + 1)[m], A_ub=A_ub, b_ub=b_ub, bounds=bounds)
+    assert result.status == 0, result.message
+    return result.x[:m], float(result.x[m])

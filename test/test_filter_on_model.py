@@ -27,9 +27,8 @@ from grasp_states import (
 )
 import numpy as np
 import pytest
-from qp_reference import hard_optimum, relaxed_optimum
+from qp_reference import chebyshev_radius, hard_optimum, relaxed_optimum
 import scipy.linalg
-from scipy.optimize import linprog
 
 from grasp_safety_filter.bench import record_filtered_run, Scenario
 from grasp_safety_filter.control.class_k import ClassKFunction
@@ -177,27 +176,6 @@ def independent_rows(model, config, state):
         [independent_residuals(model, config, state, e)[1] - at_zero for e in np.eye(m)]
     )
     return names, A, -at_zero
-
-
-def chebyshev_radius(A, lower, effort):
-    """Largest torque-space ball inside ``{A u >= lower, |u| <= effort}`` (LP), N·m.
-
-    Negative when the set is empty: the most violated row's distance at the best u.
-    """
-    m = A.shape[1]
-    norms = np.linalg.norm(A, axis=1)
-    A_ub = np.vstack(
-        (
-            np.column_stack((-A, norms)),
-            np.column_stack((np.eye(m), np.ones(m))),
-            np.column_stack((-np.eye(m), np.ones(m))),
-        )
-    )
-    b_ub = np.concatenate((-lower, effort, effort))
-    bounds = [(None, None)] * m + [(None, float(effort.max()))]
-    result = linprog(-np.eye(m + 1)[m], A_ub=A_ub, b_ub=b_ub, bounds=bounds)
-    assert result.status == 0, result.message
-    return result.x[:m], float(result.x[m])
 
 
 def reference_optimum(A, lower, u_nom, effort):

@@ -14,8 +14,7 @@ from collections import Counter
 from grasp_states import moved, paper_model, random_configuration
 import numpy as np
 import pytest
-from qp_reference import hard_optimum, relaxed_optimum
-from scipy.optimize import linprog
+from qp_reference import chebyshev_radius, hard_optimum, relaxed_optimum
 
 from grasp_safety_filter.control.qp_solvers import (
     BACKENDS,
@@ -27,24 +26,6 @@ from grasp_safety_filter.io.parameters import ParameterError
 
 N_PROBLEMS = 120
 TOLERANCE = 1e-6  # N·m per N·m of |u_nom|: torque, KKT residuals
-
-
-def chebyshev(A, lower, effort):
-    """Centre and radius of the largest torque-space ball in the feasible set (LP)."""
-    m = A.shape[1]
-    norms = np.linalg.norm(A, axis=1)
-    A_ub = np.vstack(
-        (
-            np.column_stack((-A, norms)),
-            np.column_stack((np.eye(m), np.ones(m))),
-            np.column_stack((-np.eye(m), np.ones(m))),
-        )
-    )
-    b_ub = np.concatenate((-lower, effort, effort))
-    bounds = [(None, None)] * m + [(None, float(effort.max()))]
-    result = linprog(-np.eye(m + 1)[m], A_ub=A_ub, b_ub=b_ub, bounds=bounds)
-    assert result.status == 0, result.message
-    return result.x[:m], float(result.x[m])
 
 
 class Table:
@@ -64,7 +45,7 @@ class Table:
             else:
                 c = random_configuration(model, rng, *((0.1, 0.1), (0.3, 1.0))[i % 2])
             rows = self.filter.constraint_rows(c.state(model))
-            centre, radius = chebyshev(rows.A, rows.lower, self.effort)
+            centre, radius = chebyshev_radius(rows.A, rows.lower, self.effort)
             direction = rng.normal(size=model.n_joints)
             reach = abs(radius) * 10.0 ** rng.uniform(-1.0, 1.5) + (i % 3) * 0.3
             u_nom = centre + reach * direction / np.linalg.norm(direction)
