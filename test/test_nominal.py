@@ -328,20 +328,6 @@ def test_stale_topic_reference_holds_pose_with_zero_feed_forward():
     assert np.linalg.norm(stale.u - fresh.u) > 1e-3
 
 
-def test_rejects_fewer_joints_than_contact_constraint_rows():
-    state = synthetic_state(0)
-    keep = np.arange(8)
-    short = dataclasses.replace(
-        state,
-        q=state.q[keep],
-        dq=state.dq[keep],
-        J_h=state.J_h[:, keep],
-        M_h=state.M_h[np.ix_(keep, keep)],
-    )
-    with pytest.raises(ValueError, match='m = 8 joints for n = 3 contacts'):
-        NominalController().compute(short, references(state)[2])
-
-
 def test_config_defaults_are_the_papers():
     config = NominalConfig.from_parameters({'model.fingertip_radius': 0.06})
     assert (config.kp, config.kd, config.kf) == (1.0, 2.5, 10.0)
