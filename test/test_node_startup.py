@@ -508,3 +508,49 @@ def test_nodes_exit_quietly_on_a_signal_while_they_import(library):
     finally:
         for node in nodes:
             node.kill()
+
+
+def test_a_signal_swallowed_in_a_weakref_callback_still_ends_the_node_quietly(tmp_path):
+    """The import system runs weakref callbacks, where Python can only report an exception.
+
+    A node module whose import is interrupted inside one must neither print "Exception
+    ignored" nor go on to run the node.
+    """
+    (tmp_path / 'interrupted_in_callback.py').write_text(
+        textwrap.dedent(
+            """
+            import os, signal, time, weakref
+
+            class Target:
+                pass
+
+            def callback(reference):
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.5)  # the handler runs here, inside the callback
+
+            target = Target()
+            reference = weakref.ref(target, callback)
+            del target
+            print('import continued', flush=True)
+
+            def main(args):
+                print('node ran', flush=True)
+            """
+        ),
+        encoding='utf-8',
+    )
+    script = textwrap.dedent(
+        """
+        from grasp_safety_filter.nodes import entry_points
+        entry_points.NODE_MODULES['interrupted'] = 'interrupted_in_callback'
+        entry_points.run_node('interrupted')
+        """
+    )
+    environment = {**os.environ, 'PYTHONPATH': f'{tmp_path}{os.pathsep}{os.getcwd()}'}
+    result = subprocess.run(
+        [sys.executable, '-c', script],
+        capture_output=True, text=True, timeout=60, env=environment, check=False,
+    )
+    assert (result.returncode, result.stderr) == (0, '')
+    assert 'node ran' not in result.stdout
+    assert 'import continued' not in result.stdout

@@ -10,8 +10,11 @@ as it does later. This module imports nothing heavy itself.
 from __future__ import annotations
 
 import importlib
+import os
 import signal
+import sys
 from types import FrameType
+from typing import Any
 
 #: Console script name -> the module whose ``main(args)`` runs that node.
 NODE_MODULES: dict[str, str] = {
@@ -30,13 +33,28 @@ def _exit_quietly(signum: int, frame: FrameType | None) -> None:
     raise SystemExit(0)
 
 
+def _exit_if_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__) -> None:
+    """``sys.unraisablehook``: the quiet exit raised where it cannot propagate still exits.
+
+    A signal handled inside a weakref callback or a ``__del__`` (the import system has both)
+    raises there, and Python would print "Exception ignored" and go on importing.
+    """
+    if isinstance(unraisable.exc_value, SystemExit) and _received:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
+    default(unraisable)
+
+
 def run_node(name: str, args: list[str] | None = None) -> None:
     """Import the node's module with SIGINT and SIGTERM ending the process quietly, run it.
 
-    The handler raises ``SystemExit`` wherever the import is; an extension module's
+    The handler raises ``SystemExit`` wherever the import is. An extension module's
     initialisation may run Python code and drop the exception it raised, so the request is
-    also recorded and honoured once the import is done.
+    also recorded and honoured once the import is done; one raised where Python can only
+    report it (a weakref callback) ends the process at once, before anything is started.
     """
+    sys.unraisablehook = _exit_if_swallowed
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, _exit_quietly)
     module = importlib.import_module(NODE_MODULES[name])
