@@ -32,7 +32,7 @@ MSGS = MessageNamespace.from_typestore(TYPESTORE)
 # The rclpy representation (lists of floats, bytes for byte fields) on rosbags classes, which
 # accept any field value: checks what the conversion hands to rclpy.
 LIST_MSGS = MessageNamespace(
-    **{name: getattr(MSGS, name) for name in m._MESSAGE_TYPES},
+    **{name: getattr(MSGS, name) for name in m.MESSAGE_TYPES},
     sequences_as_lists=True,
     byte_as_bytes=True,
 )

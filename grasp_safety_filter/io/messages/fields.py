@@ -1,0 +1,277 @@
+"""Field-level conversion and validation: frames, times, names, vectors, rotations, clock."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from fractions import Fraction
+import math
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.io.messages.errors import (
+    bounded_text,
+    MAX_NAME_TEXT,
+    MessageError,
+    name_list,
+)
+from grasp_safety_filter.io.messages.namespace import MessageNamespace
+from grasp_safety_filter.model.quaternion import from_rotation_matrix, rotation_matrix
+
+#: Default frame names of the message functions: the paper's hand's palm (its URDF's root
+#: link) and the object. A model names its own (``GraspModel.palm_frame``, ``object_frame``:
+#: ``model.palm_frame``, ``model.object_frame``), and the endpoints pass those.
+PALM_FRAME = 'palm'
+OBJECT_FRAME = 'object'
+
+
+_QUATERNION_NORM_TOLERANCE = 1e-6
+_ROTATION_TOLERANCE = 1e-6
+_NANOSECONDS_PER_SECOND = 1_000_000_000
+_INT32_MAX = 2**31 - 1
+
+# ----------------------------------------------------------------------------------------
+# Time
+
+
+def seconds_to_nanoseconds(t: float) -> int:
+    """Time in s to the nearest integer ns; raise MessageError unless finite and >= 0."""
+    if not math.isfinite(t) or t < 0.0:
+        raise MessageError(f'time: expected a finite number of seconds >= 0, got {t!r}')
+    # Exact rational product: a float product could round a time ns / 1e9 to ns +- 1.
+    return round(Fraction(t) * _NANOSECONDS_PER_SECOND)
+
+
+def nanoseconds_to_seconds(ns: int) -> float:
+    """Time in integer ns to s, correctly rounded (int / int true division)."""
+    return int(ns) / _NANOSECONDS_PER_SECOND
+
+
+def _sec_nanosec(t: float, what: str) -> tuple[int, int]:
+    ns = seconds_to_nanoseconds(t)
+    sec, nanosec = divmod(ns, _NANOSECONDS_PER_SECOND)
+    if sec > _INT32_MAX:
+        raise MessageError(f'{what}: {t!r} s does not fit builtin_interfaces (int32 seconds)')
+    return sec, nanosec
+
+
+def time_to_msg(msgs: MessageNamespace, t: float) -> Any:
+    """Time ``t`` (s, >= 0) as ``builtin_interfaces/Time``."""
+    sec, nanosec = _sec_nanosec(t, 'time')
+    return msgs.Time(sec=sec, nanosec=nanosec)
+
+
+def time_msg_to_nanoseconds(msg: Any, what: str = 'time') -> int:
+    """Return a ``builtin_interfaces`` Time or Duration as integer ns.
+
+    Raises:
+        MessageError: ``nanosec`` outside ``[0, 1e9)`` or ``sec`` negative (no time here
+            is before the clock's origin, and seconds_to_nanoseconds refuses it).
+
+    """
+    sec, nanosec = int(msg.sec), int(msg.nanosec)
+    if not 0 <= nanosec < _NANOSECONDS_PER_SECOND:
+        raise MessageError(f'{what}: nanosec must be in [0, 1e9), got {nanosec}')
+    if sec < 0:
+        raise MessageError(f'{what}: sec must be >= 0, got {sec}')
+    return sec * _NANOSECONDS_PER_SECOND + nanosec
+
+
+def time_from_msg(msg: Any, what: str = 'time') -> float:
+    """Return a ``builtin_interfaces`` Time or Duration in s."""
+    return nanoseconds_to_seconds(time_msg_to_nanoseconds(msg, what))
+
+
+def header_stamp_ns(msg: Any) -> int:
+    """Return the header stamp of a stamped message in integer ns (e.g. a bag timestamp)."""
+    return time_msg_to_nanoseconds(msg.header.stamp, 'header.stamp')
+
+
+def header_msg(msgs: MessageNamespace, t: float, frame_id: str) -> Any:
+    """Build a ``std_msgs/Header`` stamped ``t`` s in ``frame_id``."""
+    return msgs.Header(stamp=time_to_msg(msgs, t), frame_id=frame_id)
+
+
+def duration_to_msg(msgs: MessageNamespace, t: float) -> Any:
+    """Build a ``builtin_interfaces/Duration`` of ``t`` s (a point's ``time_from_start``)."""
+    sec, nanosec = _sec_nanosec(t, 'time_from_start')
+    return msgs.Duration(sec=sec, nanosec=nanosec)
+
+
+# ----------------------------------------------------------------------------------------
+# Validation helpers
+
+
+def check_frame(source: str, what: str, received: str, expected: str) -> None:
+    """Raise :class:`MessageError` naming ``source``, ``what`` unless the frame is ``expected``."""
+    if received != expected:
+        got = bounded_text(repr(received), MAX_NAME_TEXT)
+        raise MessageError(f'{source}: {what} must be {expected!r}, got {got}')
+
+
+def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
+    """Received names as a list; raise on duplicates."""
+    received = [str(n) for n in names]
+    duplicates = sorted(n for n, count in Counter(received).items() if count > 1)
+    if duplicates:
+        raise MessageError(
+            f'{source}: {len(duplicates)} duplicate {kind} names {name_list(duplicates)}'
+        )
+    return received
+
+
+def match_names(
+    source: str, received_names: Sequence[str], expected_names: Sequence[str], kind: str
+) -> np.ndarray:
+    """Index of each expected name in the received names (any order, each exactly once)."""
+    received = checked_names(source, received_names, kind)
+    index = {name: i for i, name in enumerate(received)}
+    expected = set(expected_names)
+    unknown = [n for n in received if n not in expected]
+    if unknown:
+        raise MessageError(
+            f'{source}: {len(unknown)} unknown {kind} names {name_list(unknown)}; expected '
+            f'{list(expected_names)}'
+        )
+    missing = [n for n in expected_names if n not in index]
+    if missing:
+        raise MessageError(
+            f'{source}: missing {kind} names {missing}; received {len(received)} '
+            f'{name_list(received)}'
+        )
+    return np.array([index[n] for n in expected_names], dtype=int)
+
+
+def array_field(
+    source: str,
+    values: Any,
+    field_name: str,
+    names: Sequence[str],
+    *,
+    required: bool,
+    allow_positive_inf: Sequence[bool] | None = None,
+) -> np.ndarray | None:
+    """Return a float field with one finite entry per name; ``None`` if optional and empty.
+
+    Args:
+        source: Name used in error messages.
+        values: The field's values.
+        field_name: The field's name.
+        names: The message's names.
+        required: The field must have one entry per name (else it may also be empty).
+        allow_positive_inf: Per name, whether ``+inf`` is admissible there.
+
+    """
+    array = np.asarray(values, dtype=np.float64).ravel()
+    if array.size == 0 and not required:
+        return None
+    if array.size != len(names):
+        expectation = 'one entry per name' if required else 'none or one entry per name'
+        raise MessageError(
+            f"{source}: '{field_name}' has {array.size} entries, expected {expectation} "
+            f'({len(names)})'
+        )
+    bad = ~np.isfinite(array)
+    if allow_positive_inf is not None:
+        bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        name = bounded_text(str(names[i]), MAX_NAME_TEXT)
+        raise MessageError(f"{source}: '{field_name}' of '{name}' is {float(array[i])!r}")
+    return array
+
+
+def finite_vector(source: str, what: str, values: Sequence[float]) -> np.ndarray:
+    """Return ``values`` as a float64 array; raise :class:`MessageError` if one is not finite."""
+    array = np.array([float(v) for v in values], dtype=np.float64)
+    if not np.isfinite(array).all():
+        raise MessageError(f'{source}: {what} must be finite, got {array.tolist()}')
+    return array
+
+
+def unit_quaternion(source: str, what: str, msg: Any) -> np.ndarray:
+    """Return a ``geometry_msgs/Quaternion`` as finite ``(x, y, z, w)`` of unit norm, or raise."""
+    quaternion = finite_vector(source, what, (msg.x, msg.y, msg.z, msg.w))
+    norm = float(np.linalg.norm(quaternion))
+    if abs(norm - 1.0) > _QUATERNION_NORM_TOLERANCE:
+        raise MessageError(
+            f'{source}: {what} must be a unit quaternion (|norm - 1| <= '
+            f'{_QUATERNION_NORM_TOLERANCE}), got norm {norm!r}'
+        )
+    return quaternion / norm
+
+
+def shaped_array(what: str, values: Any, shape: tuple[int, ...]) -> np.ndarray:
+    """Return ``values`` as a float64 array of ``shape``, or raise :class:`MessageError`."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape != shape:
+        raise MessageError(f'{what}: expected shape {shape}, got {array.shape}')
+    return array
+
+
+# ----------------------------------------------------------------------------------------
+# Rotations
+
+
+def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Return the unit quaternion ``(x, y, z, w)``, ``w >= 0``, of a rotation matrix.
+
+    Raises:
+        MessageError: ``R`` is not 3x3 or not a rotation within 1e-6.
+
+    """
+    R = shaped_array('rotation matrix', R, (3, 3))
+    if not np.isfinite(R).all():
+        raise MessageError(f'rotation matrix: expected finite entries, got {R.tolist()}')
+    error = float(np.abs(R.T @ R - np.eye(3)).max())
+    if error > _ROTATION_TOLERANCE or np.linalg.det(R) < 0.0:
+        raise MessageError(
+            f'rotation matrix: expected orthonormal with det +1 (within '
+            f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {np.linalg.det(R):.6g}'
+        )
+    return from_rotation_matrix(R)
+
+
+def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion ``(x, y, z, w)`` (normalised first)."""
+    return rotation_matrix(quaternion)
+
+
+def quaternion_msg(msgs: MessageNamespace, R: np.ndarray) -> Any:
+    """Build a ``geometry_msgs/Quaternion`` of the rotation matrix ``R``."""
+    x, y, z, w = quaternion_xyzw_from_matrix(R)
+    return msgs.Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+
+
+def vector3_msg(msgs: MessageNamespace, v: np.ndarray) -> Any:
+    """Build a ``geometry_msgs/Vector3`` of ``v``, shape (3,)."""
+    return msgs.Vector3(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def twist_msg(msgs: MessageNamespace, twist: np.ndarray) -> Any:
+    """Build a ``geometry_msgs/Twist`` of ``(v, w)``, shape (6,)."""
+    return msgs.Twist(linear=vector3_msg(msgs, twist[:3]), angular=vector3_msg(msgs, twist[3:]))
+
+
+def twist_from_msg(source: str, what: str, msg: Any) -> np.ndarray:
+    """Return a ``geometry_msgs/Twist`` as finite ``(v, w)``, shape (6,), or raise."""
+    return finite_vector(
+        source,
+        what,
+        (msg.linear.x, msg.linear.y, msg.linear.z, msg.angular.x, msg.angular.y, msg.angular.z),
+    )
+
+
+# ----------------------------------------------------------------------------------------
+# Clock
+
+
+def clock_to_msg(msgs: MessageNamespace, t: float) -> Any:
+    """Build a ``rosgraph_msgs/Clock`` at ``t`` s."""
+    return msgs.Clock(clock=time_to_msg(msgs, t))
+
+
+def clock_from_msg(msg: Any) -> float:
+    """Return the time of a Clock message, s."""
+    return time_from_msg(msg.clock, 'clock')

@@ -1,0 +1,147 @@
+"""``sensor_msgs/JointState``: joint states and joint efforts, matched by joint name."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.io.messages.errors import MessageError
+from grasp_safety_filter.io.messages.fields import (
+    array_field,
+    checked_names,
+    header_msg,
+    match_names,
+    time_from_msg,
+)
+from grasp_safety_filter.io.messages.namespace import MessageNamespace
+
+
+@dataclass(frozen=True)
+class JointStateData:
+    """A parsed ``/hand/joint_states`` sample, in the caller's joint order.
+
+    Attributes:
+        t: Header stamp, s.
+        position: Joint angles, shape (m,), rad.
+        velocity: Joint velocities, shape (m,), rad/s.
+        effort: Applied joint torques, shape (m,), N·m; None when the message has none
+            (many hand drivers publish no effort; the filter does not need it).
+
+    """
+
+    t: float
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class EffortData:
+    """A parsed effort command, in the caller's joint order.
+
+    Attributes:
+        t: Header stamp, s.
+        effort: Joint torques, shape (m,), N·m.
+
+    """
+
+    t: float
+    effort: np.ndarray
+
+
+def _check_names_and_lengths(names: Sequence[str], **arrays: np.ndarray | None) -> None:
+    checked_names('message', names, 'entry')
+    for field_name, values in arrays.items():
+        if values is not None and np.asarray(values).size != len(names):
+            raise MessageError(
+                f"message: '{field_name}' has {np.asarray(values).size} entries, expected "
+                f'{len(names)} (one per name)'
+            )
+
+
+def joint_state_to_msg(
+    msgs: MessageNamespace,
+    t: float,
+    names: Sequence[str],
+    position: np.ndarray | None,
+    velocity: np.ndarray | None,
+    effort: np.ndarray | None,
+    frame_id: str = '',
+) -> Any:
+    """Build a ``sensor_msgs/JointState``; ``None`` fields are sent empty.
+
+    Args:
+        msgs: Message classes.
+        t: Stamp, s.
+        names: Joint names, one per array entry.
+        position: Joint angles, rad.
+        velocity: Joint velocities, rad/s.
+        effort: Joint torques, N·m.
+        frame_id: Header frame (empty for joint states by ROS convention).
+
+    """
+    _check_names_and_lengths(names, position=position, velocity=velocity, effort=effort)
+    empty = np.zeros(0)
+    return msgs.JointState(
+        header=header_msg(msgs, t, frame_id),
+        name=[str(n) for n in names],
+        position=msgs.float_array(empty if position is None else position),
+        velocity=msgs.float_array(empty if velocity is None else velocity),
+        effort=msgs.float_array(empty if effort is None else effort),
+    )
+
+
+def joint_state_from_msg(
+    msg: Any, joint_names: Sequence[str], source: str = 'JointState'
+) -> JointStateData:
+    """Parse a JointState carrying position and velocity (effort optional) of ``joint_names``.
+
+    Args:
+        msg: A ``sensor_msgs/JointState``.
+        joint_names: Expected joints; the result follows this order.
+        source: Name used in error messages (e.g. the topic).
+
+    Raises:
+        MessageError: Duplicate, unknown or missing names; a field whose length is not the
+            number of names; a non-finite value.
+
+    """
+    order = match_names(source, msg.name, joint_names, 'joint')
+    names = list(msg.name)
+    arrays = {
+        f: array_field(source, getattr(msg, f), f, names, required=f != 'effort')
+        for f in ('position', 'velocity', 'effort')
+    }
+    t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
+    return JointStateData(t=t, **{f: None if a is None else a[order] for f, a in arrays.items()})
+
+
+def effort_to_msg(
+    msgs: MessageNamespace, t: float, names: Sequence[str], effort: np.ndarray
+) -> Any:
+    """Build a JointState with names and efforts (N·m) only: position and velocity empty."""
+    return joint_state_to_msg(msgs, t, names, None, None, effort)
+
+
+def effort_from_msg(
+    msg: Any, joint_names: Sequence[str], source: str = 'effort JointState'
+) -> EffortData:
+    """Parse an effort-only JointState of exactly ``joint_names``.
+
+    Position and velocity may be empty or have one entry per name (then ignored but still
+    checked to be finite, since a producer that sends them garbage is not trusted).
+
+    Raises:
+        MessageError: As :func:`joint_state_from_msg`.
+
+    """
+    order = match_names(source, msg.name, joint_names, 'joint')
+    names = list(msg.name)
+    effort = array_field(source, msg.effort, 'effort', names, required=True)
+    for f in ('position', 'velocity'):
+        array_field(source, getattr(msg, f), f, names, required=False)
+    t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
+    return EffortData(t=t, effort=effort[order])

@@ -1,0 +1,114 @@
+"""``nav_msgs/Odometry``: the object's pose and twist in the palm frame."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.io.messages.fields import (
+    check_frame,
+    finite_vector,
+    header_msg,
+    matrix_from_quaternion_xyzw,
+    OBJECT_FRAME,
+    PALM_FRAME,
+    quaternion_msg,
+    shaped_array,
+    time_from_msg,
+    twist_from_msg,
+    twist_msg,
+    unit_quaternion,
+)
+from grasp_safety_filter.io.messages.namespace import MessageNamespace
+
+
+@dataclass(frozen=True)
+class ObjectStateData:
+    """A parsed ``/object/odom`` sample, palm frame.
+
+    Attributes:
+        t: Header stamp, s.
+        p_object_in_palm: Object centre of mass, shape (3,), m.
+        R_object_to_palm: Object orientation, shape (3, 3).
+        twist_object: ``(v_o, w_o)`` in palm coordinates, shape (6,), (m/s, rad/s).
+
+    """
+
+    t: float
+    p_object_in_palm: np.ndarray
+    R_object_to_palm: np.ndarray
+    twist_object: np.ndarray
+
+
+def odometry_to_msg(
+    msgs: MessageNamespace,
+    t: float,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    frame_id: str = PALM_FRAME,
+    child_frame_id: str = OBJECT_FRAME,
+) -> Any:
+    """Build the object's ``nav_msgs/Odometry``.
+
+    The pose is the object frame in the palm frame (``frame_id``). Following REP 105 and
+    the Odometry definition, the twist is expressed in the child (object) frame:
+    ``v_child = R_object_to_palm^T v_o``, ``w_child = R_object_to_palm^T w_o``, where
+    ``(v_o, w_o)`` is the palm-frame twist of the model. Covariances are zero (exact
+    simulator state).
+
+    Args:
+        msgs: Message classes.
+        t: Stamp, s.
+        p_object_in_palm: Shape (3,), m.
+        R_object_to_palm: Shape (3, 3), a rotation.
+        twist_object: ``(v_o, w_o)`` in palm coordinates, shape (6,).
+        frame_id: Pose frame.
+        child_frame_id: Object frame.
+
+    """
+    p = shaped_array('p_object_in_palm', p_object_in_palm, (3,))
+    R = shaped_array('R_object_to_palm', R_object_to_palm, (3, 3))
+    twist = shaped_array('twist_object', twist_object, (6,))
+    twist_in_object = np.concatenate((R.T @ twist[:3], R.T @ twist[3:]))
+    covariance = msgs.float_array(np.zeros(36))
+    return msgs.Odometry(
+        header=header_msg(msgs, t, frame_id),
+        child_frame_id=child_frame_id,
+        pose=msgs.PoseWithCovariance(
+            pose=msgs.Pose(
+                position=msgs.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
+                orientation=quaternion_msg(msgs, R),
+            ),
+            covariance=covariance,
+        ),
+        twist=msgs.TwistWithCovariance(
+            twist=twist_msg(msgs, twist_in_object), covariance=msgs.float_array(np.zeros(36))
+        ),
+    )
+
+
+def odometry_from_msg(
+    msg: Any,
+    frame_id: str = PALM_FRAME,
+    child_frame_id: str = OBJECT_FRAME,
+    source: str = 'Odometry',
+) -> ObjectStateData:
+    """Parse an object Odometry; the twist is returned in palm coordinates.
+
+    Raises:
+        MessageError: Unexpected frames, non-finite values, or a quaternion whose norm
+            differs from 1 by more than 1e-6.
+
+    """
+    check_frame(source, 'header.frame_id', msg.header.frame_id, frame_id)
+    check_frame(source, 'child_frame_id', msg.child_frame_id, child_frame_id)
+    pose = msg.pose.pose
+    p = finite_vector(source, 'pose.position', (pose.position.x, pose.position.y, pose.position.z))
+    R = matrix_from_quaternion_xyzw(unit_quaternion(source, 'pose.orientation', pose.orientation))
+    twist_in_object = twist_from_msg(source, 'twist', msg.twist.twist)
+    twist = np.concatenate((R @ twist_in_object[:3], R @ twist_in_object[3:]))
+    t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
+    return ObjectStateData(t=t, p_object_in_palm=p, R_object_to_palm=R, twist_object=twist)
