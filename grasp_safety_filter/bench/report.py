@@ -1,0 +1,328 @@
+"""The benchmark document: statistics, machine facts, and the printed table."""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Callable
+import importlib
+import importlib.metadata
+import os
+from pathlib import Path
+import platform
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.bench.external_solvers import external_solvers, run_external
+from grasp_safety_filter.bench.recorded_run import (
+    nominal_loop_rate,
+    record_filtered_run,
+    runner_loop_rate,
+    Scenario,
+)
+from grasp_safety_filter.bench.replay import CERTIFIED, COMPONENTS, replay, statistics
+from grasp_safety_filter.control.safety_filter import (
+    FilterStatus,
+)
+
+#: Distribution packages whose versions the report lists.
+VERSIONED_PACKAGES = ('numpy', 'scipy', 'osqp', 'cvxpy', 'qpsolvers', 'daqp', 'clarabel')
+
+
+# --------------------------------------------------------------------------------------------
+# Figures and report
+
+
+def _counts(values: np.ndarray) -> dict[str, float | int]:
+    if values.size == 0:
+        return {'median': 0, 'p99': 0, 'max': 0}
+    return {
+        'median': float(np.median(values)),
+        'p99': float(np.percentile(values, 99)),
+        'max': int(values.max()),
+    }
+
+
+def machine_info() -> dict[str, Any]:
+    """Python and package versions, CPU count and model, load average (1, 5, 15 min)."""
+    versions = {}
+    for package in VERSIONED_PACKAGES:
+        try:
+            versions[package] = importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            versions[package] = None
+    cpu_model = platform.processor() or platform.machine()
+    try:
+        for line in Path('/proc/cpuinfo').read_text().splitlines():
+            if line.startswith('model name'):
+                cpu_model = line.split(':', 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        load_average: list[float] | None = [round(x, 2) for x in os.getloadavg()]
+    except OSError:
+        load_average = None
+    return {
+        'python': platform.python_version(),
+        'implementation': platform.python_implementation(),
+        'platform': platform.platform(),
+        'cpu_count': os.cpu_count(),
+        'cpu_model': cpu_model,
+        'load_average': load_average,
+        'packages': versions,
+    }
+
+
+def _evenly_spaced(n: int, count: int) -> np.ndarray:
+    if count <= 0 or n == 0:
+        return np.zeros(0, dtype=int)
+    return np.unique(np.linspace(0, n - 1, min(count, n)).round().astype(int))
+
+
+def _ratio(numerator: float | None, denominator: float | None) -> float | None:
+    if numerator is None or not denominator:
+        return None
+    return numerator / denominator
+
+
+def benchmark(
+    config: Path,
+    duration: float,
+    max_ticks: int | None = None,
+    warmup: int = 200,
+    external_ticks: int = 1000,
+    runner_duration: float = 2.0,
+    filter_overrides: dict[str, Any] | None = None,
+    log: Callable[[str], None] = lambda message: None,
+) -> dict[str, Any]:
+    """Run every measurement and return the figures as a JSON-ready document.
+
+    Args:
+        config: Scenario parameter file.
+        duration: Simulated time of the recorded filtered run (and of the nominal loop), s.
+        max_ticks: Replay at most this many ticks (from the start); all if None.
+        warmup: Ticks replayed once, untimed, before the measured replay.
+        external_ticks: Hard QPs (evenly spaced over the replayed ticks) given to the
+            other solvers.
+        runner_duration: Simulated time of the runner's run with bag recording, s
+            (0: not measured).
+        filter_overrides: Safety-filter parameters replaced by dotted name
+            (e.g. ``{"osqp.eps_abs": 1e-3}``).
+        log: Called with a line saying what is being measured.
+    """
+    machine = machine_info()
+    scenario = Scenario.load(config, filter_overrides)
+    log(f'recording the filtered run ({duration:g} s simulated)')
+    ticks, filtered_rate, sim_step_times = record_filtered_run(scenario, duration)
+    log(f'timing the nominal loop ({duration:g} s simulated)')
+    nominal_rate = nominal_loop_rate(scenario, duration)
+    replayed = ticks if max_ticks is None else ticks[: max(1, max_ticks)]
+    if warmup > 0:
+        log(f'warming up on {min(warmup, len(replayed))} ticks')
+        replay(scenario, replayed[:warmup])
+    qp_ticks = _evenly_spaced(len(replayed), external_ticks)
+    log(f'replaying {len(replayed)} ticks')
+    measured = replay(scenario, replayed, qp_ticks)
+
+    timings = {key: statistics(measured.times[key]) for key in COMPONENTS}
+    ours = measured.u[measured.qp_ticks]
+    certified = np.array([measured.status[i] in CERTIFIED for i in measured.qp_ticks], dtype=bool)
+    our_step_on_qps = statistics(measured.times['filter_step'][measured.qp_ticks])
+    subset_solve_time = measured.filter_qp_solve_time[measured.qp_ticks]
+    solved_a_qp = np.array(
+        [measured.status[i] is not FilterStatus.NOMINAL for i in measured.qp_ticks], dtype=bool
+    )
+    our_solve_on_qps = statistics(subset_solve_time[solved_a_qp])
+    external: dict[str, Any] = {}
+    for solver in external_solvers():
+        if solver.solve is None:
+            log(f'{solver.label}: skipped, {solver.unavailable}')
+            external[solver.key] = {
+                'label': solver.label,
+                'available': False,
+                'reason': solver.unavailable,
+            }
+            continue
+        log(f'{solver.label}: solving {len(measured.qps)} QPs')
+        times, comparison = run_external(solver, measured.qps, ours, certified)
+        stats = statistics(times)
+        external[solver.key] = {
+            'label': solver.label,
+            'available': True,
+            'reason': None,
+            'qps': len(measured.qps),
+            'time_us': stats,
+            'ratio_to_filter_step': {
+                'median': _ratio(stats['median'], our_step_on_qps['median']),
+                'p99': _ratio(stats['p99'], our_step_on_qps['p99']),
+            },
+            'ratio_to_filter_qp_solve': {
+                'median': _ratio(stats['median'], our_solve_on_qps['median']),
+                'p99': _ratio(stats['p99'], our_solve_on_qps['p99']),
+            },
+            **comparison,
+        }
+
+    runner_rate = None
+    if runner_duration > 0:
+        log(f'timing the runner with bag recording ({runner_duration:g} s simulated)')
+        runner_rate = runner_loop_rate(config, runner_duration, scenario.sim_config.time_step)
+
+    statuses = Counter(status.value for status in measured.status)
+    status_values = np.array([status.value for status in measured.status])
+    step_by_status = {
+        status: statistics(measured.times['filter_step'][status_values == status])
+        for status in sorted(statuses)
+    }
+    return {
+        'machine': {**machine, 'load_average_after': machine_info()['load_average']},
+        'config': str(config),
+        'filter_parameters': scenario.filter_config.to_parameters(),
+        'run': {
+            'duration_requested_s': duration,
+            'time_step_s': scenario.sim_config.time_step,
+            'integrator': scenario.sim_config.integrator,
+            't_end_s': filtered_rate.simulated,
+            'ticks': len(ticks),
+            'stop_reason': filtered_rate.stop_reason,
+            'statuses': dict(Counter(tick.status.value for tick in ticks)),
+        },
+        'replay': {
+            'ticks': len(replayed),
+            'warmup_ticks': min(warmup, len(replayed)),
+            'statuses': dict(statuses),
+            'max_deviation_from_run': measured.max_replay_deviation,
+            'osqp_iterations': _counts(measured.osqp_iterations),
+            'osqp_statuses': dict(Counter(measured.osqp_status)),
+            'filter_osqp_iterations': _counts(measured.filter_iterations),
+            'filter_active_set_steps': _counts(measured.active_set_steps),
+            'filter_step_us_by_status': step_by_status,
+        },
+        'timings_us': timings,
+        'external': {
+            'qps': len(measured.qps),
+            'ticks': measured.qp_ticks.tolist(),
+            'filter_step_us': our_step_on_qps,
+            'filter_qp_solve_us': our_solve_on_qps,
+            'solvers': external,
+        },
+        'real_time_factor': {
+            'nominal_loop': nominal_rate.to_json(),
+            'filtered_loop': {
+                **filtered_rate.to_json(),
+                'simulator_step_us': statistics(sim_step_times),
+            },
+            'runner_with_bag': None if runner_rate is None else runner_rate.to_json(),
+        },
+    }
+
+
+def _us(value: float | None) -> str:
+    return '-' if value is None else f'{value:,.1f}'
+
+
+def _times(value: float | None) -> str:
+    return '-' if value is None else f'{value:.3g}x'
+
+
+def format_report(document: dict[str, Any]) -> str:
+    """Render the document as a readable table."""
+    machine = document['machine']
+    packages = ', '.join(f'{k} {v}' for k, v in machine['packages'].items() if v is not None)
+    run = document['run']
+    replayed = document['replay']
+    statuses = ', '.join(f'{k} {v}' for k, v in sorted(replayed['statuses'].items()))
+    lines = [
+        f'grasp-bench: {document["config"]}',
+        f'machine: {machine["implementation"]} {machine["python"]}, {packages}',
+        f'         {machine["cpu_count"]} CPUs ({machine["cpu_model"]}), {machine["platform"]}',
+        f'         load average (1, 5, 15 min) {machine["load_average"]} before, '
+        f'{machine["load_average_after"]} after (other processes add to the p99)',
+        '',
+        f'filtered run: {run["t_end_s"]:.3f} s of {run["duration_requested_s"]:g} s simulated, '
+        f'{run["ticks"]} ticks of {1e3 * run["time_step_s"]:g} ms ({run["integrator"]}), '
+        f'stop: {run["stop_reason"]}',
+        f'replay: {replayed["ticks"]} ticks after {replayed["warmup_ticks"]} warm-up ticks; '
+        f'filter status: {statuses}',
+        f'  OSQP iterations (stand-alone) median {replayed["osqp_iterations"]["median"]:g}, '
+        f'p99 {replayed["osqp_iterations"]["p99"]:g}, max {replayed["osqp_iterations"]["max"]}; '
+        f'active-set steps max {replayed["filter_active_set_steps"]["max"]}',
+        '  filter step by status (median / p99 µs): '
+        + ', '.join(
+            f'{status} {_us(s["median"])} / {_us(s["p99"])}'
+            for status, s in replayed['filter_step_us_by_status'].items()
+        ),
+        '',
+        f'{"per tick":42s}{"median µs":>12s}{"p99 µs":>12s}{"max µs":>12s}{"ticks":>8s}',
+    ]
+    for key, label in COMPONENTS.items():
+        s = document['timings_us'][key]
+        lines.append(
+            f'{label:42s}{_us(s["median"]):>12s}{_us(s["p99"]):>12s}{_us(s["max"]):>12s}'
+            f'{s["n"]:>8d}'
+        )
+
+    external = document['external']
+    step, solve = external['filter_step_us'], external['filter_qp_solve_us']
+    lines += [
+        '',
+        f'same hard QPs, other solvers: {external["qps"]} ticks evenly spaced; on them the filter '
+        f'step takes {_us(step["median"])} / {_us(step["p99"])} µs and its QP solve '
+        f'{_us(solve["median"])} / {_us(solve["p99"])} µs (median / p99)',
+        f'{"solver":38s}{"median µs":>11s}{"p99 µs":>11s}{"/ step":>9s}{"p99/p99":>9s}'
+        f'{"/ solve":>9s}{"max |Δu| N·m":>14s}{"compared":>10s}{"infeasible":>12s}',
+    ]
+    for entry in external['solvers'].values():
+        if not entry['available']:
+            lines.append(f'{entry["label"]:38s}skipped: {entry["reason"]}')
+            continue
+        t = entry['time_us']
+        to_step, to_solve = entry['ratio_to_filter_step'], entry['ratio_to_filter_qp_solve']
+        du = '-' if entry['max_abs_du'] is None else f'{entry["max_abs_du"]:.1e}'
+        infeasible = f'{entry["infeasible_agreed"]}/{entry["infeasible"]}'
+        lines.append(
+            f'{entry["label"] + " [" + entry["solver"] + "]":38s}'
+            f'{_us(t["median"]):>11s}{_us(t["p99"]):>11s}{_times(to_step["median"]):>9s}'
+            f'{_times(to_step["p99"]):>9s}{_times(to_solve["median"]):>9s}{du:>14s}'
+            f'{entry["compared"]:>10d}{infeasible:>12s}'
+        )
+        if entry['missing']:
+            lines.append(f'{"":38s}no solution on {entry["missing"]} feasible QPs')
+        not_optimal = {
+            k: v for k, v in entry['statuses'].items() if k not in ('optimal', 'solved')
+        }
+        if not_optimal:
+            lines.append(
+                f'{"":38s}statuses: ' + ', '.join(f'{k} {v}' for k, v in not_optimal.items())
+            )
+    lines.append(
+        "  (/ step, / solve: median time over the filter step's, its QP solve's; infeasible: "
+        'QPs the filter proved infeasible that the solver also returned no solution for)'
+    )
+
+    rates = document['real_time_factor']
+    lines += [
+        '',
+        f'{"closed loop":42s}{"simulated s":>12s}{"wall s":>12s}{"real-time factor":>18s}',
+    ]
+    loops = (
+        ('nominal_loop', 'simulator + nominal'),
+        ('filtered_loop', 'simulator + nominal + filter'),
+        ('runner_with_bag', 'runner, filtered, bag recorded'),
+    )
+    for key, label in loops:
+        rate = rates[key]
+        if rate is None:
+            lines.append(f'{label:42s}not measured')
+            continue
+        lines.append(
+            f'{label:42s}{rate["simulated_s"]:>12.3f}{rate["wall_s"]:>12.3f}'
+            f'{rate["real_time_factor"]:>18.3f}'
+        )
+    step = rates['filtered_loop']['simulator_step_us']
+    lines.append(
+        f'  simulator step ({run["integrator"]}): median {_us(step["median"])} µs, '
+        f'p99 {_us(step["p99"])} µs'
+    )
+    return '\n'.join(lines)
