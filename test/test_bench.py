@@ -16,6 +16,7 @@ import pytest
 from grasp_safety_filter.bench import (
     bench_main,
     COMPONENTS,
+    CPU_COMPONENTS,
     DenseQP,
     EXTERNAL_SOLVERS,
     external_solvers,
@@ -23,9 +24,11 @@ from grasp_safety_filter.bench import (
     ExternalSolver,
     format_report,
     general_form,
+    replay_backends,
     run_external,
     Scenario,
 )
+from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.io.paths import config_path
 
 DURATION = 0.05  # s: 50 ticks of 1 ms
@@ -123,6 +126,40 @@ def test_timings_have_median_and_p99_per_piece(bench):
     # The node tick is timed as one block around the model terms and the filter step.
     assert timings['node_tick']['median'] >= timings['filter_step']['median']
     assert timings['node_tick']['median'] >= timings['model_state']['median']
+
+
+def test_cpu_times_are_reported_next_to_wall_times(bench):
+    _, document, table = bench
+    cpu = document['cpu_timings_us']
+    assert list(cpu) == list(CPU_COMPONENTS)
+    for key, s in cpu.items():
+        assert s['n'] == TICKS, key
+        assert 0.0 < s['median'] <= s['p99'] <= s['max'], key
+    # Thread CPU time cannot exceed the wall time that brackets it, tick by tick; medians
+    # keep that order up to the CPU clock's own reads.
+    assert cpu['node_tick']['median'] <= document['timings_us']['node_tick']['max']
+    by_status = document['replay']['node_tick_cpu_us_by_status']
+    assert {k: v['n'] for k, v in by_status.items()} == document['replay']['statuses']
+    assert 'CPU median' in table and 'node tick by status (thread CPU' in table
+
+
+def test_every_qp_backend_replays_the_same_ticks_and_agrees(bench):
+    _, document, table = bench
+    backends = document['backends']
+    assert list(backends) == list(BACKENDS)
+    for backend, entry in backends.items():
+        assert sum(entry['statuses'].values()) == TICKS, backend
+        for key in ('node_tick_cpu_us', 'node_tick_wall_us'):
+            assert entry[key]['n'] == TICKS and entry[key]['median'] > 0.0, (backend, key)
+        assert entry['max_abs_du_vs_first'] <= 1e-8, backend
+        assert entry['compared_ticks'] >= TICKS // 2, backend
+        assert backend in table
+    assert backends[next(iter(BACKENDS))]['max_abs_du_vs_first'] == 0.0
+
+
+def test_replay_backends_refuses_an_unknown_backend():
+    with pytest.raises(ValueError, match='backends: expected one or more of'):
+        replay_backends(Scenario.load(config_path('paper_scenario.yaml')), [], ['gurobi'])
 
 
 def test_real_time_factors_are_simulated_over_wall_seconds(bench):

@@ -30,11 +30,17 @@ recording runner, bag size per simulated second, memory of the analysis):
 :mod:`grasp_safety_filter.soak`.
 
 Modules: :mod:`.recorded_run` (1, 4), :mod:`.replay` (2), :mod:`.external_solvers` (3),
+:mod:`.backends` (the QP backends on the same ticks),
 :mod:`.report` (the document and its table), :mod:`.command_line`.
 """
 
 from __future__ import annotations
 
+from grasp_safety_filter.bench.backends import (  # noqa: F401
+    backend_table,
+    BackendReplay,
+    replay_backends,
+)
 from grasp_safety_filter.bench.command_line import (  # noqa: F401
     bench_main,
 )
@@ -59,6 +65,7 @@ from grasp_safety_filter.bench.recorded_run import (  # noqa: F401
 from grasp_safety_filter.bench.replay import (  # noqa: F401
     CERTIFIED,
     COMPONENTS,
+    CPU_COMPONENTS,
     DenseQP,
     Replay,
     replay,

@@ -10,6 +10,7 @@ import sys
 from typing import Any
 
 from grasp_safety_filter.bench.report import benchmark, format_report
+from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.io.paths import config_path
 
 
@@ -54,6 +55,14 @@ def bench_main(argv: list[str] | None = None) -> int:
         help='simulated time of the runner run with bag recording, s (2; 0: skip)',
     )
     parser.add_argument(
+        '--backends',
+        type=lambda text: [b for b in text.split(',') if b],
+        default=list(BACKENDS),
+        metavar='NAMES',
+        help='QP backends (qp.solver) compared on the same ticks, comma-separated '
+        f'(default: {",".join(BACKENDS)}; empty: none)',
+    )
+    parser.add_argument(
         '--set',
         dest='overrides',
         metavar='NAME=VALUE',
@@ -93,6 +102,9 @@ def bench_main(argv: list[str] | None = None) -> int:
         parser.error(f'--duration: expected > 0 s, got {args.duration}')
     if args.ticks is not None and args.ticks < 1:
         parser.error(f'--ticks: expected >= 1, got {args.ticks}')
+    unknown = [b for b in args.backends if b not in BACKENDS]
+    if unknown:
+        parser.error(f'--backends: expected names among {", ".join(BACKENDS)}, got {unknown[0]!r}')
 
     def log(message: str) -> None:
         print(f'grasp-bench: {message}', file=sys.stderr, flush=True)
@@ -115,6 +127,7 @@ def bench_main(argv: list[str] | None = None) -> int:
         external_ticks=max(0, args.external_ticks),
         runner_duration=max(0.0, args.runner_duration),
         filter_overrides=dict(args.overrides),
+        backends=args.backends,
         log=log,
     )
     _print(format_report(document), document, args.json)

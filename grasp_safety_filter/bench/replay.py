@@ -28,6 +28,9 @@ COMPONENTS: dict[str, str] = {
     'node_tick': 'filter node tick (model + filter step)',
 }
 
+#: Pieces of a tick also timed in thread CPU time: the filter node's own work.
+CPU_COMPONENTS: tuple[str, ...] = ('model_state', 'filter_step', 'node_tick')
+
 #: Statuses whose u* solves the hard QP (the others are answers to an infeasible one).
 CERTIFIED = frozenset((FilterStatus.NOMINAL, FilterStatus.SOLVED, FilterStatus.SOLVED_ACTIVE_SET))
 
@@ -54,6 +57,9 @@ class Replay:
         times: Wall time per tick and piece (keys of :data:`COMPONENTS`), s. Each array has
             one entry per replayed tick, except ``filter_qp_solve`` (ticks where the filter
             solved a QP, i.e. not ``nominal``).
+        cpu_times: Thread CPU time per tick of the node tick's pieces (the keys of
+            :data:`CPU_COMPONENTS`), s: what the tick itself costs, without the time the
+            thread waited for a CPU (this machine is shared; wall p99 measures the scheduler).
         u: The filter's u* per tick, shape (ticks, m).
         status: The filter's status per tick.
         osqp_iterations: Iterations of the stand-alone OSQP solve per tick.
@@ -69,6 +75,7 @@ class Replay:
     """
 
     times: dict[str, np.ndarray]
+    cpu_times: dict[str, np.ndarray]
     u: np.ndarray
     status: list[FilterStatus]
     osqp_iterations: np.ndarray
@@ -108,9 +115,10 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
     hard = safety_filter.hard_qp
     reference = scenario.reference(ticks[0])
     wanted = set(qp_ticks)
-    clock = time.perf_counter
+    clock, cpu_clock = time.perf_counter, time.thread_time
     n = len(ticks)
     times = {key: np.zeros(n) for key in COMPONENTS if key != 'filter_qp_solve'}
+    cpu_times = {key: np.zeros(n) for key in CPU_COMPONENTS}
     qp_solve_times = np.zeros(n)
     u = np.zeros((n, model.n_joints))
     status: list[FilterStatus] = []
@@ -121,7 +129,9 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
     qps: list[DenseQP] = []
     kept: list[int] = []
     for i, tick in enumerate(ticks):
-        # The node's tick: model terms then the filter step, back to back.
+        # The node's tick: model terms then the filter step, back to back. The CPU clock
+        # (~2 us a read here) is read outside the wall-clock interval it brackets.
+        c0 = cpu_clock()
         t0 = clock()
         state = model.state(
             tick.t,
@@ -132,11 +142,16 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
             tick.twist_object,
         )
         t1 = clock()
+        c1 = cpu_clock()
         result = safety_filter.solve(state, tick.u_nom)
         t2 = clock()
+        c2 = cpu_clock()
         times['model_state'][i] = t1 - t0
         times['filter_step'][i] = t2 - t1
         times['node_tick'][i] = t2 - t0
+        cpu_times['model_state'][i] = c1 - c0
+        cpu_times['filter_step'][i] = c2 - c1
+        cpu_times['node_tick'][i] = c2 - c0
         # The other pieces leave the filter's state alone: the nominal controller is
         # stateless, and assembling again writes the same QP the step just solved.
         t0 = clock()
@@ -165,6 +180,7 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
     recorded = np.array([tick.u for tick in ticks]).reshape(n, model.n_joints)
     return Replay(
         times={key: times[key] for key in COMPONENTS},
+        cpu_times=cpu_times,
         u=u,
         status=status,
         osqp_iterations=osqp_iterations,
@@ -179,7 +195,7 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
 
 
 def statistics(seconds: np.ndarray) -> dict[str, float | int | None]:
-    """Median, p99, mean and max of wall times in s, as µs (None when there are none)."""
+    """Median, p99, mean and max of times in s, as µs (None when there are none)."""
     if seconds.size == 0:
         return {'n': 0, 'median': None, 'p99': None, 'mean': None, 'max': None}
     us = 1e6 * np.asarray(seconds, dtype=float)

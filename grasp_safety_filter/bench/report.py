@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 import importlib
 import importlib.metadata
 import os
@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.bench.backends import backend_table, replay_backends
 from grasp_safety_filter.bench.external_solvers import external_solvers, run_external
 from grasp_safety_filter.bench.recorded_run import (
     nominal_loop_rate,
@@ -20,7 +21,14 @@ from grasp_safety_filter.bench.recorded_run import (
     runner_loop_rate,
     Scenario,
 )
-from grasp_safety_filter.bench.replay import CERTIFIED, COMPONENTS, replay, statistics
+from grasp_safety_filter.bench.replay import (
+    CERTIFIED,
+    COMPONENTS,
+    CPU_COMPONENTS,
+    replay,
+    statistics,
+)
+from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
 )
@@ -94,6 +102,7 @@ def benchmark(
     external_ticks: int = 1000,
     runner_duration: float = 2.0,
     filter_overrides: dict[str, Any] | None = None,
+    backends: Sequence[str] = tuple(BACKENDS),
     log: Callable[[str], None] = lambda message: None,
 ) -> dict[str, Any]:
     """Run every measurement and return the figures as a JSON-ready document.
@@ -109,6 +118,8 @@ def benchmark(
             (0: not measured).
         filter_overrides: Safety-filter parameters replaced by dotted name
             (e.g. ``{"osqp.eps_abs": 1e-3}``).
+        backends: QP backends (``qp.solver`` values) to compare on the replayed ticks
+            (:mod:`grasp_safety_filter.bench.backends`); none: not compared.
         log: Called with a line saying what is being measured.
     """
     machine = machine_info()
@@ -126,6 +137,11 @@ def benchmark(
     measured = replay(scenario, replayed, qp_ticks)
 
     timings = {key: statistics(measured.times[key]) for key in COMPONENTS}
+    cpu_timings = {key: statistics(measured.cpu_times[key]) for key in CPU_COMPONENTS}
+    backend_figures = None
+    if backends:
+        log(f'replaying {len(replayed)} ticks through {", ".join(backends)}, interleaved')
+        backend_figures = backend_table(replay_backends(scenario, replayed, backends))
     ours = measured.u[measured.qp_ticks]
     certified = np.array([measured.status[i] in CERTIFIED for i in measured.qp_ticks], dtype=bool)
     our_step_on_qps = statistics(measured.times['filter_step'][measured.qp_ticks])
@@ -175,6 +191,10 @@ def benchmark(
         status: statistics(measured.times['filter_step'][status_values == status])
         for status in sorted(statuses)
     }
+    node_tick_cpu_by_status = {
+        status: statistics(measured.cpu_times['node_tick'][status_values == status])
+        for status in sorted(statuses)
+    }
     return {
         'machine': {**machine, 'load_average_after': machine_info()['load_average']},
         'config': str(config),
@@ -198,8 +218,11 @@ def benchmark(
             'filter_osqp_iterations': _counts(measured.filter_iterations),
             'filter_active_set_steps': _counts(measured.active_set_steps),
             'filter_step_us_by_status': step_by_status,
+            'node_tick_cpu_us_by_status': node_tick_cpu_by_status,
         },
         'timings_us': timings,
+        'cpu_timings_us': cpu_timings,
+        'backends': backend_figures,
         'external': {
             'qps': len(measured.qps),
             'ticks': measured.qp_ticks.tolist(),
@@ -248,20 +271,46 @@ def format_report(document: dict[str, Any]) -> str:
         f'  OSQP iterations (stand-alone) median {replayed["osqp_iterations"]["median"]:g}, '
         f'p99 {replayed["osqp_iterations"]["p99"]:g}, max {replayed["osqp_iterations"]["max"]}; '
         f'active-set steps max {replayed["filter_active_set_steps"]["max"]}',
-        '  filter step by status (median / p99 µs): '
+        '  filter step by status (wall, median / p99 µs): '
         + ', '.join(
             f'{status} {_us(s["median"])} / {_us(s["p99"])}'
             for status, s in replayed['filter_step_us_by_status'].items()
         ),
+        '  node tick by status (thread CPU, median / p99 µs): '
+        + ', '.join(
+            f'{status} {_us(s["median"])} / {_us(s["p99"])}'
+            for status, s in replayed['node_tick_cpu_us_by_status'].items()
+        ),
         '',
-        f'{"per tick":42s}{"median µs":>12s}{"p99 µs":>12s}{"max µs":>12s}{"ticks":>8s}',
+        f'{"per tick":42s}{"wall median":>12s}{"p99":>9s}{"max":>9s}'
+        f'{"CPU median":>12s}{"p99":>9s}{"ticks":>8s}   (µs)',
     ]
     for key, label in COMPONENTS.items():
         s = document['timings_us'][key]
-        lines.append(
-            f'{label:42s}{_us(s["median"]):>12s}{_us(s["p99"]):>12s}{_us(s["max"]):>12s}'
-            f'{s["n"]:>8d}'
+        cpu = document['cpu_timings_us'].get(key)
+        cpu_columns = (
+            f'{_us(cpu["median"]):>12s}{_us(cpu["p99"]):>9s}' if cpu else f'{"-":>12s}{"-":>9s}'
         )
+        lines.append(
+            f'{label:42s}{_us(s["median"]):>12s}{_us(s["p99"]):>9s}{_us(s["max"]):>9s}'
+            f'{cpu_columns}{s["n"]:>8d}'
+        )
+    if document['backends']:
+        lines += [
+            '',
+            'QP backends (qp.solver) on the same ticks, interleaved; node tick in µs:',
+            f'{"backend":12s}{"CPU median":>12s}{"p99":>9s}{"wall median":>13s}{"p99":>9s}'
+            f'{"max |Δu*| N·m":>15s}{"compared":>10s}   statuses',
+        ]
+        for backend, entry in document['backends'].items():
+            cpu, wall = entry['node_tick_cpu_us'], entry['node_tick_wall_us']
+            counts = ', '.join(f'{k} {v}' for k, v in sorted(entry['statuses'].items()))
+            lines.append(
+                f'{backend:12s}{_us(cpu["median"]):>12s}{_us(cpu["p99"]):>9s}'
+                f'{_us(wall["median"]):>13s}{_us(wall["p99"]):>9s}'
+                f'{entry["max_abs_du_vs_first"]:>15.1e}{entry["compared_ticks"]:>10d}   {counts}'
+            )
+        lines.append('  (max |Δu*|: against the first backend, on ticks both certified optimal)')
 
     external = document['external']
     step, solve = external['filter_step_us'], external['filter_qp_solve_us']

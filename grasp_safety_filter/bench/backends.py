@@ -1,0 +1,118 @@
+"""The same replayed ticks through every QP backend (``qp.solver``), side by side.
+
+Each backend gets its own filter (its own warm starts), and every tick is given to all of
+them in turn, the order rotating from tick to tick, so that each sees the same machine
+load: the comparison is made in one run, not across runs. Per backend the node tick
+(model terms + filter step) is timed in thread CPU time and wall time, and its u* is
+compared with the first backend's.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+import dataclasses
+from dataclasses import dataclass
+import time
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.bench.recorded_run import Scenario, Tick
+from grasp_safety_filter.bench.replay import CERTIFIED, statistics
+from grasp_safety_filter.control.qp_solvers import BACKENDS
+from grasp_safety_filter.control.safety_filter import FilterStatus, SafetyFilter
+
+
+@dataclass(frozen=True, eq=False)
+class BackendReplay:
+    """One backend's node ticks on the replayed ticks.
+
+    Attributes:
+        backend: The ``qp.solver`` value.
+        cpu: Thread CPU time of each node tick, s, shape (ticks,).
+        wall: Wall time of each node tick, s, shape (ticks,).
+        u: u* per tick, shape (ticks, m), N·m.
+        status: The filter's status per tick.
+    """
+
+    backend: str
+    cpu: np.ndarray
+    wall: np.ndarray
+    u: np.ndarray
+    status: list[FilterStatus]
+
+
+def replay_backends(
+    scenario: Scenario, ticks: Sequence[Tick], backends: Sequence[str]
+) -> list[BackendReplay]:
+    """Replay ``ticks`` through one filter per backend, interleaved tick by tick.
+
+    Raises:
+        ValueError: No ticks, or a backend that :data:`BACKENDS` does not know.
+    """
+    unknown = [b for b in backends if b not in BACKENDS]
+    if unknown or not backends:
+        raise ValueError(
+            f'backends: expected one or more of {", ".join(BACKENDS)}, got {list(backends)!r}'
+        )
+    if not ticks:
+        raise ValueError('replay_backends: expected at least one tick, got none')
+    model = scenario.model
+    filters: list[SafetyFilter] = [
+        SafetyFilter.from_config(model, dataclasses.replace(scenario.filter_config, solver=b))
+        for b in backends
+    ]
+    n, k = len(ticks), len(backends)
+    cpu, wall = np.zeros((k, n)), np.zeros((k, n))
+    u = np.zeros((k, n, model.n_joints))
+    status: list[list[FilterStatus]] = [[] for _ in backends]
+    clock, cpu_clock = time.perf_counter, time.thread_time
+    for i, tick in enumerate(ticks):
+        for j in np.roll(np.arange(k), -(i % k)):
+            c0 = cpu_clock()
+            t0 = clock()
+            state = model.state(
+                tick.t,
+                tick.q,
+                tick.dq,
+                tick.p_object_in_palm,
+                tick.R_object_to_palm,
+                tick.twist_object,
+            )
+            result = filters[j].solve(state, tick.u_nom)
+            t1 = clock()
+            c1 = cpu_clock()
+            cpu[j, i], wall[j, i] = c1 - c0, t1 - t0
+            u[j, i] = result.u
+            status[j].append(result.status)
+    return [
+        BackendReplay(backend=b, cpu=cpu[j], wall=wall[j], u=u[j], status=status[j])
+        for j, b in enumerate(backends)
+    ]
+
+
+def backend_table(replays: Sequence[BackendReplay]) -> dict[str, Any]:
+    """JSON-ready figures per backend: node tick CPU and wall time, statuses, agreement.
+
+    ``max_abs_du_vs_first``: the largest ``|u* - u*_first|`` (N·m) over the ticks that both
+    this backend and the first one certified as optimal for the hard QP.
+    """
+    first = replays[0]
+    first_certified = np.array([s in CERTIFIED for s in first.status], dtype=bool)
+    table: dict[str, Any] = {}
+    for replay in replays:
+        certified = first_certified & np.array([s in CERTIFIED for s in replay.status])
+        du = np.abs(replay.u[certified] - first.u[certified])
+        statuses = np.array([s.value for s in replay.status])
+        table[replay.backend] = {
+            'node_tick_cpu_us': statistics(replay.cpu),
+            'node_tick_wall_us': statistics(replay.wall),
+            'node_tick_cpu_us_by_status': {
+                value: statistics(replay.cpu[statuses == value]) for value in sorted(set(statuses))
+            },
+            'statuses': dict(Counter(statuses.tolist())),
+            'max_abs_du_vs_first': float(du.max(initial=0.0)),
+            'compared_ticks': int(certified.sum()),
+        }
+    return table
