@@ -133,13 +133,14 @@ def grasp_findings(
         finding.subject: finding
         for finding in _declared_face_findings(model, q, p_object_in_palm, R_object_to_palm)
     }
-    for name, contact, geometry in zip(
-        model.contact_names, model.contacts, geometries, strict=True
+    boxes = model.fingertip_workspace.per_contact(model.n_contacts)
+    for name, contact, geometry, box in zip(
+        model.contact_names, model.contacts, geometries, boxes, strict=True
     ):
         subject = f'contact {name!r}'
         findings += [wrong_face[subject]] if subject in wrong_face else []
         findings += _contact_findings(
-            model, subject, contact.object_surface, geometry, gap_tolerance
+            subject, contact.object_surface, geometry, box, gap_tolerance
         )
     if findings:
         return findings
@@ -147,13 +148,16 @@ def grasp_findings(
 
 
 def _contact_findings(
-    model: GraspModel,
     subject: str,
     surface: Surface,
     geometry: ContactGeometry,
+    box: np.ndarray,
     gap_tolerance: float,
 ) -> list[GraspFinding]:
-    """Gap or penetration, position on the face and in the fingertip workspace of a contact."""
+    """Gap or penetration, position on the face and in the fingertip workspace of a contact.
+
+    ``box`` is the contact's own workspace ``(a_min, a_max, b_min, b_max)``, rad.
+    """
     findings = []
     where = _face_label(surface) if isinstance(surface, FlatSurface) else 'sphere'
     depth = float(geometry.penetration)
@@ -186,14 +190,15 @@ def _contact_findings(
                     f'|v| <= {h_v:.4g} m about its centre)',
                 )
             )
-    margins = model.fingertip_workspace.margins(geometry.xi_cf)[0]
-    if np.any(margins <= 0.0):
-        a, b = geometry.xi_cf
+    a, b = geometry.xi_cf
+    a_min, a_max, b_min, b_max = box.tolist()
+    if not (a_min < a < a_max and b_min < b < b_max):
         findings.append(
             GraspFinding(
                 subject,
-                f'fingertip coordinates (a, b) = ({a:.4g}, {b:.4g}) rad are outside the '
-                'fingertip workspace (model.fingertip_workspace)',
+                f'fingertip coordinates (a, b) = ({a:.4g}, {b:.4g}) rad are outside its '
+                f'fingertip workspace (model.fingertip_workspace: a in ({a_min:.4g}, '
+                f'{a_max:.4g}), b in ({b_min:.4g}, {b_max:.4g}))',
             )
         )
     return findings
