@@ -14,6 +14,7 @@ import math
 from grasp_states import P_OBJECT_PAPER, paper_model, Q_PAPER
 import numpy as np
 import pytest
+from scipy.optimize import linprog
 from synthetic_state import synthetic_state, with_fields
 
 from grasp_safety_filter.analysis.run_data import RunData
@@ -24,7 +25,11 @@ from grasp_safety_filter.io.parameters import NodeSchema, ParameterError, valida
 from grasp_safety_filter.io.schemas import check_model_parameters, MODEL_PARAMETERS
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace
-from grasp_safety_filter.model.grasp_check import grasp_findings
+from grasp_safety_filter.model.grasp_check import (
+    FORCE_CLOSURE_PYRAMID_FACES,
+    grasp_findings,
+    squeezes_inside_friction_cones,
+)
 from grasp_safety_filter.model.per_contact import friction_coefficients
 from grasp_safety_filter.nodes.scenario import (
     check_scenario,
@@ -230,3 +235,84 @@ def test_a_shared_value_broadcasts_and_a_list_is_kept_in_contact_order():
     box = FingertipWorkspace.for_contacts(NAMES, **narrow_box(1, 'a_max'))
     np.testing.assert_array_equal(box.per_contact(3)[:, 1], [1.0, 0.4, 1.0])
     np.testing.assert_allclose(box.margins(XI)[:, 1], [0.5, -0.1, 0.5], atol=1e-15)
+
+
+# ------------------------------------------------------------- force closure, per-contact mu
+def random_grasp_map(rng: np.random.Generator, n: int) -> np.ndarray:
+    """G of n contacts on a unit sphere, contact z axes pointing into it, random x axes."""
+    blocks = []
+    for _ in range(n):
+        p = rng.normal(size=3)
+        p /= np.linalg.norm(p)
+        z = -p
+        x = np.cross(z, rng.normal(size=3))
+        x /= np.linalg.norm(x)
+        R = np.column_stack((x, np.cross(z, x), z))
+        p_skew = np.array([[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]])
+        blocks.append(np.vstack((R, p_skew @ R)))
+    return np.hstack(blocks)
+
+
+def squeeze_margin_lp(G: np.ndarray, mu: np.ndarray, faces: int) -> float:
+    """Largest t with G f = 0, sum_i f_n,i = 1 and every face margin >= t (scipy's LP).
+
+    Scale-free (the normal forces sum to 1): t > 0 iff a squeeze inside every pyramid exists.
+    """
+    n = mu.size
+    theta = 2 * np.pi * np.arange(faces) / faces
+    A = np.zeros((n * faces, 3 * n))
+    for i in range(n):
+        for j in range(faces):
+            A[i * faces + j, 3 * i : 3 * i + 3] = (
+                -np.cos(theta[j]),
+                -np.sin(theta[j]),
+                mu[i] * np.cos(np.pi / faces),
+            )
+    cost = np.zeros(3 * n + 1)
+    cost[-1] = -1.0
+    normal_sum = np.zeros(3 * n + 1)
+    normal_sum[2 : 3 * n : 3] = 1.0
+    result = linprog(
+        cost,
+        A_ub=np.column_stack((-A, np.ones(n * faces))),
+        b_ub=np.zeros(n * faces),
+        A_eq=np.vstack((np.column_stack((G, np.zeros(6))), normal_sum)),
+        b_eq=np.eye(7)[6],
+        bounds=[(None, None)] * (3 * n + 1),
+    )
+    assert result.status == 0, result.message
+    return float(result.x[-1])
+
+
+def closed(margin: float) -> bool:
+    """Force closure by the LP's t*; t* = 0 exactly: a contact can only carry no force."""
+    assert not 1e-10 < abs(margin) < 1e-6, f'a borderline grasp (t* = {margin}): another seed'
+    return margin > 1e-6
+
+
+@pytest.mark.parametrize('seed', range(40))
+def test_force_closure_agrees_with_an_lp_and_uses_each_contacts_mu(seed):
+    rng = np.random.default_rng(seed)
+    n = 3 + seed % 2
+    G = random_grasp_map(rng, n)
+    mu = rng.uniform(0.05, 1.0, n)
+    margin = squeeze_margin_lp(G, mu, FORCE_CLOSURE_PYRAMID_FACES)
+    assert squeezes_inside_friction_cones(G, mu) == closed(margin)
+    # Enough friction at every contact closes any grasp of rank 6 ...
+    assert squeezes_inside_friction_cones(G, np.full(n, 50.0))
+    # ... and lowering one contact's mu is judged with that contact's own value.
+    if margin > 0:
+        weakest = mu.copy()
+        weakest[seed % n] = 0.01
+        expected = squeeze_margin_lp(G, weakest, FORCE_CLOSURE_PYRAMID_FACES)
+        assert squeezes_inside_friction_cones(G, weakest) == closed(expected)
+
+
+def test_both_outcomes_occur_in_the_table():
+    outcomes = set()
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        n = 3 + seed % 2
+        G, mu = random_grasp_map(rng, n), rng.uniform(0.05, 1.0, n)
+        outcomes.add(squeezes_inside_friction_cones(G, mu))
+    assert outcomes == {True, False}

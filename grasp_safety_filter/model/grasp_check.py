@@ -11,8 +11,10 @@ At its first state a run must hold the object the way the model assumes (DESIGN.
   ``model.contact_faces`` is the face nearest to the fingertip;
 - per contact, the fingertip coordinates are inside the fingertip workspace;
 - the hand's inertia M_h is positive definite, J_h has full row rank 3n (every contact
-  velocity reachable) and G has rank 6 (the contacts can move the object in every
-  direction).
+  velocity reachable; a free finger's joints add zero columns) and G has rank 6 (the
+  contacts can move the object in every direction);
+- force closure with each contact's own friction coefficient mu_i: some squeeze keeps every
+  contact force strictly inside its friction pyramid.
 
 :func:`grasp_findings` returns what fails, each naming the joint or contact and the distance;
 :func:`check_grasp` raises them as one :class:`GraspConfigError`. The paper's initial grasp
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import daqp
 import numpy as np
 
 from grasp_safety_filter.model.grasp_model import GraspConfigError, GraspModel
@@ -40,6 +43,10 @@ from grasp_safety_filter.model.surfaces import CUBE_FACE_AXES, FlatSurface, Surf
 #: one the user meant (a wrong object position, face or fingertip frame). A millimetre is
 #: 1/60 of the paper's fingertip radius and far above the paper's 3e-16 m.
 GAP_TOLERANCE = 1e-3
+
+#: Faces of the friction pyramid inscribed in each cone for the force-closure check (the
+#: safety filter's default ``no_slip.pyramid_faces``).
+FORCE_CLOSURE_PYRAMID_FACES = 8
 
 #: What a start-up check describes, for the messages.
 INITIAL_GRASP = 'initial grasp (initial.joint_positions, initial.object_position/orientation)'
@@ -252,7 +259,56 @@ def _hand_findings(
                 'object in every direction',
             )
         )
+    elif not squeezes_inside_friction_cones(state.G, model.friction_coefficient):
+        mu = model.friction_coefficient.tolist()
+        findings.append(
+            GraspFinding(
+                'hand',
+                'no force closure: no squeeze (internal force, G f = 0) keeps every contact '
+                f'force inside its friction pyramid (mu = {mu} per contact, '
+                f'{FORCE_CLOSURE_PYRAMID_FACES} faces): expected contacts on opposing faces '
+                'or a larger model.friction_coefficient',
+            )
+        )
     return findings
+
+
+def squeezes_inside_friction_cones(G: np.ndarray, mu: np.ndarray) -> bool:
+    """Whether some internal force lies strictly inside every contact's friction pyramid.
+
+    With G of rank 6 this is force closure (Murray, Li & Sastry, *A Mathematical
+    Introduction to Robotic Manipulation*, 1994, Prop. 5.2): squeezing with that force,
+    scaled, balances any wrench. Internal forces are ``f = N z`` with N an orthonormal basis
+    of null(G); since the pyramids are cones, a force strictly inside all of them exists iff
+    one with every face margin ``mu_i cos(pi / l) f_n,i - cos(th_j) f_x,i - sin(th_j) f_y,i
+    >= 1`` does: a QP in z (least norm) that DAQP solves or proves infeasible.
+
+    Args:
+        G: The grasp map, (6, 3n).
+        mu: Each contact's friction coefficient, (n,).
+    """
+    n = mu.size
+    _, singular, vt = np.linalg.svd(G)
+    rank = int(np.count_nonzero(singular > singular[0] * max(G.shape) * np.finfo(float).eps))
+    null_basis = vt[rank:].T  # (3n, 3n - rank), orthonormal
+    if null_basis.shape[1] == 0:
+        return False
+    faces = FORCE_CLOSURE_PYRAMID_FACES
+    theta = 2.0 * np.pi * np.arange(faces) / faces
+    # Face rows per contact, (n, l, 3): margin_ij = rows_ij . f_i.
+    rows = np.empty((n, faces, 3))
+    rows[:, :, 0] = -np.cos(theta)
+    rows[:, :, 1] = -np.sin(theta)
+    rows[:, :, 2] = (mu * np.cos(np.pi / faces))[:, np.newaxis]
+    A = np.zeros((n * faces, 3 * n))
+    for i in range(n):
+        A[i * faces : (i + 1) * faces, 3 * i : 3 * i + 3] = rows[i]
+    A_z = A @ null_basis
+    k = null_basis.shape[1]
+    _, _, flag, _ = daqp.solve(
+        np.eye(k), np.zeros(k), A_z, np.full(n * faces, 1e30), np.ones(n * faces)
+    )
+    return flag > 0
 
 
 def check_grasp(
