@@ -316,3 +316,37 @@ def test_both_outcomes_occur_in_the_table():
         G, mu = random_grasp_map(rng, n), rng.uniform(0.05, 1.0, n)
         outcomes.add(squeezes_inside_friction_cones(G, mu))
     assert outcomes == {True, False}
+
+
+def test_a_ros_node_declares_one_value_or_a_list_per_contact():
+    import rclpy
+    from rclpy.exceptions import InvalidParameterValueException
+    from rclpy.parameter import Parameter
+
+    from grasp_safety_filter.io.parameters import declare_node_parameters
+    from grasp_safety_filter.io.schemas import NODE_SCHEMAS, SAFETY_FILTER_NODE
+
+    schema = NODE_SCHEMAS[SAFETY_FILTER_NODE]
+    rclpy.init()
+    try:
+        overrides = [
+            Parameter('model.friction_coefficient', value=[0.8, 0.8, 0.6]),
+            Parameter('model.fingertip_workspace.a_max', value=1.2),
+        ]
+        node = rclpy.create_node('safety_filter_node', parameter_overrides=overrides)
+        values = declare_node_parameters(node, schema)
+        assert values['model.friction_coefficient'] == [0.8, 0.8, 0.6]
+        assert values['model.fingertip_workspace.a_max'] == 1.2
+        # Read-only, as every model parameter; a list element out of range is refused.
+        assert node.describe_parameter('model.friction_coefficient').read_only
+        node.destroy_node()
+        bad = rclpy.create_node(
+            'safety_filter_node',
+            parameter_overrides=[Parameter('model.friction_coefficient', value=[0.8, -0.1])],
+        )
+        message = r"friction_coefficient' element 1: expected > 0"
+        with pytest.raises(InvalidParameterValueException, match=message):
+            declare_node_parameters(bad, schema)
+        bad.destroy_node()
+    finally:
+        rclpy.try_shutdown()

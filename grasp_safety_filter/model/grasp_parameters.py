@@ -84,6 +84,21 @@ def palm_frame_name(hand: HandModel, configured: str) -> str:
     return configured
 
 
+def free_joint_names(hand: HandModel) -> list[str]:
+    """Joints of ``hand`` on no fingertip's chain (free fingers), in joint order.
+
+    A joint is on a fingertip's chain when it moves the fingertip frame (Pinocchio's
+    ``supports`` of the frame's parent joint). A free joint's columns of J_h are zero.
+    """
+    model = hand.model
+    on_chain = {
+        model.names[joint]
+        for frame_id in hand.frame_ids
+        for joint in model.supports[model.frames[frame_id].parentJoint]
+    }
+    return [name for name in hand.joint_names if name not in on_chain]
+
+
 def _object_shape(params: Mapping[str, Any]) -> ObjectShape:
     kind = params['model.object.shape']
     try:
