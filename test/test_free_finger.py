@@ -43,7 +43,7 @@ def free_mask(model: GraspModel) -> np.ndarray:
 
 
 def states(model, q0, p_o, R_o, count=4):
-    """The initial grasp moving: random joint rates of the free finger, rolling elsewhere."""
+    """Yield the initial grasp moving: random rates of the free finger, rolling elsewhere."""
     rng = np.random.default_rng(3)
     free = free_mask(model)
     for _ in range(count):
