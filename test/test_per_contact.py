@@ -350,3 +350,18 @@ def test_a_ros_node_declares_one_value_or_a_list_per_contact():
         bad.destroy_node()
     finally:
         rclpy.try_shutdown()
+
+
+def test_the_filter_of_a_model_takes_each_contacts_values():
+    from grasp_safety_filter.control.safety_filter import SafetyFilter
+
+    model = paper_model(
+        **{
+            'model.friction_coefficient': [0.9, 0.3, 0.7],
+            'model.fingertip_workspace.a_max': [1.4, 1.0, 1.2],
+        }
+    )
+    no_slip, _, workspace = SafetyFilter.from_config(model).families
+    np.testing.assert_array_equal(no_slip.mu, [0.9, 0.3, 0.7])
+    np.testing.assert_array_equal(workspace.a_max, [1.4, 1.0, 1.2])
+    np.testing.assert_array_equal(workspace.a_min, [model.fingertip_workspace.a_min] * 3)
