@@ -2,11 +2,12 @@
 
 Four families are watched, each with a margin ``h`` in its own units (``h < 0``: violated):
 
-- ``fingertip_workspace``: per contact, ``(a - a_min, a_max - a, b - b_min, b_max - b)``, rad.
+- ``fingertip_workspace``: per contact, ``(a - a_min, a_max - a, b - b_min, b_max - b)``, rad,
+  against the contact's own box.
   The workspace is the open box ``a_min < a < a_max, b_min < b < b_max``, so ``h <= 0`` is
   a violation (the contact point has left the fingertip surface's parameterised patch).
 - ``joint_limits``: per joint, ``(q - q_min, q_max - q)``, rad; ``h < 0`` is a violation.
-- ``slip``: per contact, the friction margin ``mu - beta_i`` with
+- ``slip``: per contact, the friction margin ``mu_i - beta_i`` (the contact's own mu) with
   ``beta_i = ||f_t,i|| / f_n,i`` (``beta_i = inf`` when ``f_n,i <= 0``); ``h < 0`` is a
   violation.
 - ``separation``: per contact, the normal force ``f_n,i``, N; ``f_n,i <= 0`` is a violation.
@@ -19,6 +20,7 @@ call per quantity, whatever the number of contacts and joints.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -75,7 +77,7 @@ class ConstraintMargins:
         fingertip_workspace: Shape (n, 4): ``a - a_min, a_max - a, b - b_min, b_max - b``, rad.
         joint_limits: Shape (m, 2): ``q - q_min, q_max - q``, rad.
         required_friction: ``beta_i``, shape (n,) (``inf`` where ``f_n,i <= 0``).
-        friction: ``mu - beta_i``, shape (n,).
+        friction: ``mu_i - beta_i``, shape (n,).
         normal_force: ``f_n,i``, shape (n,), N.
         values: Every margin, family after family in :data:`FAMILIES` order (the four
             arrays above but ``required_friction``, flattened), shape (6n + 2m,); built
@@ -111,7 +113,7 @@ class ConstraintMargins:
         return np.cumsum((0, *sizes))
 
     def by_family(self) -> dict[str, np.ndarray]:
-        """Return the margins of each family, in :data:`FAMILIES` order (slip: ``mu - beta_i``)."""
+        """Return the margins of each family, in :data:`FAMILIES` order (slip: mu_i - beta_i)."""
         return {
             FINGERTIP_WORKSPACE: self.fingertip_workspace,
             JOINT_LIMITS: self.joint_limits,
@@ -139,6 +141,27 @@ def _closed_mask(n_workspace: int, n_joint: int, n_contacts: int) -> np.ndarray:
     )
 
 
+def _per_contact(value: Any, n: int, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` per contact, shape (n, *shape): one for every contact or one per contact.
+
+    A workspace ``(a_min, a_max, b_min, b_max)`` has shape (4,), each bound a number or (n,).
+    """
+    try:
+        parts = [np.asarray(v, dtype=float) for v in value] if shape else [value]
+        columns = [np.broadcast_to(np.asarray(p, dtype=float).reshape(-1), (n,)) for p in parts]
+        array = np.column_stack(columns) if shape else columns[0]
+    except (TypeError, ValueError):
+        raise ValueError(
+            f'EventMonitor: expected {name} with one value or {n} (one per contact), got {value!r}'
+        ) from None
+    if array.shape != (n, *shape) or not np.all(np.isfinite(array)):
+        raise ValueError(
+            f'EventMonitor: expected finite {name} with one value or {n} (one per contact), got '
+            f'{value!r}'
+        )
+    return array.copy()
+
+
 def _violated(values: np.ndarray, closed: np.ndarray) -> np.ndarray:
     """``values <= 0`` where ``closed``, ``values < 0`` elsewhere (NaN: not violated)."""
     return (values < 0.0) | (closed & (values == 0.0))
@@ -150,8 +173,10 @@ class EventMonitor:
     Args:
         joint_lower_limits: ``q_min``, shape (m,), rad.
         joint_upper_limits: ``q_max``, shape (m,), rad.
-        fingertip_workspace: ``(a_min, a_max, b_min, b_max)``, rad.
-        friction_coefficient: ``mu`` (> 0).
+        fingertip_workspace: ``(a_min, a_max, b_min, b_max)``, rad, each one value for every
+            contact or one per contact (n,).
+        friction_coefficient: ``mu_i`` (> 0): one for every contact or one per contact (n,);
+            contact i slips when its beta_i > mu_i.
         joint_names: m joint names.
         contact_names: n contact names.
 
@@ -161,8 +186,8 @@ class EventMonitor:
         self,
         joint_lower_limits: np.ndarray,
         joint_upper_limits: np.ndarray,
-        fingertip_workspace: tuple[float, float, float, float],
-        friction_coefficient: float,
+        fingertip_workspace: Sequence[float | Sequence[float] | np.ndarray],
+        friction_coefficient: float | Sequence[float] | np.ndarray,
         joint_names: list[str] | tuple[str, ...],
         contact_names: list[str] | tuple[str, ...],
     ) -> None:
@@ -179,22 +204,22 @@ class EventMonitor:
                 'EventMonitor: expected joint_lower_limits < joint_upper_limits, got '
                 f'{self.joint_lower_limits.tolist()} and {self.joint_upper_limits.tolist()}'
             )
-        a_min, a_max, b_min, b_max = (float(v) for v in fingertip_workspace)
-        if not (a_min < a_max and b_min < b_max):
+        n = len(contact_names)
+        box = _per_contact(fingertip_workspace, n, 'fingertip_workspace', (4,))
+        if not (np.all(box[:, 0] < box[:, 1]) and np.all(box[:, 2] < box[:, 3])):
             raise ValueError(
                 'EventMonitor: expected fingertip_workspace (a_min < a_max, b_min < b_max), '
-                f'got {tuple(fingertip_workspace)}'
+                f'got {box.tolist()}'
             )
-        if not friction_coefficient > 0.0:
-            raise ValueError(
-                f'EventMonitor: expected friction_coefficient > 0, got {friction_coefficient}'
-            )
-        self.workspace_low = np.array([a_min, b_min])
-        self.workspace_high = np.array([a_max, b_max])
-        self.friction_coefficient = float(friction_coefficient)
+        mu = _per_contact(friction_coefficient, n, 'friction_coefficient', ())
+        if not np.all(mu > 0.0):
+            raise ValueError(f'EventMonitor: expected friction_coefficient > 0, got {mu.tolist()}')
+        # Per contact (n, 2): (a_min, b_min) and (a_max, b_max); mu_i, (n,).
+        self.workspace_low = box[:, [0, 2]].copy()
+        self.workspace_high = box[:, [1, 3]].copy()
+        self.friction_coefficient = mu
         self.joint_names = tuple(joint_names)
         self.contact_names = tuple(contact_names)
-        n = len(self.contact_names)
         self._ends = tuple(int(end) for end in np.cumsum((4 * n, 2 * m, n, n)))
         self._closed = _closed_mask(4 * n, 2 * m, n)
         # (family, index, name, side) of every flat margin, for the events.
@@ -398,7 +423,7 @@ class EventLog:
         """Smallest margin per barrier family over the run, in its own units.
 
         Keys ``fingertip_workspace`` (rad), ``joint_limits`` (rad) and ``friction``
-        (``min(mu - beta_i)``, ``-inf`` if a contact separated); ``inf`` before any record.
+        (``min(mu_i - beta_i)``, ``-inf`` if a contact separated); ``inf`` before any record.
         """
         minimum = dict(zip(FAMILIES, self._min_margin.tolist(), strict=True))
         return {

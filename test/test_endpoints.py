@@ -237,7 +237,10 @@ def test_scenario_message_describes_the_model_and_run(params):
     assert document['joint_upper_limits'] == model.joint_upper_limits.tolist()
     assert document['effort_limits'] == model.effort_limits.tolist()
     assert document['contact_names'] == model.contact_names
-    assert document['friction_coefficient'] == model.friction_coefficient
+    # One mu for every contact (the paper's) stays one number in the document.
+    mu = params['hand_sim_node']['model.friction_coefficient']
+    assert document['friction_coefficient'] == mu
+    assert model.friction_coefficient.tolist() == [document['friction_coefficient']] * 3
     assert document['fingertip_workspace'] == dataclasses.asdict(model.fingertip_workspace)
     assert document['time_step'] == sim.config.time_step
     assert document['n_steps'] == STEPS

@@ -137,12 +137,14 @@ def workspace_barriers(model, state, u):
 
 
 def pyramid_margins(model, config, state, u):
-    """``(names, mu cos(pi/l) f_n - cos(th_j) f_x - sin(th_j) f_y)`` at ``f_c(u)``, N."""
+    """``(names, mu_i cos(pi/l) f_n - cos(th_j) f_x - sin(th_j) f_y)`` at ``f_c(u)``, N."""
     faces = config.pyramid_faces
     forces = state.contact_force(u).reshape(-1, 3)
-    apothem = model.friction_coefficient * math.cos(math.pi / faces)
     names, margins = [], []
-    for contact, (f_x, f_y, f_n) in zip(model.contact_names, forces, strict=True):
+    for contact, mu, (f_x, f_y, f_n) in zip(
+        model.contact_names, model.friction_coefficient, forces, strict=True
+    ):
+        apothem = mu * math.cos(math.pi / faces)
         for j in range(faces):
             theta = 2.0 * math.pi * j / faces
             names.append(f'no_slip/{contact}/face{j}')

@@ -170,7 +170,7 @@ def test_overrides_reach_every_node_that_declares_them():
     sim, nominal, safety_filter = build_endpoints(options, MessageNamespace.from_typestore())
     assert safety_filter.filter.config.alpha1_gain == 10.0
     for endpoint in (sim, nominal, safety_filter):
-        assert endpoint.model.friction_coefficient == 0.5
+        assert endpoint.model.friction_coefficient.tolist() == [0.5] * 3
 
 
 @pytest.mark.parametrize(

@@ -40,7 +40,12 @@ from grasp_safety_filter.io.messages import (
     MessageError,
     nanoseconds_to_seconds,
 )
-from grasp_safety_filter.nodes.scenario import scenario_from_msg, ScenarioError
+from grasp_safety_filter.nodes.scenario import (
+    scenario_from_msg,
+    scenario_per_contact,
+    scenario_workspace,
+    ScenarioError,
+)
 from hand_sim_node.endpoint import DIAGNOSTIC_NAME as SIM_DIAGNOSTIC
 
 #: Simulation time at which a run starts, s: ``hand_sim_node`` starts every run at t_0 = 0,
@@ -129,15 +134,34 @@ class RunData:
         return np.asarray(self.scenario['joint_upper_limits'], dtype=float)
 
     @property
+    def workspace_per_contact(self) -> np.ndarray:
+        """Each contact's ``(a_min, a_max, b_min, b_max)``, shape (n, 4), rad."""
+        return np.asarray(scenario_workspace(self.scenario), dtype=float).reshape(-1, 4)
+
+    @property
+    def mu_per_contact(self) -> np.ndarray:
+        """Each contact's friction coefficient mu_i, shape (n,)."""
+        return np.asarray(scenario_per_contact(self.scenario, 'friction_coefficient'), float)
+
+    @property
     def fingertip_workspace(self) -> tuple[float, float, float, float]:
-        """``(a_min, a_max, b_min, b_max)``, rad."""
-        box = self.scenario['fingertip_workspace']
-        return (box['a_min'], box['a_max'], box['b_min'], box['b_max'])
+        """``(a_min, a_max, b_min, b_max)``, rad, that every contact's box contains.
+
+        The box itself when all contacts share it; else the intersection of theirs (see
+        :attr:`workspace_per_contact`).
+        """
+        box = self.workspace_per_contact
+        return (
+            float(box[:, 0].max()),
+            float(box[:, 1].min()),
+            float(box[:, 2].max()),
+            float(box[:, 3].min()),
+        )
 
     @property
     def mu(self) -> float:
-        """Friction coefficient."""
-        return float(self.scenario['friction_coefficient'])
+        """Friction coefficient: the one all contacts share, else the smallest mu_i."""
+        return float(self.mu_per_contact.min())
 
     @property
     def joints_per_finger(self) -> int:

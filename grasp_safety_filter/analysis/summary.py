@@ -29,6 +29,10 @@ carries the counts so far); ``watchdog_fallbacks`` counts the fallback commands 
 watchdog sent while no input came during the run, ``watchdog_statuses_after_end`` its
 statuses after the simulator's end of run (its inputs stop then: expected, not a fault).
 
+Each contact is judged against its own friction coefficient and fingertip workspace (slip
+when beta_i > mu_i): ``min_margin.friction`` is the smallest ``mu_i - beta_i`` and ``mu`` is
+one number when the contacts share it, else the list of mu_i in contact order.
+
 A margin is the smallest barrier value h over the run in its own units (negative =
 violated); infinite values (a separated contact) are written as null. ``barriers`` is what
 the filter itself saw, from ``/safety_filter/margins`` (when recorded): the smallest h of
@@ -59,6 +63,7 @@ from grasp_safety_filter.io.diagnostic_keys import (
     Key,
     TickStatus,
 )
+from grasp_safety_filter.model.per_contact import compact
 from hand_sim_node.events import EventLog, EventMonitor
 
 
@@ -110,8 +115,8 @@ def constraint_log(run: RunData) -> EventLog:
     monitor = EventMonitor(
         run.joint_lower_limits,
         run.joint_upper_limits,
-        run.fingertip_workspace,
-        run.mu,
+        tuple(run.workspace_per_contact.T),
+        run.mu_per_contact,
         run.joint_names,
         run.contact_names,
     )
@@ -208,7 +213,7 @@ def summarize(run: RunData) -> dict[str, Any]:
         'violations': log.violations(),
         'min_margin': {k: _finite_or_none(v) for k, v in log.min_margin().items()},
         'max_required_friction': _finite_or_none(log.max_required_friction),
-        'mu': run.mu,
+        'mu': compact(run.mu_per_contact),
     }
     if run.mode == 'filtered':
         summary['filter'] = filter_summary(run)

@@ -51,6 +51,13 @@ a posture spring and damper on the internal motion with gains per unit inertia (
 the same for any hand's masses), loading no contact and not moving the object. Only the
 null-space parts ``N (q - q_posture)`` and ``N dq`` act: the term never resists the object's
 motion. q_posture is the first joint positions the controller sees unless one is given.
+
+Free fingers. A joint on no listed fingertip's chain (a finger that touches nothing) has zero
+columns in J_h. With a fixed palm M_h is block-diagonal over the fingers, so its rows of
+``J_bar = M_h^-1 J_h^T Lambda`` are zero, N is the identity on it and the law gives it
+``u_free = g_free(q) + M_h,free (-k_null,p (q - q_posture) - k_null,d dq)``: gravity
+compensation and the posture spring and damper, which hold the finger at q_posture and load
+no contact. (A joint shared by several fingers, e.g. a wrist, is on their chains: not free.)
 """
 
 from __future__ import annotations

@@ -133,7 +133,8 @@ class SafetyFilter:
             u_min: Lower actuator limits, N·m (scalar or (m,)).
             u_max: Upper actuator limits, N·m (scalar or (m,)).
             mu: Friction coefficient(s), > 0 (scalar or (n,)).
-            workspace: Fingertip box ``(a_min, a_max, b_min, b_max)``, rad.
+            workspace: Fingertip box ``(a_min, a_max, b_min, b_max)``, rad, each bound a
+                scalar (every contact) or one per contact, (n,).
 
         Raises:
             ValueError: A malformed argument; the message names it.

@@ -92,6 +92,8 @@ class ParameterSpec:
         exclusive_min: Lower bound is strict (e.g. a mass must be > 0).
         read_only: Structural: read once at start-up, ``ros2 param set`` is refused.
         is_path: A file path; a relative one resolves against the parameter file's directory.
+        per_contact: A double that may also be given as a list, one per contact (each element
+            within the bounds); declared with dynamic typing, since ROS types are static.
     """
 
     name: str
@@ -105,12 +107,21 @@ class ParameterSpec:
     exclusive_min: bool = False
     read_only: bool = False
     is_path: bool = False
+    per_contact: bool = False
 
     def validate(self, value: Any) -> Any:
         """Return ``value`` converted to this parameter's Python type, or raise ParameterError.
 
         The message names the parameter, what was expected and what was received.
         """
+        if self.per_contact and isinstance(value, Iterable) and not isinstance(value, str | bytes):
+            items = [self._scalar(v, index) for index, v in enumerate(value)]
+            if not items:
+                raise ParameterError(
+                    f"parameter '{self.name}': expected a {self.type.value} or a non-empty list "
+                    'of them (one per contact), got []'
+                )
+            return items
         if self.type.is_array:
             if isinstance(value, str | bytes | Mapping) or not isinstance(value, Iterable):
                 raise ParameterError(
@@ -129,6 +140,8 @@ class ParameterSpec:
     def constraint_text(self) -> str:
         """Describe the admissible values in words, e.g. ``"> 0"`` or ``"3 elements"``."""
         parts: list[str] = []
+        if self.per_contact:
+            parts.append('one value or one per contact')
         if self.length is not None:
             parts.append(f'{self.length} elements')
         bounds = ''
@@ -142,7 +155,8 @@ class ParameterSpec:
         elif self.max_value is not None:
             bounds = f'<= {_number(self.max_value)}'
         if bounds:
-            parts.append(('each ' if self.type.is_array else '') + bounds)
+            each = self.type.is_array or self.per_contact
+            parts.append(('each ' if each else '') + bounds)
         return ', '.join(parts)
 
     def _scalar(self, value: Any, index: int | None) -> Any:
@@ -664,7 +678,7 @@ def _check_static_type(spec: ParameterSpec, value: Any) -> None:
             f'write {float(value)!r}), got {value!r}'
         )
     if (
-        spec.type is ParameterType.DOUBLE_ARRAY
+        (spec.type is ParameterType.DOUBLE_ARRAY or spec.per_contact)
         and isinstance(value, list | tuple)
         and any(is_integer(item) for item in value)
     ):
@@ -754,6 +768,11 @@ def make_parameter_descriptor(spec: ParameterSpec) -> Any:
         additional_constraints=spec.constraint_text(),
         read_only=spec.read_only,
     )
+    if spec.per_contact:
+        # A double or a double array: rclpy checks the type only when it is static, and
+        # on_set_parameters_callback checks the value.
+        descriptor.type = ParameterTypeMsg.PARAMETER_NOT_SET
+        descriptor.dynamic_typing = True
     bounded = spec.min_value is not None and spec.max_value is not None
     if bounded and spec.type is ParameterType.DOUBLE:
         descriptor.floating_point_range = [

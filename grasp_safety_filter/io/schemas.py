@@ -208,11 +208,13 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         DOUBLE,
         0.9,
         _required(
-            'Coulomb friction coefficient mu between fingertips and object [-]'
+            'Coulomb friction coefficient mu between fingertips and object: one for every '
+            'contact or a list of one per contact, in model.contact_names order [-]'
         ),
         min_value=0.0,
         exclusive_min=True,
         read_only=True,
+        per_contact=True,
     ),
     ParameterSpec(
         'model.gravity',
@@ -242,44 +244,52 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         DOUBLE,
         -HALF_PI + FINGERTIP_WORKSPACE_A_MARGIN,
         _required(
-            'Lower bound of the fingertip contact coordinate a [rad]'
+            'Lower bound of the fingertip contact coordinate a: one for every contact or a '
+            'list of one per contact [rad]'
         ),
         min_value=-HALF_PI,
         max_value=HALF_PI,
         read_only=True,
+        per_contact=True,
     ),
     ParameterSpec(
         'model.fingertip_workspace.a_max',
         DOUBLE,
         HALF_PI - FINGERTIP_WORKSPACE_A_MARGIN,
         _required(
-            'Upper bound of the fingertip contact coordinate a [rad]'
+            'Upper bound of the fingertip contact coordinate a: one for every contact or a '
+            'list of one per contact [rad]'
         ),
         min_value=-HALF_PI,
         max_value=HALF_PI,
         read_only=True,
+        per_contact=True,
     ),
     ParameterSpec(
         'model.fingertip_workspace.b_min',
         DOUBLE,
         -math.pi,
         _required(
-            'Lower bound of the fingertip contact coordinate b [rad]'
+            'Lower bound of the fingertip contact coordinate b: one for every contact or a '
+            'list of one per contact [rad]'
         ),
         min_value=-math.pi,
         max_value=0.0,
         read_only=True,
+        per_contact=True,
     ),
     ParameterSpec(
         'model.fingertip_workspace.b_max',
         DOUBLE,
         0.0,
         _required(
-            'Upper bound of the fingertip contact coordinate b [rad]'
+            'Upper bound of the fingertip contact coordinate b: one for every contact or a '
+            'list of one per contact [rad]'
         ),
         min_value=-math.pi,
         max_value=0.0,
         read_only=True,
+        per_contact=True,
     ),
 )
 
@@ -671,10 +681,17 @@ NODE_SCHEMAS: dict[str, NodeSchema] = {
 # --------------------------------------------------------------------------------------------
 
 
+def _values(value: Any) -> list[Any]:
+    """Return a per-contact parameter's values: ``[value]`` for one, else the list."""
+    return list(value) if isinstance(value, list | tuple) else [value]
+
+
 def check_model_parameters(values: Mapping[str, Any], source: str = 'parameters') -> None:
     """Check the model section for consistency between its own parameters.
 
-    - each workspace interval is non-empty: ``a_min < a_max``, ``b_min < b_max``;
+    - each per-contact parameter has one value or one per contact;
+    - each workspace interval is non-empty: ``a_min < a_max``, ``b_min < b_max`` (per
+      contact);
     - joint names, fingertip frames and contact names are non-empty and unique;
     - one fingertip frame per contact name and, for a box or cube, one face per contact (or
       one face entry for all).
@@ -683,14 +700,32 @@ def check_model_parameters(values: Mapping[str, Any], source: str = 'parameters'
         ParameterError: Listing every violation, each naming the parameters and values.
     """
     errors: list[str] = []
+    contacts = len(values['model.contact_names'])
+    per_contact = {spec.name: values[spec.name] for spec in MODEL_PARAMETERS if spec.per_contact}
+    for name, value in per_contact.items():
+        count = len(_values(value))
+        if count not in (1, contacts):
+            errors.append(
+                f"parameter '{name}': expected 1 or {contacts} values (one for every contact or "
+                f"one per contact in 'model.contact_names'), got {count}"
+            )
     prefix = 'model.fingertip_workspace.'
     for coordinate in ('a', 'b'):
         low, high = values[f'{prefix}{coordinate}_min'], values[f'{prefix}{coordinate}_max']
-        if not low < high:
-            errors.append(
-                f"parameters '{prefix}{coordinate}_min' and '{prefix}{coordinate}_max': "
-                f'expected {coordinate}_min < {coordinate}_max, got {low!r} and {high!r}'
-            )
+        lows, highs = _values(low), _values(high)
+        if len(lows) not in (1, contacts) or len(highs) not in (1, contacts):
+            continue
+        count = max(len(lows), len(highs))
+        pairs = zip(lows * (count // len(lows)), highs * (count // len(highs)), strict=True)
+        per_contact_given = count > 1
+        for index, (lo, hi) in enumerate(pairs):
+            if not lo < hi:
+                where = f' element {index}' if per_contact_given else ''
+                errors.append(
+                    f"parameters '{prefix}{coordinate}_min' and '{prefix}{coordinate}_max'"
+                    f'{where}: expected {coordinate}_min < {coordinate}_max, got {lo!r} and '
+                    f'{hi!r}'
+                )
     for name in ('model.joint_names', 'model.fingertip_frames', 'model.contact_names'):
         items = list(values[name])
         duplicates = sorted({item for item in items if items.count(item) > 1})
@@ -698,7 +733,6 @@ def check_model_parameters(values: Mapping[str, Any], source: str = 'parameters'
             errors.append(f"parameter '{name}': expected at least one name, got []")
         elif duplicates:
             errors.append(f"parameter '{name}': expected unique names, got {duplicates} twice")
-    contacts = len(values['model.contact_names'])
     lists = ['model.fingertip_frames']
     if values['model.object.shape'] != 'sphere' and len(values['model.contact_faces']) != 1:
         lists.append('model.contact_faces')

@@ -11,8 +11,10 @@ At its first state a run must hold the object the way the model assumes (DESIGN.
   ``model.contact_faces`` is the face nearest to the fingertip;
 - per contact, the fingertip coordinates are inside the fingertip workspace;
 - the hand's inertia M_h is positive definite, J_h has full row rank 3n (every contact
-  velocity reachable) and G has rank 6 (the contacts can move the object in every
-  direction).
+  velocity reachable; a free finger's joints add zero columns) and G has rank 6 (the
+  contacts can move the object in every direction);
+- force closure with each contact's own friction coefficient mu_i: some squeeze keeps every
+  contact force strictly inside its friction pyramid.
 
 :func:`grasp_findings` returns what fails, each naming the joint or contact and the distance;
 :func:`check_grasp` raises them as one :class:`GraspConfigError`. The paper's initial grasp
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import daqp
 import numpy as np
 
 from grasp_safety_filter.model.grasp_model import GraspConfigError, GraspModel
@@ -40,6 +43,10 @@ from grasp_safety_filter.model.surfaces import CUBE_FACE_AXES, FlatSurface, Surf
 #: one the user meant (a wrong object position, face or fingertip frame). A millimetre is
 #: 1/60 of the paper's fingertip radius and far above the paper's 3e-16 m.
 GAP_TOLERANCE = 1e-3
+
+#: Faces of the friction pyramid inscribed in each cone for the force-closure check (the
+#: safety filter's default ``no_slip.pyramid_faces``).
+FORCE_CLOSURE_PYRAMID_FACES = 8
 
 #: What a start-up check describes, for the messages.
 INITIAL_GRASP = 'initial grasp (initial.joint_positions, initial.object_position/orientation)'
@@ -133,13 +140,14 @@ def grasp_findings(
         finding.subject: finding
         for finding in _declared_face_findings(model, q, p_object_in_palm, R_object_to_palm)
     }
-    for name, contact, geometry in zip(
-        model.contact_names, model.contacts, geometries, strict=True
+    boxes = model.fingertip_workspace.per_contact(model.n_contacts)
+    for name, contact, geometry, box in zip(
+        model.contact_names, model.contacts, geometries, boxes, strict=True
     ):
         subject = f'contact {name!r}'
         findings += [wrong_face[subject]] if subject in wrong_face else []
         findings += _contact_findings(
-            model, subject, contact.object_surface, geometry, gap_tolerance
+            subject, contact.object_surface, geometry, box, gap_tolerance
         )
     if findings:
         return findings
@@ -147,13 +155,16 @@ def grasp_findings(
 
 
 def _contact_findings(
-    model: GraspModel,
     subject: str,
     surface: Surface,
     geometry: ContactGeometry,
+    box: np.ndarray,
     gap_tolerance: float,
 ) -> list[GraspFinding]:
-    """Gap or penetration, position on the face and in the fingertip workspace of a contact."""
+    """Gap or penetration, position on the face and in the fingertip workspace of a contact.
+
+    ``box`` is the contact's own workspace ``(a_min, a_max, b_min, b_max)``, rad.
+    """
     findings = []
     where = _face_label(surface) if isinstance(surface, FlatSurface) else 'sphere'
     depth = float(geometry.penetration)
@@ -186,14 +197,15 @@ def _contact_findings(
                     f'|v| <= {h_v:.4g} m about its centre)',
                 )
             )
-    margins = model.fingertip_workspace.margins(geometry.xi_cf)[0]
-    if np.any(margins <= 0.0):
-        a, b = geometry.xi_cf
+    a, b = geometry.xi_cf
+    a_min, a_max, b_min, b_max = box.tolist()
+    if not (a_min < a < a_max and b_min < b < b_max):
         findings.append(
             GraspFinding(
                 subject,
-                f'fingertip coordinates (a, b) = ({a:.4g}, {b:.4g}) rad are outside the '
-                'fingertip workspace (model.fingertip_workspace)',
+                f'fingertip coordinates (a, b) = ({a:.4g}, {b:.4g}) rad are outside its '
+                f'fingertip workspace (model.fingertip_workspace: a in ({a_min:.4g}, '
+                f'{a_max:.4g}), b in ({b_min:.4g}, {b_max:.4g}))',
             )
         )
     return findings
@@ -247,7 +259,56 @@ def _hand_findings(
                 'object in every direction',
             )
         )
+    elif not squeezes_inside_friction_cones(state.G, model.friction_coefficient):
+        mu = model.friction_coefficient.tolist()
+        findings.append(
+            GraspFinding(
+                'hand',
+                'no force closure: no squeeze (internal force, G f = 0) keeps every contact '
+                f'force inside its friction pyramid (mu = {mu} per contact, '
+                f'{FORCE_CLOSURE_PYRAMID_FACES} faces): expected contacts on opposing faces '
+                'or a larger model.friction_coefficient',
+            )
+        )
     return findings
+
+
+def squeezes_inside_friction_cones(G: np.ndarray, mu: np.ndarray) -> bool:
+    """Whether some internal force lies strictly inside every contact's friction pyramid.
+
+    With G of rank 6 this is force closure (Murray, Li & Sastry, *A Mathematical
+    Introduction to Robotic Manipulation*, 1994, Prop. 5.2): squeezing with that force,
+    scaled, balances any wrench. Internal forces are ``f = N z`` with N an orthonormal basis
+    of null(G); since the pyramids are cones, a force strictly inside all of them exists iff
+    one with every face margin ``mu_i cos(pi / l) f_n,i - cos(th_j) f_x,i - sin(th_j) f_y,i
+    >= 1`` does: a QP in z (least norm) that DAQP solves or proves infeasible.
+
+    Args:
+        G: The grasp map, (6, 3n).
+        mu: Each contact's friction coefficient, (n,).
+    """
+    n = mu.size
+    _, singular, vt = np.linalg.svd(G)
+    rank = int(np.count_nonzero(singular > singular[0] * max(G.shape) * np.finfo(float).eps))
+    null_basis = vt[rank:].T  # (3n, 3n - rank), orthonormal
+    if null_basis.shape[1] == 0:
+        return False
+    faces = FORCE_CLOSURE_PYRAMID_FACES
+    theta = 2.0 * np.pi * np.arange(faces) / faces
+    # Face rows per contact, (n, l, 3): margin_ij = rows_ij . f_i.
+    rows = np.empty((n, faces, 3))
+    rows[:, :, 0] = -np.cos(theta)
+    rows[:, :, 1] = -np.sin(theta)
+    rows[:, :, 2] = (mu * np.cos(np.pi / faces))[:, np.newaxis]
+    A = np.zeros((n * faces, 3 * n))
+    for i in range(n):
+        A[i * faces : (i + 1) * faces, 3 * i : 3 * i + 3] = rows[i]
+    A_z = A @ null_basis
+    k = null_basis.shape[1]
+    _, _, flag, _ = daqp.solve(
+        np.eye(k), np.zeros(k), A_z, np.full(n * faces, 1e30), np.ones(n * faces)
+    )
+    return flag > 0
 
 
 def check_grasp(

@@ -34,6 +34,7 @@ from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, Gr
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
+from grasp_safety_filter.model.per_contact import friction_coefficients
 from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import contact_stack, ContactGeometry, ContactPair
 from grasp_safety_filter.model.surfaces import SphereSurface
@@ -51,8 +52,9 @@ class GraspModel:
             frame order; None to choose them at the first configuration the model is given
             (:meth:`bind_contacts`), from ``object_shape``.
         contact_names: A name per contact (e.g. the finger's).
-        friction_coefficient: Coulomb friction coefficient mu (> 0).
-        fingertip_workspace: Admissible fingertip coordinates.
+        friction_coefficient: Coulomb friction coefficient mu (> 0): one for every contact
+            or one per contact.
+        fingertip_workspace: Admissible fingertip coordinates (one box or one per contact).
         object_shape: The object's shape, which gives the surfaces when ``contacts`` is None.
         declared_faces: Per contact, a face label of a box to use as declared, or None for the
             face nearest to the fingertip (with ``contacts`` None).
@@ -66,7 +68,7 @@ class GraspModel:
         rigid_object: RigidObject,
         contacts: Sequence[ContactPair] | None,
         contact_names: Sequence[str],
-        friction_coefficient: float,
+        friction_coefficient: float | Sequence[float],
         fingertip_workspace: FingertipWorkspace,
         *,
         object_shape: ObjectShape | None = None,
@@ -92,10 +94,6 @@ class GraspModel:
                 f'model.joint_names: a hand with n = {n} contacts needs at least 3n = {3 * n} '
                 f"joints (the paper's Assumption 1), got {hand.n_joints}"
             )
-        if not np.isfinite(friction_coefficient) or friction_coefficient <= 0.0:
-            raise GraspConfigError(
-                f'model.friction_coefficient: expected mu > 0, got {friction_coefficient!r}'
-            )
         self.hand = hand
         self.object = rigid_object
         self.object_shape = object_shape
@@ -107,7 +105,8 @@ class GraspModel:
         # [I | 0], (m, m + 1): the joint torque u as an affine map of (u, 1).
         self._unit_torque = np.eye(hand.n_joints, hand.n_joints + 1)
         self.contact_names = list(contact_names)
-        self.friction_coefficient = float(friction_coefficient)
+        #: mu_i per contact, (n,), read-only (one value given applies to every contact).
+        self.friction_coefficient = friction_coefficients(friction_coefficient, contact_names)
         self.fingertip_workspace = fingertip_workspace
         self.palm_frame = palm_frame
         self.object_frame = object_frame

@@ -12,7 +12,14 @@ What each parameter becomes (io/schemas.py documents them):
   all contacts allowed); the nearest faces, and a sphere's charts, are chosen at the first
   configuration: the initial grasp when the parameters hold it (``hand_sim_node``'s
   ``initial.*``), else the first state the model is given;
+- ``model.friction_coefficient`` and ``model.fingertip_workspace.*``: one value for every
+  contact or one per contact (:mod:`grasp_safety_filter.model.per_contact`);
 - ``model.palm_frame`` (empty: the URDF's root link), ``model.object_frame``.
+
+Free fingers: ``model.joint_names`` lists every actuated joint of the URDF; a joint on no
+listed fingertip's chain (a finger whose tip is not in ``model.fingertip_frames``) is free.
+It moves no contact (its columns of J_h are zero), so only its joint limits, its actuator
+limits and the nominal controller's null-space posture act on it.
 """
 
 from __future__ import annotations
@@ -24,7 +31,12 @@ from typing import Any, TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
+from grasp_safety_filter.model.fingertip_workspace import (
+    BOUNDS,
+    FingertipWorkspace,
+    GraspConfigError,
+    PARAMETER_PREFIX,
+)
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
 from grasp_safety_filter.model.quaternion import rotation_matrix
@@ -70,6 +82,21 @@ def palm_frame_name(hand: HandModel, configured: str) -> str:
                 f'{root!r}, a frame fixed to it at the identity, or a name outside the URDF'
             )
     return configured
+
+
+def free_joint_names(hand: HandModel) -> list[str]:
+    """Joints of ``hand`` on no fingertip's chain (free fingers), in joint order.
+
+    A joint is on a fingertip's chain when it moves the fingertip frame (Pinocchio's
+    ``supports`` of the frame's parent joint). A free joint's columns of J_h are zero.
+    """
+    model = hand.model
+    on_chain = {
+        model.names[joint]
+        for frame_id in hand.frame_ids
+        for joint in model.supports[model.frames[frame_id].parentJoint]
+    }
+    return [name for name in hand.joint_names if name not in on_chain]
 
 
 def _object_shape(params: Mapping[str, Any]) -> ObjectShape:
@@ -157,18 +184,15 @@ def grasp_model_from_parameters(
                 contacts.append(ContactPair(SphereSurface(tip.radius), shape.face(face)))
             except ValueError as error:
                 raise GraspConfigError(f'model.contact_faces: contact {name!r}: {error}') from None
-    workspace = FingertipWorkspace(
-        float(get('model.fingertip_workspace.a_min')),
-        float(get('model.fingertip_workspace.a_max')),
-        float(get('model.fingertip_workspace.b_min')),
-        float(get('model.fingertip_workspace.b_max')),
+    workspace = FingertipWorkspace.for_contacts(
+        names, **{bound: get(PARAMETER_PREFIX + bound) for bound in BOUNDS}
     )
     model = cls(
         hand,
         rigid_object,
         contacts,
         names,
-        float(get('model.friction_coefficient')),
+        get('model.friction_coefficient'),
         workspace,
         object_shape=shape,
         declared_faces=faces,

@@ -15,6 +15,9 @@ later still gets it) as one JSON object::
       "stop_on_slip": false, "stop_on_workspace_exit": true
     }
 
+``friction_coefficient`` and each workspace bound are one number when every contact has the
+same value (the paper's scenario), else a list of one per contact in ``contact_names`` order.
+
 Whether the safety filter is on is not the simulator's knowledge and is not in it (the
 filter's ``/diagnostics`` say so). Numbers are JSON numbers written with ``repr``
 precision, so every float round-trips exactly.
@@ -28,6 +31,8 @@ import math
 from typing import Any
 
 from grasp_safety_filter.errors import ConfigError
+from grasp_safety_filter.model.fingertip_workspace import BOUNDS as WORKSPACE_BOUNDS
+from grasp_safety_filter.model.per_contact import compact
 
 SCENARIO_FORMAT = 'grasp_safety_filter/scenario'
 SCENARIO_VERSION = 1
@@ -41,6 +46,11 @@ MAX_STEPS = 1e11
 #: Integrators the simulator has.
 INTEGRATORS = ('ode3', 'rk4')
 
+
+class PerContactNumber:
+    """JSON type of a per-contact value: a number, or a list of one number per contact."""
+
+
 #: Keys every scenario document has, with the JSON type of their value.
 SCENARIO_KEYS: dict[str, type] = {
     'format': str,
@@ -50,7 +60,7 @@ SCENARIO_KEYS: dict[str, type] = {
     'joint_upper_limits': list,
     'effort_limits': list,
     'contact_names': list,
-    'friction_coefficient': float,
+    'friction_coefficient': PerContactNumber,
     'fingertip_workspace': dict,
     'time_step': float,
     'duration': float,
@@ -79,7 +89,7 @@ def scenario_document(model: Any, sim_config: Any) -> dict[str, Any]:
         sim_config: The ``hand_sim_node.config.SimConfig`` of the run.
 
     """
-    workspace = model.fingertip_workspace
+    box = model.fingertip_workspace.per_contact(len(model.contact_names))
     return {
         'format': SCENARIO_FORMAT,
         'version': SCENARIO_VERSION,
@@ -88,12 +98,9 @@ def scenario_document(model: Any, sim_config: Any) -> dict[str, Any]:
         'joint_upper_limits': _floats(model.joint_upper_limits),
         'effort_limits': _floats(model.effort_limits),
         'contact_names': [str(name) for name in model.contact_names],
-        'friction_coefficient': float(model.friction_coefficient),
+        'friction_coefficient': compact(model.friction_coefficient),
         'fingertip_workspace': {
-            'a_min': float(workspace.a_min),
-            'a_max': float(workspace.a_max),
-            'b_min': float(workspace.b_min),
-            'b_max': float(workspace.b_max),
+            bound: compact(box[:, column]) for column, bound in enumerate(WORKSPACE_BOUNDS)
         },
         'time_step': float(sim_config.time_step),
         'duration': float(sim_config.duration),
@@ -134,6 +141,9 @@ def _refuse_constant(name: str) -> float:
 
 
 def _has_type(value: Any, expected: type) -> bool:
+    if expected is PerContactNumber:
+        values = value if isinstance(value, list) else [value]
+        return bool(values) and all(_has_type(v, float) for v in values)
     if expected is bool or isinstance(value, bool):
         return expected is bool and isinstance(value, bool)
     if expected is float:
@@ -162,9 +172,12 @@ def check_scenario(document: Any) -> None:
     for key, expected in SCENARIO_KEYS.items():
         value = document.get(key)
         if not _has_type(value, expected):
-            raise ScenarioError(
-                f"/grasp/scenario: key '{key}': expected a {expected.__name__}, got {value!r}"
+            what = (
+                'number or a list of one per contact'
+                if expected is PerContactNumber
+                else expected.__name__
             )
+            raise ScenarioError(f"/grasp/scenario: key '{key}': expected a {what}, got {value!r}")
     joints = len(document['joint_names'])
     for key in ('joint_lower_limits', 'joint_upper_limits', 'effort_limits'):
         values = document[key]
@@ -176,10 +189,12 @@ def check_scenario(document: Any) -> None:
                 f'joint), got {values!r}'
             )
     workspace = document['fingertip_workspace']
-    if set(workspace) != {'a_min', 'a_max', 'b_min', 'b_max'}:
+    if set(workspace) != set(WORKSPACE_BOUNDS) or not all(
+        _has_type(v, PerContactNumber) for v in workspace.values()
+    ):
         raise ScenarioError(
             "/grasp/scenario: key 'fingertip_workspace': expected a_min, a_max, b_min, b_max, "
-            f'got {sorted(workspace)}'
+            f'each a number or a list of one per contact, got {workspace!r}'
         )
     _check_physical(document)
 
@@ -205,14 +220,24 @@ def _check_physical(document: Mapping[str, Any]) -> None:
         raise _bad('joint_lower_limits', 'each below its joint_upper_limits', lower)
     if not all(e > 0 for e in document['effort_limits']):
         raise _bad('effort_limits', 'numbers > 0', document['effort_limits'])
-    mu = document['friction_coefficient']
-    if not (_finite(mu) and 0 < mu <= MAX_FRICTION_COEFFICIENT):
-        raise _bad('friction_coefficient', f'a number in (0, {MAX_FRICTION_COEFFICIENT:g}]', mu)
-    workspace = document['fingertip_workspace']
-    for low, high in (('a_min', 'a_max'), ('b_min', 'b_max')):
-        a, b = workspace[low], workspace[high]
-        if not (_finite(a) and _finite(b) and a < b):
-            raise _bad('fingertip_workspace', f'finite {low} < {high}', dict(workspace))
+    contacts = len(document['contact_names'])
+    mu = scenario_per_contact(document, 'friction_coefficient')
+    if not all(_finite(v) and 0 < v <= MAX_FRICTION_COEFFICIENT for v in mu):
+        raise _bad(
+            'friction_coefficient',
+            f'numbers in (0, {MAX_FRICTION_COEFFICIENT:g}], 1 or {contacts} (one per contact)',
+            document['friction_coefficient'],
+        )
+    box = scenario_workspace(document)
+    for row in box:
+        for low, high in ((0, 1), (2, 3)):
+            if not (_finite(row[low]) and _finite(row[high]) and row[low] < row[high]):
+                first, second = WORKSPACE_BOUNDS[low], WORKSPACE_BOUNDS[high]
+                raise _bad(
+                    'fingertip_workspace',
+                    f'finite {first} < {second}',
+                    dict(document['fingertip_workspace']),
+                )
     step, duration = document['time_step'], document['duration']
     if not (_finite(step) and step >= MIN_TIME_STEP):
         raise _bad('time_step', f'a finite number >= {MIN_TIME_STEP:g} s', step)
@@ -225,6 +250,38 @@ def _check_physical(document: Mapping[str, Any]) -> None:
         raise _bad('n_steps', f'{n_steps} (duration / time_step)', document['n_steps'])
     if document['integrator'] not in INTEGRATORS:
         raise _bad('integrator', f'one of {list(INTEGRATORS)}', document['integrator'])
+
+
+def _per_contact_list(value: Any, contacts: int, key: str) -> list[Any]:
+    values = value if isinstance(value, list) else [value]
+    if len(values) not in (1, contacts):
+        raise _bad(key, f'1 or {contacts} values (one per contact)', value)
+    return values * (contacts // len(values))
+
+
+def scenario_per_contact(document: Mapping[str, Any], key: str) -> list[float]:
+    """Each contact's value of a per-contact key (``friction_coefficient``), in contact order.
+
+    Raises:
+        ScenarioError: Neither 1 nor n values.
+    """
+    contacts = len(document['contact_names'])
+    return _per_contact_list(document[key], contacts, key)
+
+
+def scenario_workspace(document: Mapping[str, Any]) -> list[list[float]]:
+    """Each contact's ``[a_min, a_max, b_min, b_max]``, rad, in contact order.
+
+    Raises:
+        ScenarioError: A bound has neither 1 nor n values.
+    """
+    contacts = len(document['contact_names'])
+    workspace = document['fingertip_workspace']
+    columns = [
+        _per_contact_list(workspace[bound], contacts, 'fingertip_workspace')
+        for bound in WORKSPACE_BOUNDS
+    ]
+    return [list(row) for row in zip(*columns, strict=True)]
 
 
 def scenario_from_msg(msg: Any) -> dict[str, Any]:

@@ -5,12 +5,13 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from grasp_safety_filter.control.class_k import ClassKFunction
 from grasp_safety_filter.control.constraints.base import (
     BoxBarrier,
     check_rows,
-    finite_scalar,
+    finite_vector,
     validate_names,
 )
 from grasp_safety_filter.model.affine import AffineMap
@@ -23,12 +24,13 @@ WORKSPACE_ROWS: tuple[str, ...] = ('a_min', 'a_max', 'b_min', 'b_max')
 class FingertipWorkspaceBarrier(BoxBarrier):
     """Keep each contact's fingertip coordinates ``(a_i, b_i)`` inside a box.
 
-    Four barriers per contact i (rows in this order, contact-major)::
+    Four barriers per contact i (rows in this order, contact-major), with the contact's own
+    box (each bound one value for every contact or one per contact)::
 
-        a_min: h = a_i - a_min     h_dot =  a_i_dot     h_ddot(u) =  a_i_ddot(u)
-        a_max: h = a_max - a_i     h_dot = -a_i_dot     h_ddot(u) = -a_i_ddot(u)
-        b_min: h = b_i - b_min     h_dot =  b_i_dot     h_ddot(u) =  b_i_ddot(u)
-        b_max: h = b_max - b_i     h_dot = -b_i_dot     h_ddot(u) = -b_i_ddot(u)
+        a_min: h = a_i - a_min,i   h_dot =  a_i_dot     h_ddot(u) =  a_i_ddot(u)
+        a_max: h = a_max,i - a_i   h_dot = -a_i_dot     h_ddot(u) = -a_i_ddot(u)
+        b_min: h = b_i - b_min,i   h_dot =  b_i_dot     h_ddot(u) =  b_i_ddot(u)
+        b_max: h = b_max,i - b_i   h_dot = -b_i_dot     h_ddot(u) = -b_i_ddot(u)
 
     each with ``B = h_dot + alpha_1(h)`` and the constraint::
 
@@ -48,10 +50,10 @@ class FingertipWorkspaceBarrier(BoxBarrier):
     def __init__(
         self,
         contact_names: Sequence[str],
-        a_min: float,
-        a_max: float,
-        b_min: float,
-        b_max: float,
+        a_min: float | ArrayLike,
+        a_max: float | ArrayLike,
+        b_min: float | ArrayLike,
+        b_max: float | ArrayLike,
         alpha1: ClassKFunction | None = None,
         alpha2: ClassKFunction | None = None,
     ) -> None:
@@ -59,10 +61,11 @@ class FingertipWorkspaceBarrier(BoxBarrier):
 
         Args:
             contact_names: The n contact (finger) names, in the model's contact order.
-            a_min: Lower bound on the first fingertip coordinate a, rad.
-            a_max: Upper bound on a, rad, > a_min.
-            b_min: Lower bound on the second fingertip coordinate b, rad.
-            b_max: Upper bound on b, rad, > b_min.
+            a_min: Lower bound on the first fingertip coordinate a, rad: one for every
+                contact or one per contact, (n,).
+            a_max: Upper bound on a, rad, > a_min (one or n).
+            b_min: Lower bound on the second fingertip coordinate b, rad (one or n).
+            b_max: Upper bound on b, rad, > b_min (one or n).
             alpha1: Extended class-K function of h (default cubic, gain 1).
             alpha2: Extended class-K function of B (default cubic, gain 1).
 
@@ -70,8 +73,9 @@ class FingertipWorkspaceBarrier(BoxBarrier):
             ValueError: An argument is malformed; the message names it.
         """
         self.contact_names = validate_names(contact_names, 'contact_names')
+        n = len(self.contact_names)
         bounds = {
-            name: finite_scalar(value, name)
+            name: finite_vector(value, n, name)
             for name, value in (
                 ('a_min', a_min),
                 ('a_max', a_max),
@@ -80,14 +84,17 @@ class FingertipWorkspaceBarrier(BoxBarrier):
             )
         }
         for low, high in (('a_min', 'a_max'), ('b_min', 'b_max')):
-            if not bounds[low] < bounds[high]:
-                raise ValueError(
-                    f"'{high}': expected {high} > {low}, got {low} = {bounds[low]!r} and "
-                    f'{high} = {bounds[high]!r}'
-                )
+            for contact, lo, hi in zip(
+                self.contact_names, bounds[low].tolist(), bounds[high].tolist(), strict=True
+            ):
+                if not lo < hi:
+                    raise ValueError(
+                        f"'{high}' of contact {contact!r}: expected {high} > {low}, got "
+                        f'{low} = {lo!r} and {high} = {hi!r}'
+                    )
+        #: Per contact, (n,) each, rad.
         self.a_min, self.a_max = bounds['a_min'], bounds['a_max']
         self.b_min, self.b_max = bounds['b_min'], bounds['b_max']
-        n = len(self.contact_names)
         names = tuple(
             f'{self.family}/{contact}/{row}'
             for contact in self.contact_names
@@ -98,7 +105,7 @@ class FingertipWorkspaceBarrier(BoxBarrier):
         super().__init__(
             index=np.column_stack((first, first, first + 1, first + 1)).ravel(),
             sign=np.tile([1.0, -1.0, 1.0, -1.0], n),
-            bound=np.tile([self.a_min, self.a_max, self.b_min, self.b_max], n),
+            bound=np.column_stack((self.a_min, self.a_max, self.b_min, self.b_max)).ravel(),
             names=names,
             alpha1=alpha1 if alpha1 is not None else ClassKFunction(),
             alpha2=alpha2 if alpha2 is not None else ClassKFunction(),

@@ -27,11 +27,12 @@ class FrictionPyramid:
 
         cos(th_j) f_x,i(u) + sin(th_j) f_y,i(u) - mu_i cos(pi / l_s) f_n,i(u) <= -eps
 
-    The pyramid's faces touch the cone ``||f_t|| <= mu f_n`` along their centre lines (its
+    Each contact has its own mu_i (fingertips of different materials). The pyramid's faces
+    touch the cone ``||f_t|| <= mu_i f_n`` along their centre lines (its
     apothem is ``mu cos(pi / l_s) f_n``), so every force satisfying all faces lies inside the
     cone: no slip is guaranteed, at the price of ``1 - cos(pi / l_s)`` of the friction
     (7.6 % for l_s = 8). ``eps >= 0`` (N) keeps the force away from the pyramid's boundary
-    and hence ``f_n >= eps / (mu cos(pi / l_s)) > 0`` when ``eps > 0``: the contact is
+    and hence ``f_n >= eps / (mu_i cos(pi / l_s)) > 0`` when ``eps > 0``: the contact is
     neither slipping nor separating. This is a relative-degree-zero constraint: the rows
     act on the force directly, no barrier dynamics.
 
@@ -67,8 +68,9 @@ class FrictionPyramid:
             raise ValueError(f"'faces': expected an integer >= 3, got {faces!r}")
         self.faces = int(faces)
         self.mu = finite_vector(mu, n, 'mu')
-        if np.any(self.mu <= 0.0):
-            raise ValueError(f"'mu': expected friction coefficients > 0, got {self.mu.tolist()}")
+        for contact, value in zip(self.contact_names, self.mu.tolist(), strict=True):
+            if not value > 0.0:
+                raise ValueError(f"'mu' of contact {contact!r}: expected > 0, got {value!r}")
         self.normal_force_margin = finite_scalar(normal_force_margin, 'normal_force_margin', 0.0)
         theta = 2.0 * np.pi * np.arange(self.faces) / self.faces
         # Face normals per contact, shape (n, l_s, 3): rows [cos th, sin th, -mu cos(pi/l_s)];
