@@ -19,7 +19,7 @@ independent mass matrix (:meth:`RandomHand.mass_matrix`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 import math
 from pathlib import Path
 from typing import Any
@@ -123,6 +123,7 @@ class Finger:
         tip_origin: Tip frame origin in the distal link's frame, m.
         tip_rotation: Tip frame axes in the distal link's frame.
         tip_link: The tip link's own inertial (None: a massless frame).
+        sphere_on_tip: Whether the sphere is declared on the tip link (else the distal link).
         lower, upper, effort: Joint limits, rad and N·m.
     """
 
@@ -140,6 +141,7 @@ class Finger:
     lower: np.ndarray
     upper: np.ndarray
     effort: np.ndarray
+    sphere_on_tip: bool = False
 
     @property
     def joint_names(self) -> list[str]:
@@ -193,14 +195,10 @@ class Finger:
                 f'    <limit lower="{_number(self.lower[j])}" upper="{_number(self.upper[j])}" '
                 f'effort="{_number(self.effort[j])}" velocity="6.0"/>\n  </joint>\n'
             )
-            collision = ''
-            if j == len(self.axes) - 1:
-                turn = _vector(np.array([0.3, -0.2, 0.1]))
-                collision = (
-                    f'    <collision>\n      <origin xyz="{_vector(self.sphere_centre)}" '
-                    f'rpy="{turn}"/>\n      <geometry><sphere radius="{_number(self.radius)}"/>'
-                    '</geometry>\n    </collision>\n'
-                )
+            last = j == len(self.axes) - 1
+            collision = (
+                self._collision(self.sphere_centre) if last and not self.sphere_on_tip else ''
+            )
             parts.append(f'  <link name="{link.name}">\n{link.urdf()}{collision}  </link>\n')
             parent = link.name
         tip = f'{self.name}_tip'
@@ -208,9 +206,23 @@ class Finger:
             f'  <joint name="{tip}_joint" type="fixed">\n    <parent link="{parent}"/>\n'
             f'    <child link="{tip}"/>\n    <origin xyz="{_vector(self.tip_origin)}" '
             f'rpy="{_vector(pin.rpy.matrixToRpy(self.tip_rotation))}"/>\n  </joint>\n'
-            f'  <link name="{tip}">\n{self.tip_link.urdf() if self.tip_link else ""}  </link>\n'
+            f'  <link name="{tip}">\n{self.tip_link.urdf() if self.tip_link else ""}'
         )
+        if self.sphere_on_tip:
+            parts.append(
+                self._collision(self.tip_rotation.T @ (self.sphere_centre - self.tip_origin))
+            )
+        parts.append('  </link>\n')
         return ''.join(parts)
+
+    def _collision(self, centre: np.ndarray) -> str:
+        """Return the fingertip's ``<collision><sphere>`` centred at ``centre`` (link frame)."""
+        turn = _vector(np.array([0.3, -0.2, 0.1]))
+        return (
+            f'    <collision>\n      <origin xyz="{_vector(centre)}" rpy="{turn}"/>\n'
+            f'      <geometry><sphere radius="{_number(self.radius)}"/></geometry>\n'
+            '    </collision>\n'
+        )
 
 
 @dataclass(frozen=True)
@@ -232,6 +244,8 @@ class RandomHand:
         p_object: Initial object position, palm frame, m.
         R_object: Initial object orientation.
         declare_faces: Whether ``model.contact_faces`` lists the faces (else ``nearest``).
+        gravity: Gravity in the palm frame, m/s² (tilted off -z for some seeds).
+        urdf_order: The order the fingers are written in the URDF (contact order for most).
     """
 
     seed: int
@@ -248,7 +262,8 @@ class RandomHand:
     p_object: np.ndarray
     R_object: np.ndarray
     declare_faces: bool
-    extra: dict[str, Any] = field(default_factory=dict)
+    gravity: tuple[float, float, float] = GRAVITY
+    urdf_order: tuple[int, ...] | None = None
 
     @property
     def n_fingers(self) -> int:
@@ -276,7 +291,8 @@ class RandomHand:
 
     def urdf(self) -> str:
         """Return the URDF text."""
-        body = ''.join(finger.urdf() for finger in self.fingers)
+        order = self.urdf_order or range(self.n_fingers)
+        body = ''.join(self.fingers[k].urdf() for k in order)
         return (
             f'<?xml version="1.0"?>\n<robot name="random_hand_{self.seed}">\n'
             f'  <link name="palm">\n{self.palm.urdf()}  </link>\n{body}</robot>\n'
@@ -298,7 +314,7 @@ class RandomHand:
             'model.object.shape': self.shape,
             'model.object.mass': self.object_mass,
             'model.friction_coefficient': self.friction_coefficient,
-            'model.gravity': list(GRAVITY),
+            'model.gravity': [float(x) for x in self.gravity],
             'model.palm_frame': '',
             'model.object_frame': 'object',
             **WORKSPACE,
@@ -329,7 +345,7 @@ class RandomHand:
         index = {name: k for k, name in enumerate(self.joint_names)}
         m = len(self.joint_names)
         M, g = np.zeros((m, m)), np.zeros(m)
-        gravity = np.array(GRAVITY)
+        gravity = np.array(self.gravity)
         for finger, qf in zip(self.fingers, self.finger_q(q), strict=True):
             frames = finger.link_frames(qf)
             columns = [index[name] for name in finger.joint_names]
@@ -465,12 +481,17 @@ def random_hand(seed: int) -> RandomHand:
         ) @ (-n_palm)
         tip_rotation = R_distal.T @ frame_with_z(z_tip, rng.uniform(-math.pi, math.pi))
         tip_link = box_link(rng, f'{name}_tip', radius, radius) if rng.random() < 0.5 else None
+        sphere_on_tip = bool(rng.random() < 0.3)
+        # On the tip link, the sphere is off the tip frame's origin by up to 3 mm.
+        tip_origin = sphere + rng.uniform(-0.003, 0.003, 3) if sphere_on_tip else sphere
         fingers.append(
             replace(
                 probe,
                 base_position=base,
                 tip_rotation=tip_rotation,
                 tip_link=tip_link,
+                tip_origin=tip_origin,
+                sphere_on_tip=sphere_on_tip,
                 lower=q - rng.uniform(0.4, 0.9, k),
                 upper=q + rng.uniform(0.4, 0.9, k),
                 effort=rng.uniform(0.6, 1.5, k),
@@ -484,6 +505,10 @@ def random_hand(seed: int) -> RandomHand:
         order = rng.permutation(len(joint_names))
         joint_names = [joint_names[k] for k in order]
         q0 = q0[order]
+    gravity = np.array(GRAVITY)
+    if rng.random() < 0.3:
+        gravity = rotation_about(np.array([1.0, 0.0, 0.0]), rng.uniform(-0.6, 0.6)) @ gravity
+    urdf_order = tuple(int(k) for k in rng.permutation(n)) if rng.random() < 0.3 else None
     return RandomHand(
         seed=seed,
         fingers=fingers,
@@ -499,6 +524,8 @@ def random_hand(seed: int) -> RandomHand:
         p_object=p_object,
         R_object=R_object,
         declare_faces=shape == 'box' and bool(rng.random() < 0.5),
+        gravity=tuple(float(x) for x in gravity),
+        urdf_order=urdf_order,
     )
 
 

@@ -133,7 +133,8 @@ def test_each_fingertip_touches_the_object_by_pinocchios_collision_model(case):
         for k, g in enumerate(geometry.geometryObjects)
     }
     for finger, p_ours in zip(hand.fingers, hand.sphere_centres(hand.q0), strict=True):
-        centre, radius = spheres[f'{finger.name}_distal']
+        link = f'{finger.name}_tip' if finger.sphere_on_tip else f'{finger.name}_distal'
+        centre, radius = spheres[link]
         np.testing.assert_allclose(centre, p_ours, rtol=0, atol=1e-12)
         assert radius == finger.radius and 0.01 <= radius <= 0.03
     centres = hand.sphere_centres(hand.q0)
@@ -355,19 +356,18 @@ def test_filter_rows_and_optimum_match_the_formulas_and_two_exact_solvers(case):
 # -- start-up checks -------------------------------------------------------------------------
 
 
-def _nth(pattern: str, text: str, index: int) -> re.Match:
-    matches = list(re.finditer(pattern, text, flags=re.DOTALL))
-    return matches[index]
-
-
 def _cut(text: str, match: re.Match, replacement: str = '') -> str:
     return text[: match.start()] + replacement + text[match.end() :]
 
 
 def no_sphere(hand, i):
     """Leave the fingertip's collision sphere out of the URDF."""
+    finger = hand.fingers[i]
+    link = f'{finger.name}_tip' if finger.sphere_on_tip else f'{finger.name}_distal'
     text = hand.urdf()
-    return {'urdf': _cut(text, _nth(r'    <collision>.*?</collision>\n', text, i))}, (
+    start = text.index(f'<link name="{link}">')
+    sphere = re.compile(r'    <collision>.*?</collision>\n', flags=re.DOTALL).search(text, start)
+    return {'urdf': _cut(text, sphere)}, (
         'model.fingertip_frames',
         f"'{hand.fingers[i].name}_tip'",
         '<collision><sphere>',
@@ -392,7 +392,7 @@ def radius_parameter(hand, i):
     return {'model': {'fingertip_radius': first.radius * 1.1}}, (
         'model.fingertip_radius',
         f"'{first.name}'",
-        f"'{first.name}_distal'",
+        f"'{first.name}_tip'" if first.sphere_on_tip else f"'{first.name}_distal'",
     )
 
 
@@ -484,7 +484,7 @@ def _merge(document: dict, edits: dict) -> None:
 
 
 @pytest.mark.parametrize('mistake', list(MISTAKES))
-@pytest.mark.parametrize('seed', SEEDS[:8])
+@pytest.mark.parametrize('seed', SEEDS[:5])
 def test_each_mistake_is_refused_at_start_naming_it(tmp_path, seed, mistake):
     import yaml
 
