@@ -13,7 +13,7 @@ side faces, inside their edges; a sphere around its equator); each finger's post
 its kinematics evaluated here (numpy, not Pinocchio), and the finger's base placed so that its
 sphere centre lies one fingertip radius off the contact point along the surface normal. Joint
 limits are drawn around that posture, and the tip frame is turned so its z axis points at
-the object (tilted by up to 0.25 rad). The hand's link data are kept for the tests'
+the object (tilted by up to 0.8 rad). The hand's link data are kept for the tests'
 independent mass matrix (:meth:`RandomHand.mass_matrix`).
 """
 
@@ -423,7 +423,7 @@ def random_hand(seed: int) -> RandomHand:
         sizes = np.array(edges)
         R_object = rotation_about(np.array([0, 0, 1.0]), rng.uniform(-math.pi, math.pi))
         tilt_axis = np.array([*rng.normal(size=2), 0.0])
-        R_object = rotation_about(tilt_axis / np.linalg.norm(tilt_axis), rng.uniform(0, 0.15)) @ (
+        R_object = rotation_about(tilt_axis / np.linalg.norm(tilt_axis), rng.uniform(0, 0.4)) @ (
             R_object
         )
         radius_object = None
@@ -477,7 +477,7 @@ def random_hand(seed: int) -> RandomHand:
         base = target - probe.sphere_centre_in_palm(q)
         R_distal = probe.link_frames(q)[-1][0]
         z_tip = rotation_about(
-            frame_with_z(-n_palm, 0.0)[:, int(rng.integers(2))], rng.uniform(-0.25, 0.25)
+            frame_with_z(-n_palm, 0.0)[:, int(rng.integers(2))], rng.uniform(-0.8, 0.8)
         ) @ (-n_palm)
         tip_rotation = R_distal.T @ frame_with_z(z_tip, rng.uniform(-math.pi, math.pi))
         tip_link = box_link(rng, f'{name}_tip', radius, radius) if rng.random() < 0.5 else None

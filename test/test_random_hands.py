@@ -18,6 +18,7 @@ checked against what the package did not compute itself:
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 import re
 
@@ -106,13 +107,14 @@ def assert_close(actual, expected, what: str, rtol: float = RTOL) -> None:
     assert error <= rtol, f'{what}: relative error {error:.2e} > {rtol:g}\n{actual}\n{expected}'
 
 
-def outward_normals(case: Case, p_sphere: np.ndarray, c: Configuration) -> np.ndarray:
+def outward_normals(
+    hand, p_sphere: np.ndarray, p_object: np.ndarray, R_object: np.ndarray
+) -> np.ndarray:
     """Return the object's outward normal at each contact (palm frame) from its geometry."""
-    hand = case.hand
     if hand.shape == 'sphere':
-        d = p_sphere - c.p_object
+        d = p_sphere - p_object
         return d / np.linalg.norm(d, axis=1, keepdims=True)
-    return np.array([FACE_AXES[f][1] * c.R_object[:, FACE_AXES[f][0]] for f in hand.faces])
+    return np.array([FACE_AXES[f][1] * R_object[:, FACE_AXES[f][0]] for f in hand.faces])
 
 
 # -- the generator's grasp -------------------------------------------------------------------
@@ -230,7 +232,7 @@ def test_grasp_map_is_the_wrench_of_forces_at_the_geometric_contact_points(case)
     for c in case.configurations:
         state = c.state(case.model)
         centres = case.hand.sphere_centres(c.q)
-        normals = outward_normals(case, centres, c)
+        normals = outward_normals(case.hand, centres, c.p_object, c.R_object)
         radii = np.array([f.radius for f in case.hand.fingers])
         p_contact = centres - radii[:, None] * normals
         np.testing.assert_allclose(state.p_contact_in_palm, p_contact, rtol=0, atol=1e-10)
@@ -397,11 +399,18 @@ def radius_parameter(hand, i):
 
 
 def tip_z_sideways(hand, i):
-    """Turn the tip frame 100 degrees about its x axis: z no longer out of the tip."""
+    """Turn the tip frame's z axis to 100 degrees from the contact: z not out of the tip."""
     finger = hand.fingers[i]
-    turned = finger.tip_rotation @ rotation_about(np.array([1.0, 0.0, 0.0]), np.radians(100.0))
+    centres = hand.sphere_centres(hand.q0)
+    inward = -outward_normals(hand, centres, hand.p_object, hand.R_object)[i]
+    R_distal = finger.link_frames(hand.finger_q(hand.q0)[i])[-1][0]
+    d = (R_distal @ finger.tip_rotation).T @ inward  # the contact direction, tip frame
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(z, d)
+    angle = math.atan2(np.linalg.norm(axis), d @ z)
+    away = rotation_about(axis / np.linalg.norm(axis), -(math.radians(100.0) - angle))
     fingers = list(hand.fingers)
-    fingers[i] = dataclasses.replace(finger, tip_rotation=turned)
+    fingers[i] = dataclasses.replace(finger, tip_rotation=finger.tip_rotation @ away)
     return {'urdf': dataclasses.replace(hand, fingers=fingers).urdf()}, (
         f"contact '{finger.name}'",
         'outside the fingertip workspace',
