@@ -567,6 +567,7 @@ def test_a_short_filtered_run_holds_the_grasp(tmp_path, seed):
     recording = record_run(RunOptions(path, 'filtered'), tmp_path / 'bag')
     run = load_run(tmp_path / 'bag')
     assert recording.interrupted is None and recording.t_end == pytest.approx(0.2)
+    assert recording.stop_reason == 'duration'
     assert run.stop_reason == 'duration' and run.t.size >= 200
     for family, record in recording.live_log.families.items():
         assert record.count == 0 and record.min_margin > 0.0, (family, record)
