@@ -11,8 +11,11 @@ checked against what the package did not compute itself:
 - Jacobians, G, the rolling rates and xi_cf_ddot against finite differences along rolling
   motions, G against the wrench of forces at the contact points found from the geometry;
 - the filter's rows against their documented formulas and u* against two exact QP solvers;
-- each configuration mistake refused at start naming its contact, link or parameter;
-- a short closed-loop run of the lockstep runner with the filter on.
+- the nominal torque against the object acceleration of the model's constrained dynamics;
+- each configuration mistake refused at start naming its contact, link or parameter, and
+  odometry of another object frame refused by the controller and the filter;
+- the unactuated plant's energy against ode3's order of accuracy, and a short closed-loop
+  run of the lockstep runner with the filter on.
 """
 
 from __future__ import annotations
@@ -32,6 +35,8 @@ from test_endpoints import make_filter, make_nominal, make_sim, statuses, throug
 from test_filter_on_model import CONFIGS, independent_residuals, independent_rows, row_weights
 
 from grasp_safety_filter.analysis.run_data import load_run
+from grasp_safety_filter.control.nominal import NominalConfig, NominalController
+from grasp_safety_filter.control.reference import ReferenceSample
 from grasp_safety_filter.control.safety_filter import SafetyFilter
 from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.io.schemas import load_node_parameters
@@ -618,3 +623,36 @@ def test_the_unactuated_plant_conserves_energy_to_integrator_accuracy(tmp_path, 
     assert kinetic > 1e-4, kinetic  # the hand really moved
     assert drifts[1] <= 1e-5 * kinetic, drifts
     assert 6.0 < drifts[0] / drifts[1] < 10.5, drifts
+
+
+def test_nominal_torque_gives_the_desired_object_acceleration(case):
+    """Computed torque: x_o_ddot(u_nom) is the desired one; squeeze and posture move nothing.
+
+    The object acceleration comes from the model's constrained dynamics, not from the
+    controller's M_ho and C_ho; the internal force lies in null(G) and the null-space
+    posture torque changes neither the contact forces nor the object's acceleration.
+    """
+    rng = np.random.default_rng(case.hand.seed + 4)
+    controller = NominalController(NominalConfig(), posture=case.hand.q0)
+    for c in case.configurations:
+        state = c.state(case.model)
+        pose = np.concatenate((c.p_object, rng.normal(0.0, 0.1, 3)))
+        sample = ReferenceSample(
+            r=pose + rng.normal(0.0, 0.01, 6),
+            r_dot=rng.normal(0.0, 0.05, 6),
+            r_ddot=rng.normal(0.0, 0.1, 6),
+        )
+        output = controller.compute(state, sample)
+        desired = output.object_acceleration_desired
+        scale = 1.0 + np.abs(desired).max()
+        np.testing.assert_allclose(
+            state.object_acceleration(output.u), desired, rtol=0, atol=1e-8 * scale
+        )
+        np.testing.assert_allclose(state.G @ output.u_internal, 0.0, atol=1e-12)
+        without_posture = output.u - output.u_null_space
+        np.testing.assert_allclose(
+            state.contact_force(output.u),
+            state.contact_force(without_posture),
+            rtol=0,
+            atol=1e-9 * (1.0 + np.abs(state.contact_force(output.u)).max()),
+        )
