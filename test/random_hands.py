@@ -4,8 +4,11 @@
 (abduction about the finger's x axis or a twist about its z axis, then flexions about y; axis
 signs random, some axes tilted off the coordinate axes), random link lengths, masses and
 inertias (boxes with their inertial frames turned), a fingertip sphere of radius 1–3 cm
-declared as the distal link's ``<collision><sphere>`` away from the link's origin, and a tip
-frame (``finger<i>_tip``) at the sphere's centre with z towards the object.
+declared as the distal link's ``<collision><sphere>`` away from the link's origin (for some
+fingers on the tip link instead, off the tip frame's origin), and a tip frame
+(``finger<i>_tip``, on a fixed child link, massive or not) with z towards the object. Some
+seeds permute the command joint order, write the fingers into the URDF out of contact order,
+or tilt gravity up to 0.6 rad off -z.
 
 The grasp is built backwards, so that it touches exactly: the object (a box of three edge
 lengths or a sphere) is placed first and a contact point chosen per finger on it (a box's
@@ -51,7 +54,7 @@ def frame_with_z(z: np.ndarray, spin: float) -> np.ndarray:
     helper = np.eye(3)[int(np.argmin(np.abs(z)))]
     x = helper - (helper @ z) * z
     x /= np.linalg.norm(x)
-    x, y = x, np.cross(z, x)
+    y = np.cross(z, x)
     c, s = math.cos(spin), math.sin(spin)
     return np.column_stack((c * x + s * y, -s * x + c * y, z))
 
@@ -423,9 +426,8 @@ def random_hand(seed: int) -> RandomHand:
         sizes = np.array(edges)
         R_object = rotation_about(np.array([0, 0, 1.0]), rng.uniform(-math.pi, math.pi))
         tilt_axis = np.array([*rng.normal(size=2), 0.0])
-        R_object = rotation_about(tilt_axis / np.linalg.norm(tilt_axis), rng.uniform(0, 0.4)) @ (
-            R_object
-        )
+        tilt = rotation_about(tilt_axis / np.linalg.norm(tilt_axis), rng.uniform(0, 0.4))
+        R_object = tilt @ R_object
         radius_object = None
     else:
         radius_object = float(rng.uniform(0.025, 0.05))
@@ -458,21 +460,22 @@ def random_hand(seed: int) -> RandomHand:
         target = p_object + R_object @ point + radius * n_palm
         inward = -np.array([n_palm[0], n_palm[1], 0.0])
         base_rotation = rotation_about(np.array([0, 0, 1.0]), math.atan2(inward[1], inward[0]))
+        # The finger with its base at the palm origin: where its sphere centre is at q.
         probe = Finger(
-            name,
-            np.zeros(3),
-            base_rotation,
-            axes,
-            lengths[:-1],
-            links,
-            sphere,
-            radius,
-            sphere,
-            np.eye(3),
-            None,
-            q - 1.0,
-            q + 1.0,
-            np.ones(k),
+            name=name,
+            base_position=np.zeros(3),
+            base_rotation=base_rotation,
+            axes=axes,
+            offsets=lengths[:-1],
+            links=links,
+            sphere_centre=sphere,
+            radius=radius,
+            tip_origin=sphere,
+            tip_rotation=np.eye(3),
+            tip_link=None,
+            lower=q - 1.0,
+            upper=q + 1.0,
+            effort=np.ones(k),
         )
         base = target - probe.sphere_centre_in_palm(q)
         R_distal = probe.link_frames(q)[-1][0]

@@ -30,7 +30,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 from qp_reference import chebyshev_radius, hard_optimum, relaxed_optimum
-from random_hands import random_hand, rotation_about, write_scenario
+from random_hands import random_hand, RandomHand, rotation_about, write_scenario
 from test_endpoints import make_filter, make_nominal, make_sim, statuses, through_cdr
 from test_filter_on_model import CONFIGS, independent_residuals, independent_rows, row_weights
 
@@ -58,14 +58,16 @@ FACE_AXES = {'+x': (0, 1.0), '-x': (0, -1.0), '+y': (1, 1.0), '-y': (1, -1.0)}
 class Case:
     """A random hand, its written scenario, its model and rolling configurations near the grasp."""
 
-    hand: object
+    hand: RandomHand
     directory: Path
     params: dict
     model: GraspModel
     configurations: list[Configuration]
 
 
-def near_grasp(case_hand, model, rng, count):
+def near_grasp(
+    case_hand: RandomHand, model: GraspModel, rng: np.random.Generator, count: int
+) -> list[Configuration]:
     """Return grasps near the initial one: object moved, fingertips projected, rolling."""
     found = []
     for _ in range(50 * count):
@@ -83,23 +85,15 @@ def near_grasp(case_hand, model, rng, count):
     raise AssertionError(f'seed {case_hand.seed}: no grasp near the initial one')
 
 
-_CASES: dict[int, Case] = {}
-
-
-@pytest.fixture(params=SEEDS, ids=[f'seed{s}' for s in SEEDS])
+@pytest.fixture(scope='module', params=SEEDS, ids=[f'seed{s}' for s in SEEDS])
 def case(request, tmp_path_factory) -> Case:
-    seed = request.param
-    if seed not in _CASES:
-        hand = random_hand(seed)
-        directory = tmp_path_factory.mktemp(f'hand{seed}')
-        path = hand.write(directory)
-        params = {**hand.model_parameters(path), **hand.initial_parameters()}
-        model = GraspModel.from_parameters(params)
-        rng = np.random.default_rng(1000 + seed)
-        _CASES[seed] = Case(
-            hand, directory, params, model, near_grasp(hand, model, rng, N_CONFIGURATIONS)
-        )
-    return _CASES[seed]
+    hand = random_hand(request.param)
+    directory = tmp_path_factory.mktemp(f'hand{request.param}')
+    path = hand.write(directory)
+    params = {**hand.model_parameters(path), **hand.initial_parameters()}
+    model = GraspModel.from_parameters(params)
+    rng = np.random.default_rng(1000 + request.param)
+    return Case(hand, directory, params, model, near_grasp(hand, model, rng, N_CONFIGURATIONS))
 
 
 def central(f, c: Configuration, **kwargs) -> np.ndarray:
