@@ -587,7 +587,7 @@ def test_a_short_filtered_run_holds_the_grasp(tmp_path, seed):
 
 @pytest.mark.parametrize('seed', (3, 6))
 def test_the_unactuated_plant_conserves_energy_to_integrator_accuracy(tmp_path, seed):
-    """u = 0 for 50 ms, no stabilisation: the drift is ode3's (halving the step: ~1/8).
+    """Zero torque for 50 ms, no stabilisation: the drift is ode3's (halving the step: ~1/8).
 
     Rolling contact does no work, so the hand's and object's kinetic plus potential energy
     (gravity tilted off -z for seeds 3 and 6) changes only by the integrator's error. The
