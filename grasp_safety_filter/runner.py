@@ -341,7 +341,7 @@ def _record(
         bag.set_custom_data('interrupted', type(error).__name__)
         raise
     simulator = sim.simulator
-    return Recording(interrupted, simulator.log, simulator.stop_reason, simulator.t)
+    return Recording(interrupted, simulator.log, sim.stop_reason, simulator.t)
 
 
 def _write_summary(out_dir: Path, summary: dict[str, Any]) -> None:
