@@ -7,6 +7,7 @@ semi-implicit Euler solution. The closed loop on our rigid plant reproduces the 
 recorded run tick by tick; on MuJoCo, the paper's scenario runs 0.3 s with the filter.
 """
 
+import json
 from pathlib import Path
 import sys
 
@@ -16,6 +17,8 @@ import pytest
 from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario
 from grasp_safety_filter.control.filter_result import FilterStatus
 from grasp_safety_filter.control.nominal import NominalController
+from grasp_safety_filter.errors import EXIT_CONFIG_ERROR
+from hand_sim_node import mujoco_run
 from hand_sim_node.closed_loop import DURATION, run_closed_loop
 from hand_sim_node.mjcf import mjcf_from_model, MjcfError, MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant, MuJoCoUnavailableError, OBJECT_DROPPED
@@ -188,3 +191,26 @@ def test_filtered_paper_run_on_mujoco_keeps_every_contact(scenario):
     slip = np.array([report.slip_distance for report in reports])
     assert np.all(np.isfinite(slip)) and np.all(np.diff(slip, axis=0) >= 0.0)
     assert np.all(slip[-1] > 0.0)  # soft contacts creep: MuJoCo reports it
+
+
+def test_measurement_command_writes_its_figures(tmp_path, capsys):
+    """``python -m hand_sim_node.mujoco_run``: both runs, the figures on stdout and in JSON."""
+    out = tmp_path / 'figures.json'
+    argv = ['--config', str(CONFIG), '--mode', 'both', '--duration', '0.02', '--json', str(out)]
+    assert mujoco_run.main(argv) == 0
+    figures = json.loads(out.read_text())
+    assert json.loads(capsys.readouterr().out) == figures
+    assert figures['mujoco']['solref'] == [0.02, 1.0]
+    for mode in ('nominal', 'filtered'):
+        run = figures[mode]
+        assert run['stop_reason'] == DURATION and run['t_end_s'] == pytest.approx(0.02)
+        assert run['contact_first_lost_s'] == dict.fromkeys(('finger1', 'finger2', 'finger3'))
+        assert run['object_dropped_s'] is None
+    assert sum(figures['filtered']['filter_statuses'].values()) == 20
+    assert figures['nominal']['filter_statuses'] == {}
+
+
+def test_measurement_command_refuses_bad_options(capsys):
+    assert mujoco_run.main(['--config', str(CONFIG), '--solref', '0', '1']) == EXIT_CONFIG_ERROR
+    error = capsys.readouterr().err
+    assert error.startswith('mujoco_run: mujoco.solref') and error.count('\n') == 1
