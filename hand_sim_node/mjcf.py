@@ -69,6 +69,11 @@ class MjcfOptions:
             ``timestep`` ≤ timeconst / 2).
         solimp: ``(dmin, dmax, width, midpoint, power)``; MuJoCo's default
             (0.9, 0.95, 0.001, 0.5, 2).
+        impratio: Ratio of the frictional to the normal constraint impedance; MuJoCo's default
+            1. Larger values make friction stiffer (MuJoCo advises it with elliptic cones).
+        noslip_iterations: Iterations of MuJoCo's no-slip post-solver; MuJoCo's default 0
+            (off). Soft friction creeps under a steady tangential load, at a speed about
+            proportional to the load; the no-slip solver removes that creep.
         timestep: MuJoCo's step, s. Not MuJoCo's default 0.002 s: the scenarios' control
             period is 1 ms, which must be a whole number of MuJoCo steps.
         integrator: ``"Euler"`` (MuJoCo's default, semi-implicit), ``"RK4"``, ``"implicit"``
@@ -84,6 +89,8 @@ class MjcfOptions:
     condim: int = 3
     solref: tuple[float, float] = (0.02, 1.0)
     solimp: tuple[float, float, float, float, float] = field(default=(0.9, 0.95, 0.001, 0.5, 2.0))
+    impratio: float = 1.0
+    noslip_iterations: int = 0
     timestep: float = 0.001
     integrator: str = 'Euler'
     joint_limits: bool = True
@@ -98,6 +105,12 @@ class MjcfOptions:
         positive('torsional_friction', self.torsional_friction)
         positive('rolling_friction', self.rolling_friction)
         positive('timestep', self.timestep)
+        positive('impratio', self.impratio)
+        if not (isinstance(self.noslip_iterations, int) and self.noslip_iterations >= 0):
+            raise MjcfError(
+                'mujoco.noslip_iterations: expected an integer >= 0, got '
+                f'{self.noslip_iterations!r}'
+            )
         if self.cone not in CONES:
             raise MjcfError(f'mujoco.cone: expected one of {list(CONES)}, got {self.cone!r}')
         if self.condim not in CONDIMS:
@@ -189,6 +202,8 @@ def mjcf_from_model(model: GraspModel, options: MjcfOptions | None = None) -> st
         timestep=repr(float(options.timestep)),
         integrator=options.integrator,
         cone=options.cone,
+        impratio=repr(float(options.impratio)),
+        noslip_iterations=str(options.noslip_iterations),
         gravity=_numbers(np.asarray(pin_model.gravity.linear)),
     )
     world = ET.SubElement(root, 'worldbody')

@@ -7,11 +7,14 @@ distance per contact, the largest slip speed, the deepest penetration, the joint
 passed, the filter's statuses. ``--json`` writes the figures to a file. A measurement, not a
 test: nothing is asserted.
 
-Example (the paper's two runs, MuJoCo's default contacts, then stiff ones)::
+Example (the paper's two runs, MuJoCo's default contacts, then stiff ones, then without the
+creep of soft friction)::
 
     python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both
     python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
         --solref 0.004 1.0
+    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
+        --noslip-iterations 10
 """
 
 from __future__ import annotations
@@ -126,6 +129,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument('--cone', choices=CONES, default=defaults.cone)
     parser.add_argument('--condim', type=int, default=defaults.condim)
+    parser.add_argument('--impratio', type=float, default=defaults.impratio)
+    parser.add_argument(
+        '--noslip-iterations',
+        type=int,
+        default=defaults.noslip_iterations,
+        help="MuJoCo no-slip post-solver iterations (0: off, MuJoCo's default)",
+    )
     parser.add_argument('--timestep', type=float, default=defaults.timestep, help='MuJoCo step, s')
     parser.add_argument('--integrator', choices=INTEGRATORS, default=defaults.integrator)
     parser.add_argument('--friction', type=float, help="plant mu (default: the model's)")
@@ -142,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
             cone=args.cone,
             condim=args.condim,
             solref=tuple(args.solref),
+            impratio=args.impratio,
+            noslip_iterations=args.noslip_iterations,
             timestep=args.timestep,
             integrator=args.integrator,
         )
@@ -158,6 +170,8 @@ def main(argv: list[str] | None = None) -> int:
             'solimp': list(options.solimp),
             'cone': options.cone,
             'condim': options.condim,
+            'impratio': options.impratio,
+            'noslip_iterations': options.noslip_iterations,
             'timestep_s': options.timestep,
             'integrator': options.integrator,
             'friction': options.friction(scenario.model),

@@ -169,6 +169,8 @@ def test_contact_parameters_reach_mujoco(plant, options):
     mj = mujoco.MjModel.from_xml_string(mjcf_from_model(model, options))
     assert mj.opt.cone == {'pyramidal': 0, 'elliptic': 1}[options.cone]
     assert mj.opt.timestep == options.timestep
+    assert mj.opt.impratio == options.impratio
+    assert mj.opt.noslip_iterations == options.noslip_iterations
     np.testing.assert_array_equal(mj.opt.gravity, model.object.gravity)
     tips = [mj.geom(fingertip_geom_name(name)).id for name in model.contact_names]
     for geom in (*tips, mj.geom('object/shape').id):

@@ -67,6 +67,8 @@ def test_without_mujoco_the_plant_names_the_extra(scenario, monkeypatch):
         ({'solimp': (0.95, 0.9, 0.001, 0.5, 2.0)}, 'mujoco.solimp'),
         ({'integrator': 'euler'}, 'mujoco.integrator'),
         ({'friction_coefficient': -0.1}, 'mujoco.friction_coefficient'),
+        ({'impratio': 0.0}, 'mujoco.impratio'),
+        ({'noslip_iterations': -1}, 'mujoco.noslip_iterations'),
     ],
 )
 def test_bad_options_are_refused(scenario, options, match):
@@ -151,6 +153,26 @@ def test_contact_measurements_agree_with_our_geometry(scenario):
         checked[-1].slip_distance, speeds.sum(axis=0) * plant.options.timestep, rtol=1e-12
     )
     assert np.all(speeds.max(axis=0) > 0.0)
+
+
+def test_soft_friction_creeps_with_the_load_and_the_noslip_solver_stops_it(scenario):
+    """Slip on a held grasp: soft friction creeps, most where the friction force is largest."""
+
+    def slip_after(options):
+        plant = mujoco_plant(scenario, options=options)
+        run_closed_loop(
+            plant, NominalController(scenario.nominal_config),
+            scenario.reference(plant.observe()), None, 0.1,
+        )
+        return plant.contacts()
+
+    soft = slip_after(MjcfOptions())
+    # Fingers 1 and 2 carry ~0.7 N of friction, finger 3 ~0.05 N: it creeps far less.
+    assert soft.tangential_force[2] < 0.2 * soft.tangential_force[:2].min()
+    assert soft.slip_distance[2] < 0.2 * soft.slip_distance[:2].min()
+    hard = slip_after(MjcfOptions(noslip_iterations=10))
+    assert np.all(hard.slip_distance < 0.1 * soft.slip_distance)
+    assert hard.present.all()
 
 
 def test_closed_loop_on_our_plant_is_the_recorded_run(scenario):
