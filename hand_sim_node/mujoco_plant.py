@@ -66,7 +66,8 @@ class ContactReport:
             touch tolerance.
         distance: Signed distance fingertip sphere–object (``mj_geomDistance``), m
             (< 0: interpenetration; at most ``distance_limit``).
-        normal_force: Normal contact force, N (≥ 0; 0 without contact).
+        normal_force: Normal contact force, N (≥ 0; 0 without contact; summed over MuJoCo's
+            contacts of the pair, one for a sphere on a box or a sphere).
         tangential_force: Magnitude of the friction force, N.
         slip_speed: Tangential speed of the fingertip's material point relative to the
             object's at the contact point, m/s (0 without contact).
@@ -262,7 +263,7 @@ class MuJoCoPlant:
 
     # -------------------------------------------------------------------------- contacts
     def _pair(self, contact: Any) -> int | None:
-        """Index of the fingertip of a MuJoCo contact with the object, or None."""
+        """Return the index of the fingertip of a MuJoCo contact with the object, or None."""
         geoms = {int(contact.geom1), int(contact.geom2)}
         if self.object_geom not in geoms:
             return None
