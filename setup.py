@@ -40,6 +40,7 @@ setup(
             'flake8-docstrings==1.7.0',
             'flake8-builtins==3.1.0',
             'flake8-comprehensions==3.17.0',
+            'mujoco>=3.2',  # test/test_mujoco_*.py: the MuJoCo plant against our model
         ],
         # Real ROS 2 Jazzy rclpy and the message packages from the package index: the nodes
         # run and are tested over Fast DDS without a ROS install (no AMENT_PREFIX_PATH).
@@ -57,6 +58,9 @@ setup(
         ],
         # grasp-bench's comparison: the same QPs through cvxpy (OSQP, Clarabel) and daqp.
         'bench': ['cvxpy>=1.4', 'qpsolvers>=4.0'],
+        # The MuJoCo plant (hand_sim_node.mujoco_plant): soft contacts, Coulomb friction.
+        # Not 4.x only: mujoco 4 needs Python >= 3.11, the package supports 3.10.
+        'mujoco': ['mujoco>=3.2'],
     },
     python_requires='>=3.10',
     zip_safe=True,

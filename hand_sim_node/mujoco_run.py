@@ -1,0 +1,190 @@
+r"""The scenario's runs on the MuJoCo plant, measured: ``python -m hand_sim_node.mujoco_run``.
+
+Runs the nominal and/or the filtered closed loop (:func:`~hand_sim_node.closed_loop.
+run_closed_loop`) on :class:`~hand_sim_node.mujoco_plant.MuJoCoPlant` and prints, per run,
+what MuJoCo measured: when each contact was first lost and when the object dropped, the slip
+distance per contact, the largest slip speed, the deepest penetration, the joint limits
+passed, the filter's statuses. ``--json`` writes the figures to a file. A measurement, not a
+test: nothing is asserted.
+
+Example (the paper's two runs, MuJoCo's default contacts, then stiff ones, then without the
+creep of soft friction)::
+
+    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both
+    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
+        --solref 0.004 1.0
+    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
+        --noslip-iterations 10
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import Counter
+import json
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.bench.recorded_run import Scenario
+from grasp_safety_filter.control.nominal import NominalController
+from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+from hand_sim_node.closed_loop import LoopRun, run_closed_loop
+from hand_sim_node.mjcf import CONES, INTEGRATORS, MjcfOptions
+from hand_sim_node.mujoco_plant import ContactReport, MuJoCoPlant
+
+#: Times at which the slip distance so far is reported too, s.
+SLIP_CHECKPOINTS = (0.3, 1.0, 5.0)
+
+#: ``--mode`` values: the runs each one makes.
+MODES = {'nominal': ('nominal',), 'filtered': ('filtered',), 'both': ('nominal', 'filtered')}
+
+
+def measure(run: LoopRun, reports: list[ContactReport], plant: MuJoCoPlant) -> dict[str, Any]:
+    """Figures of one run from its ticks and MuJoCo's contact report after every step."""
+    model = plant.model
+    names = model.contact_names
+    present = np.array([report.present for report in reports])
+    t = np.array([report.t for report in reports])
+    lost = {
+        name: (float(t[np.flatnonzero(~present[:, i])[0]]) if (~present[:, i]).any() else None)
+        for i, name in enumerate(names)
+    }
+    dropped = [report.t for report in reports if report.object_dropped]
+    q = np.vstack([run.array('q'), run.final.q[None]])
+    below = np.max(model.joint_lower_limits - q, axis=0)
+    above = np.max(q - model.joint_upper_limits, axis=0)
+    passed = {
+        name: float(max(lo, hi))
+        for name, lo, hi in zip(model.joint_names, below, above, strict=True)
+        if max(lo, hi) > 0.0
+    }
+    last = reports[-1]
+    statuses = Counter(str(tick.status.value) for tick in run.ticks if tick.status is not None)
+    return {
+        'stop_reason': run.stop_reason,
+        't_end_s': run.final.t,
+        'wall_s': run.wall,
+        'contact_first_lost_s': lost,
+        'object_dropped_s': dropped[0] if dropped else None,
+        'slip_distance_mm': dict(zip(names, (1e3 * last.slip_distance).tolist(), strict=True)),
+        'slip_distance_mm_at_s': {
+            str(checkpoint): (1e3 * reports[index].slip_distance).round(3).tolist()
+            for checkpoint in SLIP_CHECKPOINTS
+            if (index := int(np.searchsorted(t, checkpoint - 1e-9))) < len(reports)
+        },
+        'max_slip_speed_mm_s': dict(
+            zip(
+                names,
+                (1e3 * np.max([r.slip_speed for r in reports], axis=0)).tolist(),
+                strict=True,
+            )
+        ),
+        'max_penetration_mm': dict(
+            zip(
+                names, (-1e3 * np.min([r.distance for r in reports], axis=0)).tolist(), strict=True
+            )
+        ),
+        'joint_limits_passed_rad': passed,
+        'object_position_end_m': run.final.p_object_in_palm.tolist(),
+        'max_abs_torque_Nm': float(np.max(np.abs(run.array('u')))),
+        'filter_statuses': dict(statuses),
+    }
+
+
+def run_on_mujoco(
+    scenario: Scenario, options: MjcfOptions, mode: str, duration: float
+) -> dict[str, Any]:
+    """One run (``"nominal"`` or ``"filtered"``) of ``scenario`` on MuJoCo, measured."""
+    plant = MuJoCoPlant(scenario.model, scenario.sim_config, options)
+    reports: list[ContactReport] = []
+    run = run_closed_loop(
+        plant,
+        NominalController(scenario.nominal_config),
+        scenario.reference(plant.observe()),
+        scenario.safety_filter() if mode == 'filtered' else None,
+        duration,
+        after_step=lambda _plant: reports.append(plant.contacts()),
+    )
+    return measure(run, reports, plant)
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """Command line (see the module docstring)."""
+    parser = argparse.ArgumentParser(
+        prog='python -m hand_sim_node.mujoco_run', description=__doc__.splitlines()[0]
+    )
+    parser.add_argument('--config', type=Path, default=Path('config/paper_scenario.yaml'))
+    parser.add_argument('--mode', choices=sorted(MODES), default='both')
+    parser.add_argument('--duration', type=float, help="s (default: the scenario's)")
+    defaults = MjcfOptions()
+    parser.add_argument(
+        '--solref',
+        type=float,
+        nargs=2,
+        default=defaults.solref,
+        metavar=('TIMECONST', 'DAMPRATIO'),
+    )
+    parser.add_argument('--cone', choices=CONES, default=defaults.cone)
+    parser.add_argument('--condim', type=int, default=defaults.condim)
+    parser.add_argument('--impratio', type=float, default=defaults.impratio)
+    parser.add_argument(
+        '--noslip-iterations',
+        type=int,
+        default=defaults.noslip_iterations,
+        help="MuJoCo no-slip post-solver iterations (0: off, MuJoCo's default)",
+    )
+    parser.add_argument('--timestep', type=float, default=defaults.timestep, help='MuJoCo step, s')
+    parser.add_argument('--integrator', choices=INTEGRATORS, default=defaults.integrator)
+    parser.add_argument('--friction', type=float, help="plant mu (default: the model's)")
+    parser.add_argument('--json', type=Path, help='also write the figures here')
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run and print the figures as JSON."""
+    args = parse_args(argv)
+    try:
+        options = MjcfOptions(
+            friction_coefficient=args.friction,
+            cone=args.cone,
+            condim=args.condim,
+            solref=tuple(args.solref),
+            impratio=args.impratio,
+            noslip_iterations=args.noslip_iterations,
+            timestep=args.timestep,
+            integrator=args.integrator,
+        )
+        scenario = Scenario.load(args.config)
+    except ConfigError as error:
+        print(config_error_line('mujoco_run', error), file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+    duration = args.duration or scenario.sim_config.duration
+    figures = {
+        'config': str(args.config),
+        'duration_s': duration,
+        'mujoco': {
+            'solref': list(options.solref),
+            'solimp': list(options.solimp),
+            'cone': options.cone,
+            'condim': options.condim,
+            'impratio': options.impratio,
+            'noslip_iterations': options.noslip_iterations,
+            'timestep_s': options.timestep,
+            'integrator': options.integrator,
+            'friction': options.friction(scenario.model),
+        },
+    }
+    for mode in MODES[args.mode]:
+        figures[mode] = run_on_mujoco(scenario, options, mode, duration)
+    text = json.dumps(figures, indent=2)
+    print(text)
+    if args.json is not None:
+        args.json.write_text(text + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
