@@ -58,7 +58,7 @@ class MjcfOptions:
 
     Attributes:
         friction_coefficient: Sliding friction μ of every fingertip–object contact; None:
-            the grasp model's μ (the filter's and the plant's the same).
+            each contact's own μ from the grasp model (the filter's and the plant's the same).
         torsional_friction: Torsional friction, m (used with ``condim`` 4 and 6); MuJoCo's
             default 0.005.
         rolling_friction: Rolling friction, m (``condim`` 6); MuJoCo's default 0.0001.
@@ -130,11 +130,11 @@ class MjcfOptions:
                 f'power >= 1, got {self.solimp!r}'
             )
 
-    def friction(self, model: GraspModel) -> float:
-        """Return the sliding friction coefficient MuJoCo uses with ``model``."""
+    def friction(self, model: GraspModel) -> np.ndarray:
+        """Return the sliding friction coefficient of each contact MuJoCo uses, shape (n,)."""
         if self.friction_coefficient is None:
-            return model.friction_coefficient
-        return self.friction_coefficient
+            return np.array(model.friction_coefficient, dtype=float).reshape(model.n_contacts)
+        return np.full(model.n_contacts, float(self.friction_coefficient))
 
 
 def _numbers(values: np.ndarray | tuple[float, ...] | list[float]) -> str:
@@ -186,13 +186,18 @@ def mjcf_from_model(model: GraspModel, options: MjcfOptions | None = None) -> st
     hand = model.hand
     pin_model = hand.model
     mu = options.friction(model)
-    friction = _numbers([mu, options.torsional_friction, options.rolling_friction])
+
+    def friction(sliding: float) -> str:
+        return _numbers([sliding, options.torsional_friction, options.rolling_friction])
+
+    # MuJoCo gives a contact the larger of its two geoms' coefficients: each fingertip
+    # carries its contact's μ, the object the smallest, so every contact gets its own.
     contact_attributes = {
         'condim': str(options.condim),
-        'friction': friction,
         'solref': _numbers(options.solref),
         'solimp': _numbers(options.solimp),
     }
+    mu_of_contact = dict(zip(model.contact_names, mu, strict=True))
 
     root = ET.Element('mujoco', model='grasp')
     ET.SubElement(root, 'compiler', angle='radian', inertiafromgeom='false', autolimits='true')
@@ -246,6 +251,7 @@ def mjcf_from_model(model: GraspModel, options: MjcfOptions | None = None) -> st
                 quat=_numbers(_quaternion_wxyz(tip_placement.rotation)),
                 contype='1',
                 conaffinity='0',
+                friction=friction(mu_of_contact[contact_name]),
                 **contact_attributes,
             )
 
@@ -264,6 +270,7 @@ def mjcf_from_model(model: GraspModel, options: MjcfOptions | None = None) -> st
         name=f'{OBJECT_BODY}/shape',
         contype='0',
         conaffinity='1',
+        friction=friction(float(mu.min())),
         **geom,
         **contact_attributes,
     )

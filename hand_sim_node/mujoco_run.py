@@ -174,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
             'noslip_iterations': options.noslip_iterations,
             'timestep_s': options.timestep,
             'integrator': options.integrator,
-            'friction': options.friction(scenario.model),
+            'friction': options.friction(scenario.model).tolist(),
         },
     }
     for mode in MODES[args.mode]:

@@ -22,7 +22,12 @@ from hand_sim_node.mujoco_plant import MuJoCoPlant
 from hand_sim_node.simulator import SimState
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
-SCENARIOS = ('paper_scenario.yaml', 'four_finger_box.yaml', 'four_finger_sphere.yaml')
+SCENARIOS = (
+    'paper_scenario.yaml',
+    'four_finger_box.yaml',
+    'four_finger_sphere.yaml',
+    'four_finger_three_contacts.yaml',  # a free finger, and unequal μ
+)
 SEEDS = range(4)
 #: Relative agreement of MuJoCo's and our (Pinocchio's) dynamics terms.
 RELATIVE = 1e-12
@@ -173,10 +178,14 @@ def test_contact_parameters_reach_mujoco(plant, options):
     assert mj.opt.noslip_iterations == options.noslip_iterations
     np.testing.assert_array_equal(mj.opt.gravity, model.object.gravity)
     tips = [mj.geom(fingertip_geom_name(name)).id for name in model.contact_names]
+    mu = options.friction(model)
     for geom in (*tips, mj.geom('object/shape').id):
         assert mj.geom_condim[geom] == options.condim
-        assert mj.geom_friction[geom][0] == options.friction(model)
         np.testing.assert_array_equal(mj.geom_solref[geom], options.solref)
+    # MuJoCo mixes a pair's coefficients by their maximum: each contact gets its own μ.
+    object_mu = mj.geom_friction[mj.geom('object/shape').id][0]
+    for geom, mu_i in zip(tips, mu, strict=True):
+        assert max(mj.geom_friction[geom][0], object_mu) == mu_i
     for k, name in enumerate(model.joint_names):
         joint = mj.joint(name)
         np.testing.assert_array_equal(

@@ -414,7 +414,7 @@ def tip_z_sideways(hand, i):
     fingers[i] = dataclasses.replace(finger, tip_rotation=finger.tip_rotation @ away)
     return {'urdf': dataclasses.replace(hand, fingers=fingers).urdf()}, (
         f"contact '{finger.name}'",
-        'outside the fingertip workspace',
+        'outside its fingertip workspace',
     )
 
 
