@@ -14,8 +14,8 @@ contact force affine in the torque:
     B_ho f_c = J_h M_h^-1 (u - C_h dq - g) + J_h_dot dq - G_dot^T x_o_dot
                + G^T M_o^-1 (C_o x_o_dot - w_e),    B_ho = J_h M_h^-1 J_h^T + G^T M_o^-1 G
 
-and with it ``ddq``, ``x_o_ddot`` and the fingertip contact coordinates' second
-derivatives. ``J_h_dot`` and ``G_dot`` are total time derivatives along the rolling
+and with it ``ddq``, ``x_o_ddot`` and the fingertip and object contact coordinates'
+second derivatives. ``J_h_dot`` and ``G_dot`` are total time derivatives along the rolling
 motion: they include the motion of the contact point over the fingertip and the rotation of
 the contact frame.
 """
@@ -411,7 +411,11 @@ class GraspModel:
         alpha_relative[:, :, m] += alpha_f0 - matvec(skew_contact, w_relative)
         xi_ddot = (rates.H_cf @ R_cp) @ alpha_relative
         xi_ddot[:, :, m] += rates.H_cf_dot_w
+        # xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot + bias (differentiated Montana equations).
+        xi_co_ddot = rates.object_from_fingertip @ xi_ddot
+        xi_co_ddot[:, :, m] += rates.xi_co_ddot_bias
         xi_ddot = xi_ddot.reshape(2 * n, m + 1)
+        xi_co_ddot = xi_co_ddot.reshape(2 * n, m + 1)
 
         arrays = {
             'q': q,
@@ -446,7 +450,7 @@ class GraspModel:
         }
         # Every array is handed out read-only; the augmented matrices are frozen before their
         # column views are taken, so that the views are read-only too.
-        for array in (*arrays.values(), force, ddq, x_ddot, xi_ddot):
+        for array in (*arrays.values(), force, ddq, x_ddot, xi_ddot, xi_co_ddot):
             array.setflags(write=False)
         return GraspState(
             t=float(t),
@@ -455,4 +459,5 @@ class GraspModel:
             joint_acceleration=AffineMap(ddq[:, :m], ddq[:, m]),
             object_acceleration=AffineMap(x_ddot[:, :m], x_ddot[:, m]),
             xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
+            xi_co_ddot=AffineMap(xi_co_ddot[:, :m], xi_co_ddot[:, m]),
         )

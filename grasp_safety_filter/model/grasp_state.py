@@ -70,6 +70,8 @@ class GraspState:
         joint_acceleration: ``u ↦ ddq``, shape (m, m).
         object_acceleration: ``u ↦ x_o_ddot = (a_o, alpha_o)``, shape (6, m).
         xi_cf_ddot: ``u ↦ (a_1_ddot, b_1_ddot, a_2_ddot, ...)``, shape (2n, m).
+        xi_co_ddot: ``u ↦`` second derivatives of ``xi_co`` (contact-major, like
+            ``xi_cf_ddot``), shape (2n, m); m/s² on a face, rad/s² in a sphere chart.
     """
 
     t: float
@@ -106,6 +108,7 @@ class GraspState:
     joint_acceleration: AffineMap
     object_acceleration: AffineMap
     xi_cf_ddot: AffineMap
+    xi_co_ddot: AffineMap
 
     @property
     def n_contacts(self) -> int:
