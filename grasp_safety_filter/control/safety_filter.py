@@ -55,6 +55,7 @@ from grasp_safety_filter.control.constraints import (
     FingertipWorkspaceBarrier,
     FrictionPyramid,
     JointLimitBarrier,
+    ObjectWorkspaceBarrier,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.control.filter_inputs import (
@@ -73,6 +74,7 @@ from grasp_safety_filter.control.qp_solvers import (
     SolutionStatus,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.model.surfaces import Surface
 
 __all__ = [
     'ACTIVE_TOLERANCE',
@@ -102,7 +104,7 @@ class SafetyFilter:
         config: The configuration.
         joint_names, contact_names: Model joint and contact order.
         families: The enabled barrier families, in row order (no slip, joint limits,
-            fingertip workspace).
+            fingertip workspace, object workspace).
         actuator_limits: The torque box (always enforced, never relaxed).
         row_names: Names of the barrier rows, in row order.
         hard_qp: The hard QP in OSQP's form, the rows' buffer (the last assembled data).
@@ -121,6 +123,7 @@ class SafetyFilter:
         u_max: float | Sequence[float] | np.ndarray,
         mu: float | Sequence[float] | np.ndarray,
         workspace: tuple[float, float, float, float],
+        object_surfaces: Sequence[Surface] | None = None,
     ) -> None:
         """Build the families, the problems and the QP backend.
 
@@ -134,6 +137,8 @@ class SafetyFilter:
             u_max: Upper actuator limits, N·m (scalar or (m,)).
             mu: Friction coefficient(s), > 0 (scalar or (n,)).
             workspace: Fingertip box ``(a_min, a_max, b_min, b_max)``, rad.
+            object_surfaces: Each contact's object surface; needed only with
+                ``object_workspace_enabled``.
 
         Raises:
             ValueError: A malformed argument; the message names it.
@@ -171,6 +176,24 @@ class SafetyFilter:
             chosen.append((joint_limits, config.joint_limits_weight))
         if config.fingertip_workspace_enabled:
             chosen.append((fingertip_workspace, config.fingertip_workspace_weight))
+        if config.object_workspace_enabled:
+            if object_surfaces is None:
+                raise ValueError(
+                    "'object_surfaces': expected each contact's object surface with "
+                    'object_workspace.enabled, got None'
+                )
+            object_workspace = ObjectWorkspaceBarrier.on_surfaces(
+                self.contact_names,
+                object_surfaces,
+                config.object_workspace_margin,
+                (
+                    config.object_workspace_sphere_a_half_width,
+                    config.object_workspace_sphere_b_half_width,
+                ),
+                config.alpha1,
+                config.alpha2,
+            )
+            chosen.append((object_workspace, config.object_workspace_weight))
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
         self.row_names: tuple[str, ...] = tuple(n for f in self.families for n in f.names)
         k = len(self.row_names)
@@ -207,12 +230,19 @@ class SafetyFilter:
             grasp_model: Anything with ``joint_names``, ``contact_names``,
                 ``joint_lower_limits``, ``joint_upper_limits``, ``effort_limits`` (u_max;
                 u_min = -u_max), ``friction_coefficient`` and ``fingertip_workspace``
-                (``(a_min, a_max, b_min, b_max)``), e.g. a ``GraspModel``.
+                (``(a_min, a_max, b_min, b_max)``), e.g. a ``GraspModel``; with
+                ``object_workspace.enabled`` also ``contacts`` (their ``object_surface``).
             config: The filter configuration (defaults if None).
         """
         effort = np.asarray(grasp_model.effort_limits, dtype=float)
+        config = config if config is not None else SafetyFilterConfig()
+        object_surfaces = (
+            [contact.object_surface for contact in grasp_model.contacts]
+            if config.object_workspace_enabled
+            else None
+        )
         return cls(
-            config if config is not None else SafetyFilterConfig(),
+            config,
             joint_names=grasp_model.joint_names,
             contact_names=grasp_model.contact_names,
             q_min=grasp_model.joint_lower_limits,
@@ -221,6 +251,7 @@ class SafetyFilter:
             u_max=effort,
             mu=grasp_model.friction_coefficient,
             workspace=tuple(grasp_model.fingertip_workspace),
+            object_surfaces=object_surfaces,
         )
 
     @property
