@@ -188,6 +188,28 @@ def test_a_margin_that_leaves_no_face_is_refused_naming_contact_and_face(shape, 
     SafetyFilter.from_config(model, dataclasses.replace(config, object_workspace_enabled=False))
 
 
+def test_faces_chosen_at_the_first_state_give_the_bounds_then():
+    """A box's nearest faces are chosen at the first state: the bounds follow them."""
+    model = paper_model(**MODELS['box'])
+    assert not model.contacts_bound
+    with pytest.raises(GraspConfigError, match=r"margin'.*smallest 0\.1302 m, got 0\.14 m"):
+        SafetyFilter.from_config(
+            model, SafetyFilterConfig(object_workspace_enabled=True, object_workspace_margin=0.14)
+        )
+    filter_ = SafetyFilter.from_config(
+        model, SafetyFilterConfig(object_workspace_enabled=True, object_workspace_margin=0.02)
+    )
+    state = model.state(
+        0.0, Q_PAPER, np.zeros(Q_PAPER.size), P_OBJECT_PAPER, np.eye(3), np.zeros(6)
+    )
+    margins = filter_.margins(state, np.zeros(model.n_joints))
+    expected = barrier_of(model, margin=0.02).values(state)
+    assert [margins[name] for name in expected.names] == expected.h.tolist()
+    # finger3 is on the +y face: 0.34 / 2 - 0.02 m along z, 0.1302 - 0.02 m along x.
+    finger3 = [margins[f'object_workspace/finger3/{row}'] for row in ('u_max', 'v_max')]
+    np.testing.assert_allclose(finger3, [0.17 - 0.02, 0.1302 - 0.02], atol=2e-3)
+
+
 @pytest.mark.parametrize(
     'half_widths,word',
     [((math.pi / 2, 1.0), 'sphere_a_half_width'), ((1.0, 1.6), 'sphere_b_half_width')],

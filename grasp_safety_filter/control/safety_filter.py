@@ -74,7 +74,6 @@ from grasp_safety_filter.control.qp_solvers import (
     SolutionStatus,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
-from grasp_safety_filter.model.surfaces import Surface
 
 __all__ = [
     'ACTIVE_TOLERANCE',
@@ -123,7 +122,7 @@ class SafetyFilter:
         u_max: float | Sequence[float] | np.ndarray,
         mu: float | Sequence[float] | np.ndarray,
         workspace: tuple[float, float, float, float],
-        object_surfaces: Sequence[Surface] | None = None,
+        object_workspace: ObjectWorkspaceBarrier | None = None,
     ) -> None:
         """Build the families, the problems and the QP backend.
 
@@ -137,8 +136,8 @@ class SafetyFilter:
             u_max: Upper actuator limits, N·m (scalar or (m,)).
             mu: Friction coefficient(s), > 0 (scalar or (n,)).
             workspace: Fingertip box ``(a_min, a_max, b_min, b_max)``, rad.
-            object_surfaces: Each contact's object surface; needed only with
-                ``object_workspace_enabled``.
+            object_workspace: The object-workspace family (its rows, same contacts);
+                needed only with ``object_workspace_enabled``.
 
         Raises:
             ValueError: A malformed argument; the message names it.
@@ -177,22 +176,14 @@ class SafetyFilter:
         if config.fingertip_workspace_enabled:
             chosen.append((fingertip_workspace, config.fingertip_workspace_weight))
         if config.object_workspace_enabled:
-            if object_surfaces is None:
+            if not isinstance(object_workspace, ObjectWorkspaceBarrier) or (
+                object_workspace.contact_names != self.contact_names
+            ):
                 raise ValueError(
-                    "'object_surfaces': expected each contact's object surface with "
-                    'object_workspace.enabled, got None'
+                    "'object_workspace': expected an ObjectWorkspaceBarrier of the contacts "
+                    f'{list(self.contact_names)} with object_workspace.enabled, got '
+                    f'{object_workspace!r}'
                 )
-            object_workspace = ObjectWorkspaceBarrier.on_surfaces(
-                self.contact_names,
-                object_surfaces,
-                config.object_workspace_margin,
-                (
-                    config.object_workspace_sphere_a_half_width,
-                    config.object_workspace_sphere_b_half_width,
-                ),
-                config.alpha1,
-                config.alpha2,
-            )
             chosen.append((object_workspace, config.object_workspace_weight))
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
         self.row_names: tuple[str, ...] = tuple(n for f in self.families for n in f.names)
@@ -231,13 +222,23 @@ class SafetyFilter:
                 ``joint_lower_limits``, ``joint_upper_limits``, ``effort_limits`` (u_max;
                 u_min = -u_max), ``friction_coefficient`` and ``fingertip_workspace``
                 (``(a_min, a_max, b_min, b_max)``), e.g. a ``GraspModel``; with
-                ``object_workspace.enabled`` also ``contacts`` (their ``object_surface``).
+                ``object_workspace.enabled`` a ``GraspModel`` (its contacts' object surfaces,
+                :meth:`ObjectWorkspaceBarrier.for_model`).
             config: The filter configuration (defaults if None).
         """
         effort = np.asarray(grasp_model.effort_limits, dtype=float)
         config = config if config is not None else SafetyFilterConfig()
-        object_surfaces = (
-            [contact.object_surface for contact in grasp_model.contacts]
+        object_workspace = (
+            ObjectWorkspaceBarrier.for_model(
+                grasp_model,
+                config.object_workspace_margin,
+                (
+                    config.object_workspace_sphere_a_half_width,
+                    config.object_workspace_sphere_b_half_width,
+                ),
+                config.alpha1,
+                config.alpha2,
+            )
             if config.object_workspace_enabled
             else None
         )
@@ -251,7 +252,7 @@ class SafetyFilter:
             u_max=effort,
             mu=grasp_model.friction_coefficient,
             workspace=tuple(grasp_model.fingertip_workspace),
-            object_surfaces=object_surfaces,
+            object_workspace=object_workspace,
         )
 
     @property

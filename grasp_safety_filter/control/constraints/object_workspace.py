@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 import math
+from typing import Any
 
 import numpy as np
 
@@ -108,6 +109,11 @@ class ObjectWorkspaceBarrier(BoxBarrier):
     margin. On a sphere object ``(x, y) = (a, b)`` in the contact's chart, h in rad and rows
     in rad/s². Row names ``"object_workspace/<contact>/u_min"`` (``u_max``, ``v_min``,
     ``v_max``; ``a_min``... on a sphere).
+
+    A grasp model whose box faces are chosen at the first configuration it is given
+    (``model.contact_faces: ["nearest"]``) gives each contact's face only then:
+    :meth:`for_model` checks the margin against every face of the box at construction and
+    takes each contact's bounds from its face at the first state.
     """
 
     family = 'object_workspace'
@@ -154,6 +160,10 @@ class ObjectWorkspaceBarrier(BoxBarrier):
         if len(labels) != n or any(len(r) != 4 for r in labels):
             raise ValueError(f"'row_labels': expected four labels per contact ({n}), got {labels}")
         self.lower, self.upper = bounds['lower'], bounds['upper']
+        self._alphas = (alpha1, alpha2)
+        # Gives the contacts' surfaces once the model has chosen them (see for_model).
+        self._pending_surfaces: Callable[[], Sequence[Surface]] | None = None
+        self._pending_parameters: tuple[float, tuple[float, float]] = (0.0, (0.0, 0.0))
         names = tuple(
             f'{self.family}/{contact}/{row}'
             for contact, rows in zip(self.contact_names, labels, strict=True)
@@ -215,8 +225,78 @@ class ObjectWorkspaceBarrier(BoxBarrier):
             alpha2,
         )
 
+    @classmethod
+    def for_model(
+        cls,
+        model: Any,
+        margin: float,
+        sphere_half_widths: tuple[float, float],
+        alpha1: ClassKFunction | None = None,
+        alpha2: ClassKFunction | None = None,
+    ) -> ObjectWorkspaceBarrier:
+        """Build the barrier of a grasp model's contacts (:meth:`on_surfaces`).
+
+        When the model has not chosen its contacts' box faces yet, the margin is checked
+        against the smallest half extent of the box (every face's extents are at least
+        that) and each contact's bounds are taken from its face at the first state.
+
+        Args:
+            model: A ``GraspModel``: ``contact_names``, ``contacts_bound``, ``contacts``
+                and ``object_shape``.
+            margin: Distance kept from a face's edges, m (> 0).
+            sphere_half_widths: ``(w_a, w_b)`` of a sphere chart's box, rad.
+            alpha1: Extended class-K function of h (default cubic, gain 1).
+            alpha2: Extended class-K function of B (default cubic, gain 1).
+
+        Raises:
+            GraspConfigError: The margin or the half widths do not fit the object.
+        """
+        if model.contacts_bound:
+            surfaces = [contact.object_surface for contact in model.contacts]
+            return cls.on_surfaces(
+                model.contact_names, surfaces, margin, sphere_half_widths, alpha1, alpha2
+            )
+        shape = model.object_shape
+        if not shape.has_faces:
+            surfaces = [SphereSurface(shape.radius)] * len(model.contact_names)
+            return cls.on_surfaces(
+                model.contact_names, surfaces, margin, sphere_half_widths, alpha1, alpha2
+            )
+        # Every face's half extents are at least half the box's shortest edge.
+        half = 0.5 * float(min(shape.edge_lengths))
+        if not margin < half:
+            raise GraspConfigError(
+                f"'object_workspace.margin': expected a margin smaller than every half extent "
+                f"of every face of the {shape.kind} (the contacts' faces are chosen at the first "
+                f'configuration), the smallest {half!r} m, got {margin!r} m'
+            )
+        # Until the faces are chosen, a square face of that half extent stands in.
+        stand_in = FlatSurface(np.zeros(3), np.eye(3)[0], np.eye(3)[1], half_width=half)
+        barrier = cls.on_surfaces(
+            model.contact_names,
+            [stand_in] * len(model.contact_names),
+            margin,
+            sphere_half_widths,
+            alpha1,
+            alpha2,
+        )
+        barrier._pending_surfaces = lambda: [c.object_surface for c in model.contacts]
+        barrier._pending_parameters = (margin, sphere_half_widths)
+        return barrier
+
+    def _bind_surfaces(self) -> None:
+        """Take each contact's bounds from the surface the model has chosen for it."""
+        surfaces = self._pending_surfaces()
+        margin, sphere_half_widths = self._pending_parameters
+        bound = self.on_surfaces(
+            self.contact_names, surfaces, margin, sphere_half_widths, *self._alphas
+        )
+        self.__dict__.update(bound.__dict__)
+
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
         """``(xi_co, xi_co_dot)`` flattened contact-major, and ``u ↦ xi_co_ddot``."""
+        if self._pending_surfaces is not None:
+            self._bind_surfaces()
         n = len(self.contact_names)
         check_rows(state.xi_co, n, 'xi_co')
         check_rows(state.xi_co_dot, n, 'xi_co_dot')
