@@ -23,6 +23,7 @@ the contact frame.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -411,11 +412,7 @@ class GraspModel:
         alpha_relative[:, :, m] += alpha_f0 - matvec(skew_contact, w_relative)
         xi_ddot = (rates.H_cf @ R_cp) @ alpha_relative
         xi_ddot[:, :, m] += rates.H_cf_dot_w
-        # xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot + bias (differentiated Montana equations).
-        xi_co_ddot = rates.object_from_fingertip @ xi_ddot
-        xi_co_ddot[:, :, m] += rates.xi_co_ddot_bias
         xi_ddot = xi_ddot.reshape(2 * n, m + 1)
-        xi_co_ddot = xi_co_ddot.reshape(2 * n, m + 1)
 
         arrays = {
             'q': q,
@@ -450,7 +447,7 @@ class GraspModel:
         }
         # Every array is handed out read-only; the augmented matrices are frozen before their
         # column views are taken, so that the views are read-only too.
-        for array in (*arrays.values(), force, ddq, x_ddot, xi_ddot, xi_co_ddot):
+        for array in (*arrays.values(), force, ddq, x_ddot, xi_ddot):
             array.setflags(write=False)
         return GraspState(
             t=float(t),
@@ -459,5 +456,5 @@ class GraspModel:
             joint_acceleration=AffineMap(ddq[:, :m], ddq[:, m]),
             object_acceleration=AffineMap(x_ddot[:, :m], x_ddot[:, m]),
             xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
-            xi_co_ddot=AffineMap(xi_co_ddot[:, :m], xi_co_ddot[:, m]),
+            xi_co_rate_terms=partial(self._contact_stack.object_rate_terms, geometry, rates),
         )

@@ -273,16 +273,6 @@ class StackedRollingRates:
             fingertip, components along (rho1, rho2) of the contact frame, (n, 2), m/s.
         frame_angular_velocity: ``Omega`` with ``d/dt R_contact_to_fingertip = R_fc (Omega×)``,
             contact-frame components, (n, 3), rad/s.
-        object_from_fingertip: ``M_co^-1 R_psi M_cf``: xi_cf_dot ↦ xi_co_dot, (n, 2, 2).
-        xi_co_ddot_bias: ``M_co^-1 (R_psi_dot M_cf xi_cf_dot + R_psi M_cf_dot xi_cf_dot
-            - M_co_dot xi_co_dot)``, the part of xi_co_ddot that does not come from
-            xi_cf_ddot, (n, 2).
-
-    Differentiating ``M_co xi_co_dot = R_psi M_cf xi_cf_dot`` (Montana's equations, both
-    sides the sliding velocity in the object chart) gives the object coordinates'
-    second derivative from the fingertip's::
-
-        xi_co_ddot = object_from_fingertip xi_cf_ddot + xi_co_ddot_bias
     """
 
     xi_cf_dot: np.ndarray
@@ -292,8 +282,6 @@ class StackedRollingRates:
     H_cf_dot_w: np.ndarray
     sliding_velocity: np.ndarray
     frame_angular_velocity: np.ndarray
-    object_from_fingertip: np.ndarray
-    xi_co_ddot_bias: np.ndarray
 
 
 class ContactStack:
@@ -389,24 +377,17 @@ class ContactStack:
         sliding = matvec(A_inv, w @ ROLL_SELECT.T)
         sliding_on_object = matvec(R_psi, sliding)
         xi_cf_dot = sliding / M_cf
-        M_co = self.object_surfaces.metric(xi_co)
-        xi_co_dot = sliding_on_object / M_co
+        xi_co_dot = sliding_on_object / self.object_surfaces.metric(xi_co)
         torsion_cf = np.einsum('ki,ki->k', self.fingertips.torsion(xi_cf), sliding)
         psi_dot = w[:, 2] + torsion_cf
         if not flat:
             psi_dot = psi_dot + np.einsum(
                 'ki,ki->k', self.object_surfaces.torsion(xi_co), sliding_on_object
             )
-        M_cf_dot_xi_cf_dot = self.fingertips.metric_rate(xi_cf, xi_cf_dot) * xi_cf_dot
-        H_cf_dot_w = -M_cf_dot_xi_cf_dot / M_cf
-        s, c = np.sin(geometry.psi), np.cos(geometry.psi)
-        R_psi_dot = psi_dot[:, None, None] * np.array([[-s, -c], [-c, s]]).transpose(2, 0, 1)
-        xi_co_ddot_bias = (
-            matvec(R_psi_dot, sliding)
-            + matvec(R_psi, M_cf_dot_xi_cf_dot)
-            - self.object_surfaces.metric_rate(xi_co, xi_co_dot) * xi_co_dot
-        ) / M_co
+        H_cf_dot_w = -self.fingertips.metric_rate(xi_cf, xi_cf_dot) * xi_cf_dot / M_cf
         if not flat:
+            s, c = np.sin(geometry.psi), np.cos(geometry.psi)
+            R_psi_dot = psi_dot[:, None, None] * np.array([[-s, -c], [-c, s]]).transpose(2, 0, 1)
             K_co_dot = self.object_surfaces.curvature_rate(xi_co, xi_co_dot)
             A_dot = R_psi_dot @ K_co @ R_psi + R_psi @ K_co_dot @ R_psi + R_psi @ K_co @ R_psi_dot
             H_cf_dot_w = H_cf_dot_w - matvec(A_inv, matvec(A_dot, sliding)) / M_cf
@@ -419,9 +400,40 @@ class ContactStack:
             H_cf_dot_w=H_cf_dot_w,
             sliding_velocity=sliding,
             frame_angular_velocity=np.array([-K_sliding[:, 1], K_sliding[:, 0], torsion_cf]).T,
-            object_from_fingertip=R_psi * M_cf[:, None, :] / M_co[:, :, None],
-            xi_co_ddot_bias=xi_co_ddot_bias,
         )
+
+
+    def object_rate_terms(
+        self, geometry: StackedContactGeometry, rates: StackedRollingRates
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """How the object coordinates' second derivative follows from the fingertip's.
+
+        Montana's equations give both sides the sliding velocity,
+        ``M_co xi_co_dot = R_psi M_cf xi_cf_dot``; differentiated,
+
+            xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot
+                         + M_co^-1 (R_psi_dot M_cf xi_cf_dot + R_psi M_cf_dot xi_cf_dot
+                                    - M_co_dot xi_co_dot)
+
+        Evaluated only when asked for (a barrier on the object surface), not every tick.
+
+        Returns:
+            ``M_co^-1 R_psi M_cf`` (n, 2, 2) and the second term (n, 2).
+        """
+        xi_cf, xi_co, psi = geometry.xi_cf, geometry.xi_co, geometry.psi
+        s, c = np.sin(psi), np.cos(psi)
+        R_psi = np.array([[c, -s], [-s, -c]]).transpose(2, 0, 1)
+        R_psi_dot = rates.psi_dot[:, None, None] * np.array([[-s, -c], [-c, s]]).transpose(
+            2, 0, 1
+        )
+        M_cf = self.fingertips.metric(xi_cf)
+        M_co = self.object_surfaces.metric(xi_co)
+        bias = (
+            matvec(R_psi_dot, rates.sliding_velocity)
+            + matvec(R_psi, self.fingertips.metric_rate(xi_cf, rates.xi_cf_dot) * rates.xi_cf_dot)
+            - self.object_surfaces.metric_rate(xi_co, rates.xi_co_dot) * rates.xi_co_dot
+        ) / M_co
+        return R_psi * M_cf[:, None, :] / M_co[:, :, None], bias
 
 
 class SphereOnPlaneStack(ContactStack):
@@ -439,8 +451,6 @@ class SphereOnPlaneStack(ContactStack):
         psi_dot = w_z - tan(a) w_x
         H_cf = [[0, -1, 0], [1 / cos a, 0, 0]],   H_cf_dot w = (0, tan(a) a_dot b_dot)
         Omega = (-w_x, -w_y, -tan(a) w_x)
-        object_from_fingertip = R_psi diag(R, R cos a)
-        xi_co_ddot_bias = R_psi_dot M_cf xi_cf_dot + R_psi (0, -R sin(a) a_dot b_dot)
 
     Args:
         contacts: The contact pairs; every object surface must be a
@@ -457,7 +467,7 @@ class SphereOnPlaneStack(ContactStack):
         self, geometry: StackedContactGeometry, w_relative_in_contact: np.ndarray
     ) -> StackedRollingRates:
         """:meth:`ContactStack.rolling_rates`, by the closed forms above."""
-        rows, H_cf, object_from_fingertip = [], [], []
+        rows, H_cf = [], []
         for (a, _), psi, (w_x, w_y, w_z), radius in zip(
             geometry.xi_cf.tolist(),
             geometry.psi.tolist(),
@@ -469,16 +479,13 @@ class SphereOnPlaneStack(ContactStack):
             cos_psi, sin_psi = math.cos(psi), math.sin(psi)
             sliding_x, sliding_y = -radius * w_y, radius * w_x
             a_dot, b_dot = -w_y, w_x / cos_a
-            psi_dot = w_z - tan_a * w_x
-            # R_psi_dot sliding + R_psi (0, metric_rate), metric_rate = -R sin(a) a_dot b_dot.
-            metric_rate = -radius * math.sin(a) * a_dot * b_dot
             rows.append(
                 (
                     a_dot,
                     b_dot,  # xi_cf_dot
                     cos_psi * sliding_x - sin_psi * sliding_y,  # xi_co_dot = R_psi sliding
                     -sin_psi * sliding_x - cos_psi * sliding_y,
-                    psi_dot,
+                    w_z - tan_a * w_x,  # psi_dot
                     0.0,
                     tan_a * a_dot * b_dot,  # H_cf_dot w
                     sliding_x,
@@ -486,16 +493,9 @@ class SphereOnPlaneStack(ContactStack):
                     -w_x,
                     -w_y,
                     -tan_a * w_x,  # Omega
-                    -psi_dot * (sin_psi * sliding_x + cos_psi * sliding_y)
-                    - sin_psi * metric_rate,  # xi_co_ddot_bias
-                    psi_dot * (sin_psi * sliding_y - cos_psi * sliding_x) - cos_psi * metric_rate,
                 )
             )
             H_cf.append(((0.0, -1.0, 0.0), (1.0 / cos_a, 0.0, 0.0)))
-            radius_b = radius * cos_a  # R_psi diag(R, R cos a)
-            object_from_fingertip.append(
-                ((cos_psi * radius, -sin_psi * radius_b), (-sin_psi * radius, -cos_psi * radius_b))
-            )
         # One array for all per-contact results (one numpy call), split into column views.
         table = np.array(rows)
         return StackedRollingRates(
@@ -506,8 +506,6 @@ class SphereOnPlaneStack(ContactStack):
             H_cf_dot_w=table[:, 5:7],
             sliding_velocity=table[:, 7:9],
             frame_angular_velocity=table[:, 9:12],
-            object_from_fingertip=np.array(object_from_fingertip),
-            xi_co_ddot_bias=table[:, 12:14],
         )
 
 
