@@ -62,6 +62,7 @@ def object_face_half_widths(model: Any) -> np.ndarray | None:
         dtype=float,
     )
 
+
 #: Bound of each margin column of the two-sided families (slip and separation have none).
 _SIDES: dict[str, tuple[str, ...]] = {
     FINGERTIP_WORKSPACE: WORKSPACE_SIDES,

@@ -48,7 +48,7 @@ ALPHAS = {
 
 
 def bound_model(shape):
-    """The paper's hand on ``shape``, each contact's surface chosen at the paper's grasp."""
+    """Return the paper's hand on ``shape``, each contact's surface chosen at its grasp."""
     model = paper_model(**MODELS[shape])
     model.bind_contacts(Q_PAPER, P_OBJECT_PAPER, np.eye(3))
     return model

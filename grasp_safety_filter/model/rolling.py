@@ -402,7 +402,6 @@ class ContactStack:
             frame_angular_velocity=np.array([-K_sliding[:, 1], K_sliding[:, 0], torsion_cf]).T,
         )
 
-
     def object_rate_terms(
         self, geometry: StackedContactGeometry, rates: StackedRollingRates
     ) -> tuple[np.ndarray, np.ndarray]:
