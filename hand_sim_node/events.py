@@ -1,6 +1,6 @@
 """Grasp constraint events: margins at one instant, violations, and their run-long record.
 
-Four families are watched, each with a margin ``h`` in its own units (``h < 0``: violated):
+Five families are watched, each with a margin ``h`` in its own units (``h < 0``: violated):
 
 - ``fingertip_workspace``: per contact, ``(a - a_min, a_max - a, b - b_min, b_max - b)``, rad,
   against the contact's own box.
@@ -11,11 +11,15 @@ Four families are watched, each with a margin ``h`` in its own units (``h < 0``:
   ``beta_i = ||f_t,i|| / f_n,i`` (``beta_i = inf`` when ``f_n,i <= 0``); ``h < 0`` is a
   violation.
 - ``separation``: per contact, the normal force ``f_n,i``, N; ``f_n,i <= 0`` is a violation.
+- ``object_face``: per contact on a box face ``|u| <= h_u, |v| <= h_v``, how far the contact
+  point is inside the face's edges, ``min(h_u - |u|, h_v - |v|)``, m; ``h < 0`` is a
+  violation (the contact point has rolled off its face). ``inf`` on a sphere object (no
+  edge), NaN where the object coordinates or the faces are unknown (flags nothing).
 
 All margins of one instant live in one flat array, family after family (workspace (n, 4),
-joints (m, 2), slip (n,), separation (n,), each row-major); the per-family arrays are views
-of it. Violations, events and the run's record are evaluated on that array with one numpy
-call per quantity, whatever the number of contacts and joints.
+joints (m, 2), slip (n,), separation (n,), object face (n,), each row-major); the
+per-family arrays are views of it. Violations, events and the run's record are evaluated
+on that array with one numpy call per quantity, whatever the number of contacts and joints.
 """
 
 from __future__ import annotations
@@ -32,11 +36,34 @@ FINGERTIP_WORKSPACE = 'fingertip_workspace'
 JOINT_LIMITS = 'joint_limits'
 SLIP = 'slip'
 SEPARATION = 'separation'
-FAMILIES: tuple[str, ...] = (FINGERTIP_WORKSPACE, JOINT_LIMITS, SLIP, SEPARATION)
+OBJECT_FACE = 'object_face'
+FAMILIES: tuple[str, ...] = (FINGERTIP_WORKSPACE, JOINT_LIMITS, SLIP, SEPARATION, OBJECT_FACE)
 """Constraint families, in the order the run summary lists them."""
 
 WORKSPACE_SIDES: tuple[str, ...] = ('a_min', 'a_max', 'b_min', 'b_max')
 JOINT_SIDES: tuple[str, ...] = ('lower', 'upper')
+
+#: Key of the ``/grasp/scenario`` document holding each contact's face half extents
+#: ``[h_u, h_v]``, m (absent for a sphere object), for judging a bag's object-face margins.
+OBJECT_FACES_KEY = 'object_face_half_widths'
+
+
+def object_face_half_widths(model: Any) -> np.ndarray | None:
+    """Half extents ``(h_u, h_v)`` of each contact's box face, (n, 2), m.
+
+    ``inf`` for a contact not on a bounded face (a sphere object); None when the model has
+    not chosen its contacts' surfaces yet.
+    """
+    if not getattr(model, 'contacts_bound', False):
+        return None
+    return np.array(
+        [
+            getattr(contact.object_surface, 'half_widths', (np.inf, np.inf))
+            for contact in model.contacts
+        ],
+        dtype=float,
+    )
+
 
 #: Bound of each margin column of the two-sided families (slip and separation have none).
 _SIDES: dict[str, tuple[str, ...]] = {
@@ -52,11 +79,12 @@ class Event:
     Attributes:
         t: Time, s.
         family: One of :data:`FAMILIES`.
-        index: Contact index (workspace, slip, separation) or joint index (joint limits).
+        index: Contact index (workspace, slip, separation, object face) or joint index
+            (joint limits).
         name: The contact's or joint's name.
         side: Which bound: ``"a_min"``, ``"a_max"``, ``"b_min"``, ``"b_max"``, ``"lower"``,
-            ``"upper"``; ``""`` for slip and separation.
-        margin: The violated margin (rad, rad, 1, N for the four families; <= 0).
+            ``"upper"``; ``""`` for slip, separation and object face.
+        margin: The violated margin (rad, rad, 1, N, m for the five families; <= 0).
 
     """
 
@@ -79,11 +107,13 @@ class ConstraintMargins:
         required_friction: ``beta_i``, shape (n,) (``inf`` where ``f_n,i <= 0``).
         friction: ``mu_i - beta_i``, shape (n,).
         normal_force: ``f_n,i``, shape (n,), N.
-        values: Every margin, family after family in :data:`FAMILIES` order (the four
-            arrays above but ``required_friction``, flattened), shape (6n + 2m,); built
+        object_face: ``min(h_u - |u|, h_v - |v|)`` per contact, shape (n,), m (NaN where
+            unknown; all NaN if not given).
+        values: Every margin, family after family in :data:`FAMILIES` order (the five
+            arrays above but ``required_friction``, flattened), shape (7n + 2m,); built
             from them if not given.
         violated_mask: ``values`` violated (``<= 0`` for workspace and separation, ``< 0``
-            for joint limits and slip), shape (6n + 2m,); built from ``values`` if not given.
+            for the others), shape (7n + 2m,); built from ``values`` if not given.
 
     """
 
@@ -93,10 +123,13 @@ class ConstraintMargins:
     required_friction: np.ndarray
     friction: np.ndarray
     normal_force: np.ndarray
+    object_face: np.ndarray | None = None
     values: np.ndarray | None = field(default=None, repr=False)
     violated_mask: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
+        if self.object_face is None:
+            object.__setattr__(self, 'object_face', np.full(self.normal_force.shape, np.nan))
         if self.values is None:
             flat = np.concatenate([np.ravel(v) for v in self.by_family().values()])
             object.__setattr__(self, 'values', flat)
@@ -108,8 +141,13 @@ class ConstraintMargins:
 
     @property
     def family_starts(self) -> np.ndarray:
-        """Index in :attr:`values` where each family's margins start, shape (4,)."""
-        sizes = (self.fingertip_workspace.size, self.joint_limits.size, self.friction.size)
+        """Index in :attr:`values` where each family's margins start, shape (5,)."""
+        sizes = (
+            self.fingertip_workspace.size,
+            self.joint_limits.size,
+            self.friction.size,
+            self.normal_force.size,
+        )
         return np.cumsum((0, *sizes))
 
     def by_family(self) -> dict[str, np.ndarray]:
@@ -119,6 +157,7 @@ class ConstraintMargins:
             JOINT_LIMITS: self.joint_limits,
             SLIP: self.friction,
             SEPARATION: self.normal_force,
+            OBJECT_FACE: self.object_face,
         }
 
     def violated(self) -> dict[str, np.ndarray]:
@@ -137,6 +176,7 @@ def _closed_mask(n_workspace: int, n_joint: int, n_contacts: int) -> np.ndarray:
             np.ones(n_workspace, dtype=bool),
             np.zeros(n_joint + n_contacts, dtype=bool),
             np.ones(n_contacts, dtype=bool),
+            np.zeros(n_contacts, dtype=bool),
         )
     )
 
@@ -168,7 +208,7 @@ def _violated(values: np.ndarray, closed: np.ndarray) -> np.ndarray:
 
 
 class EventMonitor:
-    """Evaluates the four constraint families of a grasp state under a contact force.
+    """Evaluates the five constraint families of a grasp state under a contact force.
 
     Args:
         joint_lower_limits: ``q_min``, shape (m,), rad.
@@ -179,6 +219,8 @@ class EventMonitor:
             contact i slips when its beta_i > mu_i.
         joint_names: m joint names.
         contact_names: n contact names.
+        object_face_half_widths: Half extents ``(h_u, h_v)`` of each contact's face, (n, 2),
+            m (``inf``: no edge); None if unknown (object-face margins are then NaN).
 
     """
 
@@ -190,6 +232,7 @@ class EventMonitor:
         friction_coefficient: float | Sequence[float] | np.ndarray,
         joint_names: list[str] | tuple[str, ...],
         contact_names: list[str] | tuple[str, ...],
+        object_face_half_widths: np.ndarray | None = None,
     ) -> None:
         self.joint_lower_limits = np.array(joint_lower_limits, dtype=float)
         self.joint_upper_limits = np.array(joint_upper_limits, dtype=float)
@@ -220,7 +263,16 @@ class EventMonitor:
         self.friction_coefficient = mu
         self.joint_names = tuple(joint_names)
         self.contact_names = tuple(contact_names)
-        self._ends = tuple(int(end) for end in np.cumsum((4 * n, 2 * m, n, n)))
+        self.object_face_half_widths = None
+        if object_face_half_widths is not None:
+            half = np.array(object_face_half_widths, dtype=float)
+            if half.shape != (n, 2) or np.any(np.isnan(half)) or np.any(half <= 0.0):
+                raise ValueError(
+                    f'EventMonitor: expected object_face_half_widths of shape ({n}, 2), each '
+                    f'> 0, got {half.tolist()}'
+                )
+            self.object_face_half_widths = half
+        self._ends = tuple(int(end) for end in np.cumsum((4 * n, 2 * m, n, n, n)))
         self._closed = _closed_mask(4 * n, 2 * m, n)
         # (family, index, name, side) of every flat margin, for the events.
         self._entries = (
@@ -236,11 +288,12 @@ class EventMonitor:
             ]
             + [(SLIP, i, self.contact_names[i], '') for i in range(n)]
             + [(SEPARATION, i, self.contact_names[i], '') for i in range(n)]
+            + [(OBJECT_FACE, i, self.contact_names[i], '') for i in range(n)]
         )
 
     @classmethod
     def from_model(cls, model: Any) -> EventMonitor:
-        """Monitor with the limits, workspace, friction coefficient and names of a GraspModel."""
+        """Monitor with the limits, workspace, friction coefficient, names and faces of a model."""
         return cls(
             joint_lower_limits=model.joint_lower_limits,
             joint_upper_limits=model.joint_upper_limits,
@@ -248,32 +301,39 @@ class EventMonitor:
             friction_coefficient=model.friction_coefficient,
             joint_names=model.joint_names,
             contact_names=model.contact_names,
+            object_face_half_widths=object_face_half_widths(model),
         )
 
     def margins(self, state: GraspState, contact_force: np.ndarray) -> ConstraintMargins:
         """Margins of every constraint at ``state`` under the contact forces ``contact_force``.
 
         Args:
-            state: The grasp state (reads t, q, xi_cf).
+            state: The grasp state (reads t, q, xi_cf, xi_co).
             contact_force: Stacked contact forces ``(f_x, f_y, f_n)`` per contact, contact
                 frames, shape (3n,), N.
 
         """
-        return self.margins_at(state.t, state.q, state.xi_cf, contact_force)
+        return self.margins_at(state.t, state.q, state.xi_cf, contact_force, state.xi_co)
 
     def margins_at(
-        self, t: float, q: np.ndarray, xi_cf: np.ndarray, contact_force: np.ndarray
+        self,
+        t: float,
+        q: np.ndarray,
+        xi_cf: np.ndarray,
+        contact_force: np.ndarray,
+        xi_co: np.ndarray | None = None,
     ) -> ConstraintMargins:
         """Margins from raw samples: joint angles (m,), fingertip coordinates (n, 2), forces (3n,).
 
-        The bag analysis evaluates recorded runs with this, so a run and its recording are
-        judged by the same code.
+        With the object surface coordinates ``xi_co`` (n, 2) (m on a face) and the faces'
+        half extents, also the object-face margins (else NaN). The bag analysis evaluates
+        recorded runs with this, so a run and its recording are judged by the same code.
         """
         a_b = np.asarray(xi_cf, dtype=float)
         forces = np.asarray(contact_force, dtype=float).reshape(-1, 3)
         n, m = a_b.shape[0], self.joint_lower_limits.shape[0]
-        workspace_end, joint_end, slip_end, size = self._ends
-        if forces.shape[0] != n or size != 6 * n + 2 * m:
+        workspace_end, joint_end, slip_end, separation_end, size = self._ends
+        if forces.shape[0] != n or size != 7 * n + 2 * m:
             raise ValueError(
                 f'EventMonitor.margins_at: expected {len(self.contact_names)} contacts, got '
                 f'coordinates of {n} and forces of {forces.shape[0]}'
@@ -297,14 +357,21 @@ class EventMonitor:
         )
         friction = values[joint_end:slip_end]
         np.subtract(self.friction_coefficient, beta, out=friction)
-        values[slip_end:] = normal
+        values[slip_end:separation_end] = normal
+        object_face = values[separation_end:]
+        if xi_co is None or self.object_face_half_widths is None:
+            object_face.fill(np.nan)
+        else:
+            inside = self.object_face_half_widths - np.abs(np.asarray(xi_co, dtype=float))
+            np.min(inside, axis=1, out=object_face)
         return ConstraintMargins(
             t=float(t),
             fingertip_workspace=workspace,
             joint_limits=joints,
             required_friction=beta,
             friction=friction,
-            normal_force=values[slip_end:],
+            normal_force=values[slip_end:separation_end],
+            object_face=object_face,
             values=values,
             violated_mask=_violated(values, self._closed),
         )

@@ -10,6 +10,7 @@ random dynamics:
     ddq      = M_h^-1 (u - h_bias - J_h^T f_c)
     x_o_ddot = M_o^-1 (G f_c + w_e - C_o_twist)
     xi_cf_ddot,i = H_i (alpha_f,i - alpha_o) + c_i     (alpha: angular accelerations)
+    xi_co_ddot,i = R_psi,i M_cf,i xi_cf_ddot,i           (a sphere rolling on a face, bias 0)
 
 so ``J_h ddq + Jh_dot_dq = G^T x_o_ddot + G_dot_T_twist`` holds for every u (the rolling
 constraint, differentiated). Velocity-dependent terms scale with ``speed``.
@@ -233,7 +234,7 @@ def synthetic_state(
     if xi_cf_dot is None:
         xi_cf_dot = rng.normal(scale=speed, size=(n, 2))
 
-    return GraspState(
+    state = GraspState(
         t=t,
         q=np.asarray(q, dtype=float),
         dq=np.asarray(dq, dtype=float),
@@ -268,7 +269,14 @@ def synthetic_state(
         joint_acceleration=joint_acceleration,
         object_acceleration=object_acceleration,
         xi_cf_ddot=xi_cf_ddot,
+        xi_co_rate_terms=lambda: (np.zeros((n, 2, 2)), np.zeros((n, 2))),
     )
+    # A sphere rolling on a face: M_co = I, so M_co^-1 R_psi M_cf = R_psi diag(R, R cos a);
+    # no random numbers, so that later states are unchanged.
+    c, s = np.cos(state.psi), np.sin(state.psi)
+    cos_a = np.cos(state.xi_cf[:, 0])
+    blocks = FINGERTIP_RADIUS * np.array([[c, -s * cos_a], [-s, -c * cos_a]]).transpose(2, 0, 1)
+    return with_fields(state, xi_co_rate_terms=lambda: (blocks, np.zeros((n, 2))))
 
 
 def with_fields(state: GraspState, **changes: object) -> GraspState:

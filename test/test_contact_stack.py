@@ -7,6 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.rolling import (
     contact_stack,
     ContactPair,
@@ -52,9 +53,17 @@ def test_stacks_match_the_per_contact_formulas(shape):
         c = random_configuration(model, rng)
         p_f, R_f, _ = model.hand.fingertip_placements(c.q)
         w_in_contact = rng.normal(0.0, 1.0, (model.n_contacts, 3))
+        object_terms = {}
         for name, stack in _stacks(model):
             geometry = stack.geometry(p_f, R_f, c.p_object, c.R_object)
             rates = stack.rolling_rates(geometry, w_in_contact)
+            # M_co xi_co_dot = R_psi M_cf xi_cf_dot, and every stack gives the same terms.
+            object_terms[name] = stack.object_rate_terms(geometry, rates)
+            np.testing.assert_allclose(
+                matvec(object_terms[name][0], rates.xi_cf_dot), rates.xi_co_dot, atol=1e-12
+            )
+            for term, reference in zip(object_terms[name], object_terms['selected'], strict=True):
+                np.testing.assert_allclose(term, reference, atol=1e-12, err_msg=name)
             for i, pair in enumerate(model.contacts):
                 expected = pair.geometry(p_f[i], R_f[i], c.p_object, c.R_object)
                 for field in (

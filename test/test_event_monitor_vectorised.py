@@ -18,6 +18,7 @@ from hand_sim_node.events import (
     FAMILIES,
     FINGERTIP_WORKSPACE,
     JOINT_LIMITS,
+    OBJECT_FACE,
     SEPARATION,
     SLIP,
 )
@@ -26,8 +27,8 @@ WORKSPACE = (-0.6, 0.6, -2.5, -0.6)
 MU = 0.9
 
 
-def reference_margins(lower, upper, t, q, xi_cf, forces):
-    """Margins row by row: (workspace rows, joint rows, beta, mu - beta, f_n)."""
+def reference_margins(lower, upper, t, q, xi_cf, forces, half_widths, xi_co):
+    """Margins row by row: (workspace rows, joint rows, beta, mu - beta, f_n, face)."""
     a_min, a_max, b_min, b_max = WORKSPACE
     workspace = [[a - a_min, a_max - a, b - b_min, b_max - b] for a, b in xi_cf]
     joints = [[q_j - lo, hi - q_j] for q_j, lo, hi in zip(q, lower, upper, strict=True)]
@@ -41,12 +42,16 @@ def reference_margins(lower, upper, t, q, xi_cf, forces):
             beta.append(math.inf)
     friction = [MU - b for b in beta]
     normal = [f[2] for f in forces]
-    return workspace, joints, beta, friction, normal
+    face = [
+        min(h_u - abs(u), h_v - abs(v))
+        for (h_u, h_v), (u, v) in zip(half_widths, xi_co, strict=True)
+    ]
+    return workspace, joints, beta, friction, normal, face
 
 
 def reference_events(t, joint_names, contact_names, margins):
     """Violated rows, family by family: workspace and separation at <= 0, the others < 0."""
-    workspace, joints, _, friction, normal = margins
+    workspace, joints, _, friction, normal, face = margins
     events = []
     for i, row in enumerate(workspace):
         for side, value in zip(('a_min', 'a_max', 'b_min', 'b_max'), row, strict=True):
@@ -62,6 +67,9 @@ def reference_events(t, joint_names, contact_names, margins):
     for i, value in enumerate(normal):
         if value <= 0.0:
             events.append(Event(t, SEPARATION, i, contact_names[i], '', value))
+    for i, value in enumerate(face):
+        if value < 0.0:
+            events.append(Event(t, OBJECT_FACE, i, contact_names[i], '', value))
     return events
 
 
@@ -77,8 +85,9 @@ class ReferenceLog:
         self.active = set()
 
     def record(self, t, margins, events):
-        workspace, joints, beta, friction, normal = margins
+        workspace, joints, beta, friction, normal, face = margins
         rows = {
+            OBJECT_FACE: face,
             FINGERTIP_WORKSPACE: [v for row in workspace for v in row],
             JOINT_LIMITS: [v for row in joints for v in row],
             SLIP: friction,
@@ -100,8 +109,8 @@ class ReferenceLog:
         self.active = set(keys)
 
 
-def random_instant(rng, n, m, lower, upper):
-    """Joint angles, fingertip coordinates and forces around every bound, with special values."""
+def random_instant(rng, n, m, lower, upper, half_widths):
+    """Joint angles, contact coordinates and forces around every bound, with special values."""
     a_min, a_max, b_min, b_max = WORKSPACE
     q = rng.uniform(lower - 0.1, upper + 0.1)
     xi = np.column_stack(
@@ -109,11 +118,16 @@ def random_instant(rng, n, m, lower, upper):
     )
     forces = rng.normal(0.0, 1.0, (n, 3))
     forces[:, 2] = np.abs(forces[:, 2]) * rng.choice([1.0, -1.0], n, p=[0.8, 0.2])
-    # Exactly at a bound: a workspace margin 0 is violated, a joint margin 0 is not.
+    finite = np.where(np.isfinite(half_widths), half_widths, 0.05)
+    xi_co = rng.uniform(-1.1, 1.1, (n, 2)) * finite
+    # Exactly at a bound: a workspace margin 0 is violated, a joint or face margin 0 is not.
     if rng.random() < 0.3:
         xi[rng.integers(n), 0] = a_max
         j = rng.integers(m)
         q[j] = upper[j]
+        i = rng.integers(n)
+        xi_co[i, 1] = -finite[i, 1]
+        xi_co[i, 0] = 0.0
     special = rng.random()
     if special < 0.15:
         forces[rng.integers(n)] = np.nan  # the dynamics could not be evaluated
@@ -123,7 +137,7 @@ def random_instant(rng, n, m, lower, upper):
         forces[rng.integers(n), 2] = np.inf
     elif special < 0.35:
         forces[rng.integers(n), 0] = np.inf
-    return q, xi, forces
+    return q, xi, forces, xi_co
 
 
 @pytest.mark.parametrize(
@@ -137,19 +151,24 @@ def test_vectorised_monitor_equals_the_per_row_definitions(n, m, seed):
     upper = lower + rng.uniform(0.5, 2.0, m)
     joint_names = [f'joint_{j}' for j in range(m)]
     contact_names = [f'finger_{i}' for i in range(n)]
-    monitor = EventMonitor(lower, upper, WORKSPACE, MU, joint_names, contact_names)
+    # Box faces of random extents; the last contact on a sphere (no edge) when n > 1.
+    half_widths = rng.uniform(0.01, 0.1, (n, 2))
+    if n > 1:
+        half_widths[-1] = np.inf
+    monitor = EventMonitor(lower, upper, WORKSPACE, MU, joint_names, contact_names, half_widths)
     log, reference = EventLog(), ReferenceLog()
     seen = set()
     for k in range(200):
         t = 0.001 * k
-        q, xi, forces = random_instant(rng, n, m, lower, upper)
-        margins = monitor.margins_at(t, q, xi, forces.ravel())
-        expected = reference_margins(lower, upper, t, q, xi, forces)
+        q, xi, forces, xi_co = random_instant(rng, n, m, lower, upper, half_widths)
+        margins = monitor.margins_at(t, q, xi, forces.ravel(), xi_co)
+        expected = reference_margins(lower, upper, t, q, xi, forces, half_widths, xi_co)
         np.testing.assert_array_equal(margins.fingertip_workspace, expected[0])
         np.testing.assert_array_equal(margins.joint_limits, expected[1])
         np.testing.assert_array_equal(margins.required_friction, expected[2])
         np.testing.assert_array_equal(margins.friction, expected[3])
         np.testing.assert_array_equal(margins.normal_force, expected[4])
+        np.testing.assert_array_equal(margins.object_face, expected[5])
         events = monitor.events(margins)
         expected_events = reference_events(t, joint_names, contact_names, expected)
         assert list(events) == expected_events
@@ -189,3 +208,24 @@ def test_margins_at_a_bound_unknown_forces_and_a_log_given_other_events():
     log.record(margins, events)
     assert log.min_margin()['friction'] == math.inf  # unknown, not a violation
     assert log.max_required_friction == 0.0
+    # Without the object coordinates or the faces, the object-face margins are unknown.
+    assert np.isnan(margins.object_face[0])
+    assert log.violations()[OBJECT_FACE] == {'count': 0, 'first_t': None}
+
+
+def test_a_contact_off_its_face_is_an_event_and_a_sphere_has_no_edge():
+    monitor = EventMonitor(
+        [-1.0] * 3, [1.0] * 3, WORKSPACE, MU, 'abc', ['f', 'g'], [[0.1, 0.2], [np.inf, np.inf]]
+    )
+    forces = [0.0, 0.0, 1.0] * 2
+    margins = monitor.margins_at(
+        0.0, [0.0] * 3, [[0.0, -1.0]] * 2, forces, [[0.05, -0.2], [9.0, 9.0]]
+    )
+    assert monitor.events(margins) == ()  # on the edge of f's face: still on it
+    assert margins.object_face.tolist() == [0.0, math.inf]
+    margins = monitor.margins_at(
+        0.0, [0.0] * 3, [[0.0, -1.0]] * 2, forces, [[0.05, -0.25], [9.0, 9.0]]
+    )
+    events = monitor.events(margins)
+    assert [(e.family, e.name) for e in events] == [(OBJECT_FACE, 'f')]
+    assert events[0].margin == pytest.approx(-0.05)

@@ -178,6 +178,20 @@ def test_contact_coordinate_accelerations_match_finite_differences(model, config
         assert_close(state.xi_cf_ddot(u).reshape(-1, 2), rate, 'xi_cf_ddot')
 
 
+def test_object_contact_coordinate_accelerations_match_finite_differences(model, configurations):
+    """xi_co_ddot(u) against the rate of xi_co_dot along the motion u causes (face and chart)."""
+    rng = np.random.default_rng(13)
+    for c in configurations:
+        state = c.state(model)
+        u = rng.normal(0.0, 1.0, model.n_joints)
+        ddq = state.joint_acceleration(u)
+        x_ddot = state.object_acceleration(u)
+        rate = central(lambda x: x.state(model).xi_co_dot, c, ddq=ddq, x_ddot=x_ddot)
+        actual = state.xi_co_ddot(u).reshape(-1, 2)
+        for i in range(model.n_contacts):
+            assert_close(actual[i], rate[i], f'xi_co_ddot[{i}]')
+
+
 def test_mass_matrices_are_symmetric_positive_definite(model, configurations):
     for c in configurations:
         state = c.state(model)

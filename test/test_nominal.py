@@ -104,6 +104,7 @@ def synthetic_state(seed, n=3, m=9):
         joint_acceleration=joint_acceleration,
         object_acceleration=object_acceleration,
         xi_cf_ddot=AffineMap(zeros((2 * n, m)), zeros(2 * n)),
+        xi_co_rate_terms=lambda: (zeros((n, 2, 2)), zeros((n, 2))),
     )
 
 

@@ -47,6 +47,7 @@ from grasp_safety_filter.nodes.scenario import (
     ScenarioError,
 )
 from hand_sim_node.endpoint import DIAGNOSTIC_NAME as SIM_DIAGNOSTIC
+from hand_sim_node.events import OBJECT_FACES_KEY
 
 #: Simulation time at which a run starts, s: ``hand_sim_node`` starts every run at t_0 = 0,
 #: with the scenario and the state at t_0.
@@ -88,6 +89,8 @@ class RunData:
             (the recording began late): topic -> that first stamp, s. Empty if none.
         barriers: The filter's smallest barrier value per row family over the run, from
             ``/safety_filter/margins`` (:meth:`BarrierReader.summary`); None without them.
+        xi_co: Object surface contact coordinates at ``t``, shape (K, n, 2) (m on a face);
+            None if not read.
     """
 
     scenario: dict[str, Any]
@@ -107,6 +110,7 @@ class RunData:
     t_end: float = 0.0
     missed_start: dict[str, float] = field(default_factory=dict)
     barriers: dict[str, Any] | None = None
+    xi_co: np.ndarray | None = None
 
     @property
     def t_filter(self) -> np.ndarray:
@@ -142,6 +146,24 @@ class RunData:
     def mu_per_contact(self) -> np.ndarray:
         """Each contact's friction coefficient mu_i, shape (n,)."""
         return np.asarray(scenario_per_contact(self.scenario, 'friction_coefficient'), float)
+
+    @property
+    def object_face_half_widths(self) -> np.ndarray | None:
+        """Each contact's face half extents ``(h_u, h_v)``, (n, 2), m; None if not recorded.
+
+        From the scenario document's :data:`~hand_sim_node.events.OBJECT_FACES_KEY` (a box
+        object's runs; ``inf`` stands for a contact without an edge).
+        """
+        rows = self.scenario.get(OBJECT_FACES_KEY)
+        if not isinstance(rows, list) or len(rows) != len(self.contact_names):
+            return None
+        try:
+            half = np.array(
+                [[np.inf if h is None else h for h in row] for row in rows], dtype=float
+            )
+        except (TypeError, ValueError):
+            return None
+        return half if half.shape == (len(rows), 2) and np.all(half > 0.0) else None
 
     @property
     def fingertip_workspace(self) -> tuple[float, float, float, float]:
@@ -206,6 +228,7 @@ class _Series:
         self.contact_stamps = Column((), np.int64)
         self.contact_t = Column(())
         self.xi_cf = Column((n, 2))
+        self.xi_co = Column((n, 2))
         self.force = Column((n, 3))
         self.required_friction = Column((n,))
         self.effort_stamps = {
@@ -280,6 +303,7 @@ def _load_run(bag: Path) -> RunData:
             series.contact_stamps.append(header_stamp_ns(msg))
             series.contact_t.append(contact.t)
             series.xi_cf.append(contact.xi_cf)
+            series.xi_co.append(contact.xi_co)
             series.force.append(contact.force)
             series.required_friction.append(contact.required_friction)
         elif topic in series.efforts:
@@ -378,4 +402,5 @@ def _assemble(
         t_end=t_end if t_end is not None else int(state_stamps[-1]) * 1e-9,
         missed_start=missed_start,
         barriers=None if barriers is None else barriers.summary(),
+        xi_co=series.xi_co.array()[kept],
     )

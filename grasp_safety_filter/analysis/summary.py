@@ -119,10 +119,12 @@ def constraint_log(run: RunData) -> EventLog:
         run.mu_per_contact,
         run.joint_names,
         run.contact_names,
+        run.object_face_half_widths,
     )
     log = EventLog()
     for k, t in enumerate(run.t):
-        margins = monitor.margins_at(t, run.q[k], run.xi_cf[k], run.force[k].ravel())
+        xi_co = None if run.xi_co is None else run.xi_co[k]
+        margins = monitor.margins_at(t, run.q[k], run.xi_cf[k], run.force[k].ravel(), xi_co)
         log.record(margins, monitor.events(margins))
     return log
 

@@ -17,6 +17,10 @@ _FIELDS: dict[str, str] = {
     'no_slip.normal_force_margin': 'normal_force_margin',
     'joint_limits.enabled': 'joint_limits_enabled',
     'fingertip_workspace.enabled': 'fingertip_workspace_enabled',
+    'object_workspace.enabled': 'object_workspace_enabled',
+    'object_workspace.margin': 'object_workspace_margin',
+    'object_workspace.sphere_a_half_width': 'object_workspace_sphere_a_half_width',
+    'object_workspace.sphere_b_half_width': 'object_workspace_sphere_b_half_width',
     'barrier.alpha1.kind': 'alpha1_kind',
     'barrier.alpha1.gain': 'alpha1_gain',
     'barrier.alpha2.kind': 'alpha2_kind',
@@ -24,6 +28,7 @@ _FIELDS: dict[str, str] = {
     'relaxation.no_slip_weight': 'no_slip_weight',
     'relaxation.joint_limits_weight': 'joint_limits_weight',
     'relaxation.fingertip_workspace_weight': 'fingertip_workspace_weight',
+    'relaxation.object_workspace_weight': 'object_workspace_weight',
     'osqp.eps_abs': 'eps_abs',
     'osqp.eps_rel': 'eps_rel',
     'osqp.max_iter': 'max_iter',
@@ -42,10 +47,15 @@ class SafetyFilterConfig:
         normal_force_margin: Pyramid margin eps, N (>= 0).
         joint_limits_enabled: Enforce the joint-limit barriers.
         fingertip_workspace_enabled: Enforce the fingertip-workspace barriers.
+        object_workspace_enabled: Enforce the object-workspace barriers.
+        object_workspace_margin: Distance kept from a box face's edges, m (> 0).
+        object_workspace_sphere_a_half_width, object_workspace_sphere_b_half_width: The box
+            ``|a| <= w_a, |b + pi/2| <= w_b`` of a contact's sphere chart, rad.
         alpha1_kind, alpha1_gain: alpha_1 (``"cubic"`` or ``"linear"``, gain > 0).
         alpha2_kind, alpha2_gain: alpha_2 (same choices).
-        no_slip_weight, joint_limits_weight, fingertip_workspace_weight: Slack weights of
-            the relaxed QP (> 0), per (N·m)² of torque-space violation.
+        no_slip_weight, joint_limits_weight, fingertip_workspace_weight,
+            object_workspace_weight: Slack weights of the relaxed QP (> 0), per (N·m)² of
+            torque-space violation.
         eps_abs, eps_rel: OSQP tolerances (> 0).
         max_iter: OSQP iteration limit (>= 1).
         polish: OSQP solution polishing.
@@ -58,6 +68,10 @@ class SafetyFilterConfig:
     normal_force_margin: float = 0.01
     joint_limits_enabled: bool = True
     fingertip_workspace_enabled: bool = True
+    object_workspace_enabled: bool = False
+    object_workspace_margin: float = 0.005
+    object_workspace_sphere_a_half_width: float = 1.0
+    object_workspace_sphere_b_half_width: float = 1.0
     alpha1_kind: str = 'cubic'
     alpha1_gain: float = 1.0
     alpha2_kind: str = 'cubic'
@@ -65,6 +79,7 @@ class SafetyFilterConfig:
     no_slip_weight: float = 1e6
     joint_limits_weight: float = 1e6
     fingertip_workspace_weight: float = 1e3
+    object_workspace_weight: float = 1e3
     eps_abs: float = 1e-4
     eps_rel: float = 1e-4
     max_iter: int = 50

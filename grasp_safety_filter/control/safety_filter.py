@@ -55,6 +55,7 @@ from grasp_safety_filter.control.constraints import (
     FingertipWorkspaceBarrier,
     FrictionPyramid,
     JointLimitBarrier,
+    ObjectWorkspaceBarrier,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.control.filter_inputs import (
@@ -102,7 +103,7 @@ class SafetyFilter:
         config: The configuration.
         joint_names, contact_names: Model joint and contact order.
         families: The enabled barrier families, in row order (no slip, joint limits,
-            fingertip workspace).
+            fingertip workspace, object workspace).
         actuator_limits: The torque box (always enforced, never relaxed).
         row_names: Names of the barrier rows, in row order.
         hard_qp: The hard QP in OSQP's form, the rows' buffer (the last assembled data).
@@ -121,6 +122,7 @@ class SafetyFilter:
         u_max: float | Sequence[float] | np.ndarray,
         mu: float | Sequence[float] | np.ndarray,
         workspace: tuple[float, float, float, float],
+        object_workspace: ObjectWorkspaceBarrier | None = None,
     ) -> None:
         """Build the families, the problems and the QP backend.
 
@@ -135,6 +137,8 @@ class SafetyFilter:
             mu: Friction coefficient(s), > 0 (scalar or (n,)).
             workspace: Fingertip box ``(a_min, a_max, b_min, b_max)``, rad, each bound a
                 scalar (every contact) or one per contact, (n,).
+            object_workspace: The object-workspace family (its rows, same contacts);
+                needed only with ``object_workspace_enabled``.
 
         Raises:
             ValueError: A malformed argument; the message names it.
@@ -172,6 +176,16 @@ class SafetyFilter:
             chosen.append((joint_limits, config.joint_limits_weight))
         if config.fingertip_workspace_enabled:
             chosen.append((fingertip_workspace, config.fingertip_workspace_weight))
+        if config.object_workspace_enabled:
+            if not isinstance(object_workspace, ObjectWorkspaceBarrier) or (
+                object_workspace.contact_names != self.contact_names
+            ):
+                raise ValueError(
+                    "'object_workspace': expected an ObjectWorkspaceBarrier of the contacts "
+                    f'{list(self.contact_names)} with object_workspace.enabled, got '
+                    f'{object_workspace!r}'
+                )
+            chosen.append((object_workspace, config.object_workspace_weight))
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
         self.row_names: tuple[str, ...] = tuple(n for f in self.families for n in f.names)
         k = len(self.row_names)
@@ -208,12 +222,29 @@ class SafetyFilter:
             grasp_model: Anything with ``joint_names``, ``contact_names``,
                 ``joint_lower_limits``, ``joint_upper_limits``, ``effort_limits`` (u_max;
                 u_min = -u_max), ``friction_coefficient`` and ``fingertip_workspace``
-                (``(a_min, a_max, b_min, b_max)``), e.g. a ``GraspModel``.
+                (``(a_min, a_max, b_min, b_max)``), e.g. a ``GraspModel``; with
+                ``object_workspace.enabled`` a ``GraspModel`` (its contacts' object surfaces,
+                :meth:`ObjectWorkspaceBarrier.for_model`).
             config: The filter configuration (defaults if None).
         """
         effort = np.asarray(grasp_model.effort_limits, dtype=float)
+        config = config if config is not None else SafetyFilterConfig()
+        object_workspace = (
+            ObjectWorkspaceBarrier.for_model(
+                grasp_model,
+                config.object_workspace_margin,
+                (
+                    config.object_workspace_sphere_a_half_width,
+                    config.object_workspace_sphere_b_half_width,
+                ),
+                config.alpha1,
+                config.alpha2,
+            )
+            if config.object_workspace_enabled
+            else None
+        )
         return cls(
-            config if config is not None else SafetyFilterConfig(),
+            config,
             joint_names=grasp_model.joint_names,
             contact_names=grasp_model.contact_names,
             q_min=grasp_model.joint_lower_limits,
@@ -222,6 +253,7 @@ class SafetyFilter:
             u_max=effort,
             mu=grasp_model.friction_coefficient,
             workspace=tuple(grasp_model.fingertip_workspace),
+            object_workspace=object_workspace,
         )
 
     @property

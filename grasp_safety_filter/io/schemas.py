@@ -514,6 +514,42 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'Keep every contact point inside the fingertip workspace (relative-degree-2 barrier)',
     ),
     ParameterSpec(
+        'object_workspace.enabled',
+        BOOL,
+        False,
+        'Keep every contact point on its object surface, a margin inside a box face '
+        '(relative-degree-2 barrier; off in the paper)',
+    ),
+    ParameterSpec(
+        'object_workspace.margin',
+        DOUBLE,
+        0.005,
+        'Distance the contact points keep from the edges of their box face, below every '
+        'half extent [m]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'object_workspace.sphere_a_half_width',
+        DOUBLE,
+        1.0,
+        "On a sphere object: |a| the contact keeps in its chart, off the chart's poles at "
+        '+-pi/2 [rad]',
+        min_value=0.0,
+        max_value=HALF_PI - FINGERTIP_WORKSPACE_A_MARGIN,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'object_workspace.sphere_b_half_width',
+        DOUBLE,
+        1.0,
+        "On a sphere object: |b + pi/2| the contact keeps in its chart, off the chart's cut "
+        'at b = +-pi [rad]',
+        min_value=0.0,
+        max_value=HALF_PI - FINGERTIP_WORKSPACE_A_MARGIN,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
         'barrier.alpha1.kind',
         STRING,
         'cubic',
@@ -564,6 +600,14 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         DOUBLE,
         1.0e3,
         'Penalty on the squared slack of the fingertip-workspace rows when infeasible [-]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'relaxation.object_workspace_weight',
+        DOUBLE,
+        1.0e3,
+        'Penalty on the squared slack of the object-workspace rows when infeasible [-]',
         min_value=0.0,
         exclusive_min=True,
     ),

@@ -14,8 +14,8 @@ contact force affine in the torque:
     B_ho f_c = J_h M_h^-1 (u - C_h dq - g) + J_h_dot dq - G_dot^T x_o_dot
                + G^T M_o^-1 (C_o x_o_dot - w_e),    B_ho = J_h M_h^-1 J_h^T + G^T M_o^-1 G
 
-and with it ``ddq``, ``x_o_ddot`` and the fingertip contact coordinates' second
-derivatives. ``J_h_dot`` and ``G_dot`` are total time derivatives along the rolling
+and with it ``ddq``, ``x_o_ddot`` and the fingertip and object contact coordinates'
+second derivatives. ``J_h_dot`` and ``G_dot`` are total time derivatives along the rolling
 motion: they include the motion of the contact point over the fingertip and the rotation of
 the contact frame.
 """
@@ -23,6 +23,7 @@ the contact frame.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -454,4 +455,5 @@ class GraspModel:
             joint_acceleration=AffineMap(ddq[:, :m], ddq[:, m]),
             object_acceleration=AffineMap(x_ddot[:, :m], x_ddot[:, m]),
             xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
+            xi_co_rate_terms=partial(self._contact_stack.object_rate_terms, geometry, rates),
         )

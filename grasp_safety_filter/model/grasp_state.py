@@ -18,7 +18,9 @@ Conventions (used throughout the package):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -70,6 +72,14 @@ class GraspState:
         joint_acceleration: ``u ↦ ddq``, shape (m, m).
         object_acceleration: ``u ↦ x_o_ddot = (a_o, alpha_o)``, shape (6, m).
         xi_cf_ddot: ``u ↦ (a_1_ddot, b_1_ddot, a_2_ddot, ...)``, shape (2n, m).
+        xi_co_rate_terms: Returns ``(M_co^-1 R_psi M_cf, c)`` of this instant, shapes
+            (n, 2, 2) and (n, 2), with ``xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot + c``
+            (:meth:`~grasp_safety_filter.model.rolling.ContactStack.object_rate_terms`).
+        xi_co_ddot: ``u ↦`` second derivatives of ``xi_co`` (contact-major, like
+            ``xi_cf_ddot``), shape (2n, m); m/s² on a face, rad/s² in a sphere chart.
+            A property computed once, on first use, from ``xi_cf_ddot`` and
+            ``xi_co_rate_terms``: a tick without an object-surface barrier does not pay
+            for it.
     """
 
     t: float
@@ -106,6 +116,21 @@ class GraspState:
     joint_acceleration: AffineMap
     object_acceleration: AffineMap
     xi_cf_ddot: AffineMap
+    xi_co_rate_terms: Callable[[], tuple[np.ndarray, np.ndarray]]
+
+    @cached_property
+    def xi_co_ddot(self) -> AffineMap:
+        """``u ↦ xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot(u) + c``, shape (2n, m)."""
+        object_from_fingertip, bias = self.xi_co_rate_terms()
+        n, m = object_from_fingertip.shape[0], self.xi_cf_ddot.matrix.shape[1]
+        augmented = np.empty((n, 2, m + 1))
+        augmented[:, :, :m] = self.xi_cf_ddot.matrix.reshape(n, 2, m)
+        augmented[:, :, m] = self.xi_cf_ddot.offset.reshape(n, 2)
+        result = object_from_fingertip @ augmented
+        result[:, :, m] += bias
+        result = result.reshape(2 * n, m + 1)
+        result.setflags(write=False)
+        return AffineMap(result[:, :m], result[:, m])
 
     @property
     def n_contacts(self) -> int:

@@ -25,6 +25,7 @@ from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.surfaces import (
     box_face,
     CUBE_FACE_AXES,
+    face_label,
     FlatSurface,
     SphereSurface,
     Surface,
@@ -128,8 +129,6 @@ class ObjectShape:
     def describe(self, surface: Surface) -> str:
         """``"face +x"`` for a face of this box, ``"sphere"`` for the sphere."""
         if isinstance(surface, FlatSurface):
-            for label, (axis, sign) in CUBE_FACE_AXES.items():
-                if surface.normal[axis] * sign > 1.0 - 1e-9:
-                    return f'face {label}'
-            return 'plane'
+            label = face_label(surface)
+            return 'plane' if label is None else f'face {label}'
         return 'sphere'

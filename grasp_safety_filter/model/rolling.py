@@ -402,6 +402,38 @@ class ContactStack:
             frame_angular_velocity=np.array([-K_sliding[:, 1], K_sliding[:, 0], torsion_cf]).T,
         )
 
+    def object_rate_terms(
+        self, geometry: StackedContactGeometry, rates: StackedRollingRates
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """How the object coordinates' second derivative follows from the fingertip's.
+
+        Montana's equations give both sides the sliding velocity,
+        ``M_co xi_co_dot = R_psi M_cf xi_cf_dot``; differentiated,
+
+            xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot
+                         + M_co^-1 (R_psi_dot M_cf xi_cf_dot + R_psi M_cf_dot xi_cf_dot
+                                    - M_co_dot xi_co_dot)
+
+        Evaluated only when asked for (a barrier on the object surface), not every tick.
+
+        Returns:
+            ``M_co^-1 R_psi M_cf`` (n, 2, 2) and the second term (n, 2).
+        """
+        xi_cf, xi_co, psi = geometry.xi_cf, geometry.xi_co, geometry.psi
+        s, c = np.sin(psi), np.cos(psi)
+        R_psi = np.array([[c, -s], [-s, -c]]).transpose(2, 0, 1)
+        R_psi_dot = rates.psi_dot[:, None, None] * np.array([[-s, -c], [-c, s]]).transpose(
+            2, 0, 1
+        )
+        M_cf = self.fingertips.metric(xi_cf)
+        M_co = self.object_surfaces.metric(xi_co)
+        bias = (
+            matvec(R_psi_dot, rates.sliding_velocity)
+            + matvec(R_psi, self.fingertips.metric_rate(xi_cf, rates.xi_cf_dot) * rates.xi_cf_dot)
+            - self.object_surfaces.metric_rate(xi_co, rates.xi_co_dot) * rates.xi_co_dot
+        ) / M_co
+        return R_psi * M_cf[:, None, :] / M_co[:, :, None], bias
+
 
 class SphereOnPlaneStack(ContactStack):
     """Spherical fingertips on flat object faces (the paper's cube).

@@ -297,6 +297,14 @@ CUBE_FACE_AXES: dict[str, tuple[int, float]] = {
 }
 
 
+def face_label(plane: FlatSurface) -> str | None:
+    """Label (``"+x"``...) of the box face whose outward normal ``plane`` has, else None."""
+    for label, (axis, sign) in CUBE_FACE_AXES.items():
+        if plane.normal[axis] * sign > 1.0 - 1e-9:
+            return label
+    return None
+
+
 def box_face(label: str, edge_lengths: Sequence[float]) -> FlatSurface:
     """Return the face ``label`` (``"+x"``, ``"-y"``, ...) of a box centred at the origin.
 

@@ -4,6 +4,8 @@
 - :class:`JointLimitBarrier` (``joint_limits``): joint angles inside their limits (ZCBF).
 - :class:`FingertipWorkspaceBarrier` (``fingertip_workspace``): rolling contact points on
   the fingertip surface (ZCBF).
+- :class:`ObjectWorkspaceBarrier` (``object_workspace``): rolling contact points on their
+  object surface, a margin inside a box face's edges (ZCBF).
 - :class:`ActuatorLimits` (``actuator_limits``): the joint torque box.
 """
 
@@ -25,6 +27,7 @@ from grasp_safety_filter.control.constraints.fingertip_workspace import (
 )
 from grasp_safety_filter.control.constraints.friction_cone import FrictionPyramid
 from grasp_safety_filter.control.constraints.joint_limits import JointLimitBarrier
+from grasp_safety_filter.control.constraints.object_workspace import ObjectWorkspaceBarrier
 from grasp_safety_filter.model.grasp_state import GraspState
 
 __all__ = [
@@ -36,6 +39,7 @@ __all__ = [
     'FingertipWorkspaceBarrier',
     'FrictionPyramid',
     'JointLimitBarrier',
+    'ObjectWorkspaceBarrier',
     'stack_constraints',
 ]
 
