@@ -93,9 +93,7 @@ class BagScenario:
     note: str | None = None
 
 
-def bag_scenario(
-    recorded: Mapping[str, Any], scenario: ScenarioFile, given: bool
-) -> BagScenario:
+def bag_scenario(recorded: Mapping[str, Any], scenario: ScenarioFile, given: bool) -> BagScenario:
     """Apply a scenario file to a bag's recorded scenario (module docstring).
 
     Args:
@@ -114,9 +112,9 @@ def bag_scenario(
         if given:
             raise ScenarioMismatchError(
                 f'--config {scenario.path}: expected the scenario file of the recorded run; '
-                f"its hand has joints {scenario.document['joint_names']} and contacts "
-                f"{scenario.document['contact_names']}, the bag records joints "
-                f"{recorded['joint_names']} and contacts {recorded['contact_names']}"
+                f'its hand has joints {scenario.document["joint_names"]} and contacts '
+                f'{scenario.document["contact_names"]}, the bag records joints '
+                f'{recorded["joint_names"]} and contacts {recorded["contact_names"]}'
             )
         return BagScenario('', None)
     differences = scenario_differences(recorded, scenario.document)

@@ -104,13 +104,13 @@ def plot_contacts(run: RunData, path: Path) -> Path:
 
 
 def _finger_rows(fingers: Sequence[Finger]) -> list[tuple[str, tuple[int, ...]]]:
-    """One row of panels per finger: its label and joints, at most :data:`MAX_COLUMNS` a row.
+    """Lay out a row of panels per finger: label and joints, at most :data:`MAX_COLUMNS` a row.
 
     A finger with more joints continues on the next rows, labelled ``"<finger> (cont.)"``.
     """
     rows = []
     for finger in fingers:
-        for start in range(0, max(len(finger.joints), 1), MAX_COLUMNS):
+        for start in range(0, len(finger.joints), MAX_COLUMNS):
             label = finger.label if start == 0 else f'{finger.label} (cont.)'
             rows.append((label, finger.joints[start : start + MAX_COLUMNS]))
     return rows
@@ -153,7 +153,12 @@ def _joint_title(axes: Axes, name: str) -> None:
 
 
 def plot_joints(run: RunData, path: Path, fingers: Sequence[Finger] | None = None) -> Path:
-    """Plot each joint's angle in its finger's row, with its limits (grey beyond)."""
+    """Plot :func:`joints_figure` to ``path``."""
+    return _save(joints_figure(run, fingers), path)
+
+
+def joints_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Figure:
+    """Draw each joint's angle in its finger's row, with its limits (grey beyond)."""
     by = 'by finger' if fingers is not None else 'in command order (fingers not known)'
     fingers = all_joints(run.joint_names) if fingers is None else fingers
     figure, panels = _finger_grid(fingers, 'q [rad]')
@@ -165,7 +170,7 @@ def plot_joints(run: RunData, path: Path, fingers: Sequence[Finger] | None = Non
             _joint_title(axes, run.joint_names[j])
             _stop_marker(axes, run)
     figure.suptitle(f'{run.mode}: joint angles {by} (grey: beyond the joint limits)')
-    return _save(figure, path)
+    return figure
 
 
 def plot_friction(run: RunData, path: Path) -> Path:
@@ -188,7 +193,12 @@ def plot_friction(run: RunData, path: Path) -> Path:
 
 
 def plot_torques(run: RunData, path: Path, fingers: Sequence[Finger] | None = None) -> Path:
-    """Plot the commanded torque u* against the nominal u_nom, per joint in its finger's row."""
+    """Plot :func:`torques_figure` to ``path``."""
+    return _save(torques_figure(run, fingers), path)
+
+
+def torques_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Figure:
+    """Draw the commanded torque u* and the nominal u_nom, per joint in its finger's row."""
     by = 'by finger' if fingers is not None else 'in command order (fingers not known)'
     fingers = all_joints(run.joint_names) if fingers is None else fingers
     figure, panels = _finger_grid(fingers, 'torque [N m]')
@@ -202,7 +212,7 @@ def plot_torques(run: RunData, path: Path, fingers: Sequence[Finger] | None = No
     figure.suptitle(
         f'{run.mode}: joint torques {by}\n(grey: nominal $u_{{nom}}$, red: commanded $u^*$)'
     )
-    return _save(figure, path)
+    return figure
 
 
 def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = None) -> list[Path]:

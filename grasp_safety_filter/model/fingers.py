@@ -55,7 +55,7 @@ def _joints_by_child(robot: ElementTree.Element) -> dict[str, _Joint]:
         parent, child = element.find('parent'), element.find('child')
         if parent is None or child is None:
             raise HandModelError(
-                f"model.urdf_file: joint {element.get('name')!r}: expected <parent link> and "
+                f'model.urdf_file: joint {element.get("name")!r}: expected <parent link> and '
                 '<child link>, got '
                 + ('neither' if parent is None and child is None else 'only one')
             )
