@@ -12,13 +12,15 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.analysis.report import print_summary, verdict_document
-from grasp_safety_filter.analysis.verdict import (
-    paper_verdict as paper_verdict,  # the paper's verdict, as the tests and scripts import it
-)
+from grasp_safety_filter.analysis.verdict import paper_verdict as _paper_verdict
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.parameters import ParameterError, parse_parameter_value
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.model.quaternion import rotation_matrix
+
+#: The paper's verdict on a run (:func:`grasp_safety_filter.analysis.verdict.paper_verdict`),
+#: where scripts and tests have imported it from.
+paper_verdict = _paper_verdict
 
 
 def model_report_main(argv: list[str] | None = None) -> int:
@@ -366,10 +368,11 @@ def _bag_scenario(bag: Path, config: Path | None) -> Any:
         load_scenario_file,
     )
     from grasp_safety_filter.analysis.run_data import read_scenario, RunDataError
+    from grasp_safety_filter.io.schemas import NO_OUTCOME
 
     try:
         recorded = read_scenario(bag)
     except RunDataError:
-        return BagScenario('', None)
+        return BagScenario(NO_OUTCOME, None)
     scenario_file = load_scenario_file(config_path() if config is None else config)
     return bag_scenario(recorded, scenario_file, given=config is not None)

@@ -60,7 +60,7 @@ def joint(name: str, parent: str, child: str, kind: str = 'revolute') -> str:
 
 
 def robot(*joints: tuple[str, ...]) -> ElementTree.Element:
-    """A URDF tree of the given joints (name, parent, child[, type]); links from them."""
+    """Make a URDF tree of the given joints (name, parent, child[, type]), links from them."""
     links = {'palm'} | {j[1] for j in joints} | {j[2] for j in joints}
     text = '<robot name="hand">' + ''.join(f'<link name="{link}"/>' for link in sorted(links))
     return ElementTree.fromstring(text + ''.join(joint(*j) for j in joints) + '</robot>')

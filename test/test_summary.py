@@ -247,7 +247,7 @@ def summary_of(
     violated: dict[str, tuple[int, float, str, str]] | None = None,
     families: tuple[str, ...] = FAMILIES,
 ) -> dict:
-    """A summary of a 15 s run; ``violated``: family -> (steps, first t, first name, side)."""
+    """Make a summary of a 15 s run; ``violated``: family -> (steps, first t, name, side)."""
     violated = violated or {}
     return {
         'mode': mode,
@@ -324,9 +324,9 @@ VERDICT_CASES = {
         False,
         'NOT reproduced: not no constraint violated',
     ),
-    'example held': ('', summary_of('filtered'), True, [], None, None),
+    'example held': ('none', summary_of('filtered'), True, [], None, None),
     'example slips': (
-        '',
+        'none',
         summary_of('nominal', violated={'slip': (500, 0.0, 'finger1', '')}),
         False,
         ['slip'],
@@ -334,7 +334,7 @@ VERDICT_CASES = {
         None,
     ),
     'example passes a joint limit': (
-        '',
+        'none',
         summary_of('filtered', violated={'joint_limits': (7, 3.25, 'finger4_joint1', 'lower')}),
         False,
         ['joint_limits'],
@@ -342,7 +342,7 @@ VERDICT_CASES = {
         None,
     ),
     'example leaves the fingertip workspace': (
-        '',
+        'none',
         summary_of('nominal', 2.0, 'fingertip_workspace', {
             'fingertip_workspace': (1, 2.0, 'finger3', 'b_min'),
         }),
@@ -352,7 +352,7 @@ VERDICT_CASES = {
         None,
     ),
     'example loses a contact': (
-        '',
+        'none',
         summary_of('nominal', violated={'separation': (2, 4.5, 'finger2', '')}),
         False,
         ['separation'],
@@ -360,7 +360,7 @@ VERDICT_CASES = {
         None,
     ),
     'a family this version does not know': (
-        '',
+        'none',
         summary_of(
             'filtered',
             violated={'object_workspace': (4, 0.5, 'finger1', 'v_max')},
@@ -371,7 +371,7 @@ VERDICT_CASES = {
         None,
         None,
     ),
-    'interrupted': ('', summary_of('filtered', 3.0, 'interrupted'), False, [], None, None),
+    'interrupted': ('none', summary_of('filtered', 3.0, 'interrupted'), False, [], None, None),
 }
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from grasp_safety_filter.errors import ConfigError
+from grasp_safety_filter.io.schemas import NO_OUTCOME
 from grasp_safety_filter.model.fingers import Finger, fingers_from_parameters
 
 #: Scenario-document keys a run may set without changing the scenario (``grasp-demo
@@ -36,7 +37,7 @@ class ScenarioFile:
 
     Attributes:
         path: The file.
-        expected_outcome: Its ``expected_outcome`` (``""``: none).
+        expected_outcome: Its ``expected_outcome`` (``"none"``: none).
         fingers: Its hand's joints by finger.
         document: The ``/grasp/scenario`` document its simulator publishes.
 
@@ -82,7 +83,7 @@ class BagScenario:
     """What a scenario file says of a bag.
 
     Attributes:
-        expected_outcome: The outcome the bag's run is judged against (``""``: none).
+        expected_outcome: The outcome the bag's run is judged against (``"none"``: none).
         fingers: Its joints by finger for the figures, or None (another hand).
         note: One line on why the file's expected outcome does not apply, or None.
 
@@ -116,14 +117,14 @@ def bag_scenario(recorded: Mapping[str, Any], scenario: ScenarioFile, given: boo
                 f'{scenario.document["contact_names"]}, the bag records joints '
                 f'{recorded["joint_names"]} and contacts {recorded["contact_names"]}'
             )
-        return BagScenario('', None)
+        return BagScenario(NO_OUTCOME, None)
     differences = scenario_differences(recorded, scenario.document)
     if not differences:
         return BagScenario(scenario.expected_outcome, scenario.fingers)
     note = None
-    if given and scenario.expected_outcome:
+    if given and scenario.expected_outcome != NO_OUTCOME:
         note = (
             f'expected outcome {scenario.expected_outcome!r} of {scenario.path} not checked: '
             f'the bag records another scenario ({", ".join(differences)} differ)'
         )
-    return BagScenario('', scenario.fingers, note)
+    return BagScenario(NO_OUTCOME, scenario.fingers, note)

@@ -11,10 +11,11 @@ from grasp_safety_filter.analysis.verdict import (
     run_verdict,
     RunVerdict,
 )
+from grasp_safety_filter.io.schemas import NO_OUTCOME
 
 
 def print_summary(
-    mode: str, summary: dict[str, Any], out_dir: Path, expected_outcome: str = ''
+    mode: str, summary: dict[str, Any], out_dir: Path, expected_outcome: str = NO_OUTCOME
 ) -> tuple[RunVerdict, ExpectedVerdict | None]:
     """Print a run's summary, its generic verdict and, if one is declared, its expected one."""
     verdict = run_verdict(summary)

@@ -20,7 +20,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from grasp_safety_filter.io.schemas import EXPECTED_OUTCOMES, PAPER_OUTCOME
+from grasp_safety_filter.io.schemas import EXPECTED_OUTCOMES, NO_OUTCOME, PAPER_OUTCOME
 
 
 @dataclass(frozen=True)
@@ -178,7 +178,7 @@ class ExpectedVerdict:
 def expected_verdict(
     outcome: str, mode: str, summary: Mapping[str, Any]
 ) -> ExpectedVerdict | None:
-    """Judge a run against ``outcome`` (None for ``""``: no outcome expected).
+    """Judge a run against ``outcome`` (None for ``"none"``: no outcome expected).
 
     Raises:
         ValueError: ``outcome`` is not one of
@@ -187,7 +187,7 @@ def expected_verdict(
     """
     if outcome not in EXPECTED_OUTCOMES:
         raise ValueError(f'expected_outcome: expected one of {EXPECTED_OUTCOMES}, got {outcome!r}')
-    if not outcome:
+    if outcome == NO_OUTCOME:
         return None
     label, judge = OUTCOME_JUDGES[outcome]
     met, text = judge(mode, summary)
