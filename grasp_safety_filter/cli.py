@@ -7,7 +7,7 @@ from collections.abc import Callable
 import json
 from pathlib import Path
 import sys
-from typing import Any
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
@@ -17,6 +17,9 @@ from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONF
 from grasp_safety_filter.io.parameters import ParameterError, parse_parameter_value
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.model.quaternion import rotation_matrix
+
+if TYPE_CHECKING:
+    from grasp_safety_filter.analysis.bag_scenario import BagScenario
 
 #: The paper's verdict on a run (:func:`grasp_safety_filter.analysis.verdict.paper_verdict`),
 #: where scripts and tests have imported it from.
@@ -227,7 +230,8 @@ for each constraint family (fingertip_workspace, joint_limits, slip, separation,
 steps violated and when and by which contact or joint it was first violated. A scenario
 file whose hand_sim_node section sets expected_outcome (config/paper_scenario.yaml:
 "paper") is also judged against that outcome: "paper outcome reproduced" or "NOT
-reproduced". grasp-demo writes the verdicts to OUT/verdict.json.
+reproduced" (an interrupted run's recording: "not judged"). grasp-demo writes the
+verdicts to OUT/verdict.json.
 
 exit codes:
   0    the runs completed as asked (a run that slips or stops early is an outcome)
@@ -353,10 +357,10 @@ def _analyze(argv: list[str] | None) -> int:
     print(f'  summary: {out_dir / SUMMARY_FILE}')
     for figure in figures:
         print(f'  figure: {figure}')
-    return 1 if expected is not None and not expected.met else 0
+    return 1 if expected is not None and expected.met is False else 0
 
 
-def _bag_scenario(bag: Path, config: Path | None) -> Any:
+def _bag_scenario(bag: Path, config: Path | None) -> BagScenario:
     """Apply the scenario file (``--config``, else the paper's) to ``bag``.
 
     A bag whose scenario cannot be read gets nothing from it: the analysis then reports

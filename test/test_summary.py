@@ -276,8 +276,8 @@ PAPER_NOMINAL = {
     'fingertip_workspace': (1, 1.205, 'finger2', 'a_max'),
 }
 
-#: name: (expected outcome, summary, held, violated families in order, expected met or None,
-#: words of the printed verdict).
+#: name: (expected outcome, summary, held, violated families in order, expected met (None:
+#: none expected, 'not judged': interrupted), words of the printed verdict).
 VERDICT_CASES = {
     'paper nominal reproduced': (
         'paper',
@@ -372,6 +372,14 @@ VERDICT_CASES = {
         None,
     ),
     'interrupted': ('none', summary_of('filtered', 3.0, 'interrupted'), False, [], None, None),
+    'paper, interrupted': (
+        'paper',
+        summary_of('nominal', 0.5, 'interrupted', {'slip': (3, 0.25, 'finger1', '')}),
+        False,
+        ['slip'],
+        'not judged',
+        'paper outcome not judged: the run was interrupted at 0.500 s',
+    ),
 }
 
 
@@ -403,11 +411,12 @@ def test_verdicts_of_summaries(case):
     if met is None:
         assert expected is None
     else:
-        assert expected.met is met and words in expected.text
+        assert expected.met is (None if met == 'not judged' else met)
+        assert words in expected.text
     document = verdict_document(verdict, expected)
     assert set(document['first_violations']) == set(violated)
-    assert document.get('reproduced') is met
     assert ('reproduced' in document) is (met is not None)
+    assert document.get('reproduced') is (None if met == 'not judged' else met)
 
 
 def test_an_unknown_expected_outcome_is_refused():
@@ -441,7 +450,7 @@ PAPER_BAG_CASES = {
         {'model.friction_coefficient': 1.2},
         None,
         0,
-        'held for the duration: yes',
+        'not checked: the bag records another scenario (differing in friction_coefficient)',
     ),
     # A scenario file of another hand for this bag: a user error.
     'another hand named': ({}, 'four_finger_box.yaml', 2, None),
@@ -461,4 +470,5 @@ def test_grasp_analyze_judges_a_bag_by_the_scenario_it_records(case, tmp_path, c
         assert line.startswith('grasp-analyze: --config ') and 'the bag records joints' in line
         return
     assert words in captured.out
+    assert 'held for the duration: yes' in captured.out
     assert ('paper outcome' in captured.out) is (code == 1)

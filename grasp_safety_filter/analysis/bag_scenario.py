@@ -85,7 +85,8 @@ class BagScenario:
     Attributes:
         expected_outcome: The outcome the bag's run is judged against (``"none"``: none).
         fingers: Its joints by finger for the figures, or None (another hand).
-        note: One line on why the file's expected outcome does not apply, or None.
+        note: One line on why the file's expected outcome does not apply to a bag of its
+            hand, or None.
 
     """
 
@@ -122,9 +123,9 @@ def bag_scenario(recorded: Mapping[str, Any], scenario: ScenarioFile, given: boo
     if not differences:
         return BagScenario(scenario.expected_outcome, scenario.fingers)
     note = None
-    if given and scenario.expected_outcome != NO_OUTCOME:
+    if scenario.expected_outcome != NO_OUTCOME:
         note = (
             f'expected outcome {scenario.expected_outcome!r} of {scenario.path} not checked: '
-            f'the bag records another scenario ({", ".join(differences)} differ)'
+            f'the bag records another scenario (differing in {", ".join(differences)})'
         )
     return BagScenario(NO_OUTCOME, scenario.fingers, note)

@@ -69,7 +69,7 @@ def verdict_document(verdict: RunVerdict, expected: ExpectedVerdict | None) -> d
     document = verdict.to_json()
     document['expected_outcome'] = None if expected is None else expected.outcome
     if expected is not None:
-        document['reproduced'] = expected.met
+        document['reproduced'] = expected.met  # None: interrupted, not judged
         document['verdict'] = expected.text
     return document
 

@@ -59,6 +59,7 @@ import numpy as np
 
 from grasp_safety_filter.analysis.filter_statuses import TIME_KEYS
 from grasp_safety_filter.analysis.run_data import RunData
+from grasp_safety_filter.analysis.verdict import INTERRUPTED
 from grasp_safety_filter.io.diagnostic_keys import (
     FAILED_STATUSES,
     INPUT_STATUSES,
@@ -211,7 +212,7 @@ def summarize(run: RunData) -> dict[str, Any]:
     completed = run.stop_reason == 'duration' or (
         run.stop_reason is None and run.t_end >= duration - 0.5 * step
     )
-    stop_reason = None if completed else (run.stop_reason or 'interrupted')
+    stop_reason = None if completed else (run.stop_reason or INTERRUPTED)
     summary: dict[str, Any] = {
         'mode': run.mode,
         'completed': bool(completed),

@@ -11,7 +11,8 @@ A scenario that declares an expected outcome (``expected_outcome`` in its
 also judged against it (:func:`expected_verdict`): the paper's scenario, ``"paper"``,
 against the outcome Shaw-Cortez et al. (CDC 2018) publish in Section IV
 (:func:`paper_verdict`). ``grasp-demo`` and ``grasp-analyze`` exit 1 only when such an
-outcome is not met.
+outcome is not met. An interrupted run (a recording without the simulator's end of run: a
+signal, a killed process) is not judged against it: it did not run as the scenario asks.
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from grasp_safety_filter.io.schemas import EXPECTED_OUTCOMES, NO_OUTCOME, PAPER_OUTCOME
+
+#: ``stop_reason`` of a run whose recording has no end-of-run status from the simulator.
+INTERRUPTED = 'interrupted'
 
 
 @dataclass(frozen=True)
@@ -165,13 +169,13 @@ class ExpectedVerdict:
 
     Attributes:
         outcome: The ``expected_outcome`` value (e.g. ``"paper"``).
-        met: Whether the run shows it.
+        met: Whether the run shows it; None for an interrupted run (not judged).
         text: One line, e.g. ``"paper outcome reproduced: ran the full duration; ..."``.
 
     """
 
     outcome: str
-    met: bool
+    met: bool | None
     text: str
 
 
@@ -190,5 +194,11 @@ def expected_verdict(
     if outcome == NO_OUTCOME:
         return None
     label, judge = OUTCOME_JUDGES[outcome]
+    if summary['stop_reason'] == INTERRUPTED:
+        return ExpectedVerdict(
+            outcome,
+            None,
+            f'{label} not judged: the run was interrupted at {summary["t_end"]:.3f} s',
+        )
     met, text = judge(mode, summary)
     return ExpectedVerdict(outcome, met, f'{label} {text}')
