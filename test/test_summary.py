@@ -397,13 +397,13 @@ def test_verdicts_of_summaries(case):
     if summary['completed']:
         assert 'ran 15 s' in text
     else:
-        assert f'stopped at {summary["t_end"]:.3f} s of 15 s ({summary["stop_reason"]})' in text
+        assert f'stopped at {summary["t_end"]:.3f} s of 15 s: {summary["stop_reason"]};' in text
     for family in verdict.families:
         if family.family in violated:
             first = summary['violations'][family.family]['first_t']
             by = summary['first_violated_by'][family.family]
             assert f'first violated at {first:.3f} s by {by["name"]}' in family.first_text()
-            assert (f'({by["side"]})' in family.first_text()) is bool(by['side'])
+            assert family.first_text().endswith(f', {by["side"]}' if by['side'] else by['name'])
             assert family.family in text
         else:
             assert family.first_text() == 'never violated'

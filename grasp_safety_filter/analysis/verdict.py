@@ -52,11 +52,11 @@ class FamilyVerdict:
         return self.steps > 0
 
     def first_text(self) -> str:
-        """Say when and by what it was first violated, e.g. ``"at 1.107 s by j2 (upper)"``."""
+        """Say when and by what it was first violated, e.g. ``"... at 1.107 s by j2, upper"``."""
         if self.first_t is None:
             return 'never violated'
         by = '' if self.first_by is None else f' by {self.first_by}'
-        side = f' ({self.side})' if self.first_by is not None and self.side else ''
+        side = f', {self.side}' if self.first_by is not None and self.side else ''
         return f'first violated at {self.first_t:.3f} s{by}{side}'
 
 
@@ -89,8 +89,8 @@ class RunVerdict:
             ran = f'ran {self.duration:g} s'
         else:
             ran = (
-                f'stopped at {self.t_end:.3f} s of {self.duration:g} s '
-                f'({self.stop_reason or "interrupted"})'
+                f'stopped at {self.t_end:.3f} s of {self.duration:g} s: '
+                f'{self.stop_reason or INTERRUPTED}'
             )
         broken = f'violated: {", ".join(violated)}' if violated else 'no constraint violated'
         return f'held for the duration: {"yes" if self.held else "no"} ({ran}; {broken})'
