@@ -7,14 +7,23 @@ from collections.abc import Callable
 import json
 from pathlib import Path
 import sys
-from typing import Any
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
+from grasp_safety_filter.analysis.report import print_summary, verdict_document
+from grasp_safety_filter.analysis.verdict import paper_verdict as _paper_verdict
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.parameters import ParameterError, parse_parameter_value
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.model.quaternion import rotation_matrix
+
+if TYPE_CHECKING:
+    from grasp_safety_filter.analysis.bag_scenario import BagScenario
+
+#: The paper's verdict on a run (:func:`grasp_safety_filter.analysis.verdict.paper_verdict`),
+#: where scripts and tests have imported it from.
+paper_verdict = _paper_verdict
 
 
 def model_report_main(argv: list[str] | None = None) -> int:
@@ -81,75 +90,6 @@ def _progress_printer(label: str) -> Callable[[float, float], None] | None:
     return show
 
 
-def paper_verdict(mode: str, summary: dict[str, Any]) -> tuple[bool, str]:
-    """Tell whether a run shows the paper's outcome for its mode, and why (one line)."""
-    violations = summary['violations']
-    if mode == 'nominal':
-        joint = violations['joint_limits']['first_t']
-        checks = {
-            'stopped early on a contact leaving the fingertip workspace': (
-                not summary['completed'] and summary['stop_reason'] == 'fingertip_workspace'
-            ),
-            'a joint limit passed before that': joint is not None and joint < summary['t_end'],
-            'required friction above mu': violations['slip']['count'] > 0,
-        }
-    else:
-        checks = {
-            'ran the full duration': summary['completed'],
-            'no constraint violated': all(v['count'] == 0 for v in violations.values()),
-        }
-    failed = [name for name, ok in checks.items() if not ok]
-    if failed:
-        return False, 'NOT reproduced: ' + '; '.join(f'not {name}' for name in failed)
-    return True, 'reproduced: ' + '; '.join(checks)
-
-
-def _print_summary(mode: str, summary: dict[str, Any], out_dir: Path) -> tuple[bool, str]:
-    """Print a run's summary and its :func:`paper_verdict`; return the verdict."""
-    ok, verdict = paper_verdict(mode, summary)
-    stop = summary['stop_reason'] or 'none'
-    print(f'\n[{mode}] {out_dir}')
-    print(
-        f'  t_end {summary["t_end"]:.3f} s of {summary["duration_requested"]:g} s, '
-        f'stop reason: {stop}'
-    )
-    missed = summary.get('missed_start') or {}
-    if missed:
-        print(
-            '  recording missed the start of the run (t_0 = 0): '
-            + ', '.join(f'{topic} from {t:.3f} s' for topic, t in missed.items())
-        )
-    for family, record in summary['violations'].items():
-        first = '' if record['first_t'] is None else f' (first at {record["first_t"]:.3f} s)'
-        print(f'  {family:20s} {record["count"]:6d} steps violated{first}')
-    margins = ', '.join(
-        f'{k} {v:.4g}' if v is not None else f'{k} -inf' for k, v in summary['min_margin'].items()
-    )
-    print(f'  smallest margins: {margins}')
-    if 'filter' in summary:
-        f = summary['filter']
-        relaxed = ', '.join(f'{k} {v}' for k, v in f.get('relaxed_families', {}).items())
-        print(
-            f'  filter: {f["steps"]} steps, {f["relaxed_steps"]} relaxed'
-            f'{f" ({relaxed})" if relaxed else ""}, {f["failed_steps"]} failed, '
-            f'{f.get("rejected_steps", 0)} with rejected input, '
-            f'{f.get("watchdog_fallbacks", 0)} watchdog fallbacks (inputs missing during the '
-            f'run; {f.get("watchdog_statuses_after_end", 0)} statuses after its end)'
-        )
-        timing = ', '.join(
-            f'{label} {_us(f[key]["median"])} / {_us(f[key]["p99"])} us'
-            for label, key in (('QP', 'qp_solve_us'), ('step', 'step_us'), ('tick', 'tick_us'))
-            if key in f
-        )
-        print(f'  filter time (median / p99): {timing}')
-    print(f'  paper outcome {verdict}')
-    return ok, verdict
-
-
-def _us(value: float | None) -> str:
-    return 'n/a' if value is None else f'{value:.0f}'
-
-
 def _override(text: str) -> tuple[str, Any]:
     """Parse ``NAME=VALUE``, the value typed as in a parameter file (``1e-5`` a double)."""
     name, separator, value = text.partition('=')
@@ -178,7 +118,7 @@ def _interrupt_message(interrupt: Any) -> str:
 
 
 def demo_main(argv: list[str] | None = None) -> int:
-    """``grasp-demo``: the paper's runs, recorded to bags, with figures and a verdict."""
+    """``grasp-demo``: a scenario's runs (default: the paper's), with figures and verdicts."""
     try:
         return _demo(argv)
     except KeyboardInterrupt:
@@ -198,7 +138,12 @@ def _demo(argv: list[str] | None) -> int:
         VERDICT_FILE,
     )
 
-    parser = argparse.ArgumentParser(prog='grasp-demo', description=demo_main.__doc__)
+    parser = argparse.ArgumentParser(
+        prog='grasp-demo',
+        description=demo_main.__doc__,
+        epilog=VERDICT_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument(
         '--mode',
         choices=('nominal', 'filtered', 'both'),
@@ -239,7 +184,7 @@ def _demo(argv: list[str] | None) -> int:
     modes = ('nominal', 'filtered') if args.mode == 'both' else (args.mode,)
     verdicts = {}
     try:
-        load_initial_grasp(args.config, dict(args.overrides))
+        _, params = load_initial_grasp(args.config, dict(args.overrides))
     except ConfigError as error:
         print(config_error_line('grasp-demo', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
@@ -270,11 +215,30 @@ def _demo(argv: list[str] | None) -> int:
         except RunInterrupted as interrupt:
             print(f'\n[{mode}] {_interrupt_message(interrupt)}', file=sys.stderr)
             return 130
-        ok, verdict = _print_summary(mode, result.summary, out_dir)
-        verdicts[mode] = {'reproduced': ok, 'verdict': verdict}
+        verdict, expected = print_summary(
+            mode, result.summary, out_dir, params['expected_outcome']
+        )
+        verdicts[mode] = verdict_document(verdict, expected)
     write_file(args.out / VERDICT_FILE, json.dumps(verdicts, indent=2) + '\n')
-    return 0 if all(v['reproduced'] for v in verdicts.values()) else 1
+    return 1 if any(v.get('reproduced') is False for v in verdicts.values()) else 0
 
+
+VERDICT_EPILOG = """\
+Each run is judged from its summary.json: "held for the duration: yes" when it ran its
+requested duration with no constraint violated, else "no" with its stop reason and time;
+for each constraint family (fingertip_workspace, joint_limits, slip, separation, ...) the
+steps violated and when and by which contact or joint it was first violated. A scenario
+file whose hand_sim_node section sets expected_outcome (config/paper_scenario.yaml:
+"paper") is also judged against that outcome: "paper outcome reproduced" or "NOT
+reproduced" (an interrupted run's recording: "not judged"). grasp-demo writes the
+verdicts to OUT/verdict.json.
+
+exit codes:
+  0    the runs completed as asked (a run that slips or stops early is an outcome)
+  1    a run did not show its scenario's expected outcome (expected_outcome)
+  2    a user error: a bad scenario file, parameter, bag or output directory
+  130  interrupted (SIGINT, SIGTERM)
+"""
 
 ANALYZE_EPILOG = """\
 A bag whose writer died without closing it (SIGKILL, the OOM killer, a power loss) has no
@@ -285,6 +249,12 @@ replace the old file; what was lost is at most the writer's last {period:g} s of
 --recover does only that, also for a bag with a metadata.yaml whose file cannot be read,
 so that ros2 bag info and rosbags read it. A bag still being written by a live
 grasp-demo or grasp-record is refused.
+
+The bag records its scenario, not its scenario file: --config FILE (default: the paper's)
+applies FILE's expected_outcome when the bag records FILE's scenario (duration, time step
+and integrator aside), and FILE's hand groups the joints by finger in the figures when the
+bag records its joint and contact names (else one group of every joint).
+
 """
 
 
@@ -323,7 +293,7 @@ def _analyze(argv: list[str] | None) -> int:
     parser = argparse.ArgumentParser(
         prog='grasp-analyze',
         description=analyze_main.__doc__,
-        epilog=ANALYZE_EPILOG.format(period=FLUSH_PERIOD_NS / 1e9),
+        epilog=ANALYZE_EPILOG.format(period=FLUSH_PERIOD_NS / 1e9) + VERDICT_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument('bag', type=Path, help='rosbag2 directory (mcap or sqlite3)')
@@ -337,6 +307,12 @@ def _analyze(argv: list[str] | None) -> int:
         '--force',
         action='store_true',
         help='write into OUT even if it holds files that are not a previous output',
+    )
+    parser.add_argument(
+        '--config',
+        type=Path,
+        help='scenario file of the run: its expected outcome and hand (default: the paper '
+        "scenario's, for a bag that records it; see below)",
     )
     parser.add_argument(
         '--recover',
@@ -364,12 +340,43 @@ def _analyze(argv: list[str] | None) -> int:
             # The run's own summary (it may say "interrupted"): keep it.
             out_dir = out_dir / ANALYSIS_DIRECTORY
     try:
-        summary, figures = analyze_bag(args.bag, out_dir, force=args.force)
+        scenario = _bag_scenario(args.bag, args.config)
+    except ConfigError as error:
+        print(config_error_line('grasp-analyze', error), file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+    try:
+        summary, figures = analyze_bag(
+            args.bag, out_dir, force=args.force, fingers=scenario.fingers
+        )
     except (RunDataError, OutputError) as error:
         print(f'grasp-analyze: {error}', file=sys.stderr)
         return 2
-    _print_summary(summary['mode'], summary, out_dir)
+    _, expected = print_summary(summary['mode'], summary, out_dir, scenario.expected_outcome)
+    if scenario.note is not None:
+        print(f'  {scenario.note}')
     print(f'  summary: {out_dir / SUMMARY_FILE}')
     for figure in figures:
         print(f'  figure: {figure}')
-    return 0
+    return 1 if expected is not None and expected.met is False else 0
+
+
+def _bag_scenario(bag: Path, config: Path | None) -> BagScenario:
+    """Apply the scenario file (``--config``, else the paper's) to ``bag``.
+
+    A bag whose scenario cannot be read gets nothing from it: the analysis then reports
+    the bag's problem.
+    """
+    from grasp_safety_filter.analysis.bag_scenario import (
+        bag_scenario,
+        BagScenario,
+        load_scenario_file,
+    )
+    from grasp_safety_filter.analysis.run_data import read_scenario, RunDataError
+    from grasp_safety_filter.io.schemas import NO_OUTCOME
+
+    try:
+        recorded = read_scenario(bag)
+    except RunDataError:
+        return BagScenario(NO_OUTCOME, None)
+    scenario_file = load_scenario_file(config_path() if config is None else config)
+    return bag_scenario(recorded, scenario_file, given=config is not None)

@@ -20,7 +20,7 @@ is replaced, never followed, and a reader never sees half a file.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 import dataclasses
 from dataclasses import dataclass, field
 import json
@@ -54,6 +54,7 @@ from grasp_safety_filter.io.schemas import (
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
 )
+from grasp_safety_filter.model.fingers import Finger, fingers_from_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
@@ -272,6 +273,14 @@ def build_endpoints(
     return sim, nominal, safety_filter
 
 
+def scenario_fingers(options: RunOptions) -> list[Finger]:
+    """Group the scenario hand's joints by finger (:mod:`grasp_safety_filter.model.fingers`)."""
+    overrides = {k: v for k, v in options.overrides.items() if NODE_SCHEMAS[HAND_SIM_NODE].get(k)}
+    return fingers_from_parameters(
+        load_node_parameters(options.config, HAND_SIM_NODE, overrides=overrides)
+    )
+
+
 def record_run(
     options: RunOptions,
     bag_path: Path,
@@ -349,9 +358,11 @@ def _write_summary(out_dir: Path, summary: dict[str, Any]) -> None:
 
 
 def analyze_bag(
-    bag_path: Path, out_dir: Path, force: bool = False
+    bag_path: Path, out_dir: Path, force: bool = False, fingers: Sequence[Finger] | None = None
 ) -> tuple[dict[str, Any], list[Path]]:
     """Figures and ``summary.json`` of a recorded run, into ``out_dir``.
+
+    ``fingers``: the run's hand's joints by finger, for the figures (None: not known).
 
     Raises:
         RunDataError: The bag cannot be analysed.
@@ -364,7 +375,7 @@ def analyze_bag(
     summary = summarize(run)
     out_dir.mkdir(parents=True, exist_ok=True)
     _write_summary(out_dir, summary)
-    return summary, plot_run(run, out_dir)
+    return summary, plot_run(run, out_dir, fingers)
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -396,6 +407,7 @@ def run(
     """
     out_dir = Path(out_dir)
     check_output_dir(out_dir, force)
+    fingers = scenario_fingers(options)
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_path, summary_path = out_dir / BAG_DIRECTORY, out_dir / SUMMARY_FILE
     started, written = [False], [False]
@@ -419,7 +431,7 @@ def run(
                     summary['interrupted'] = recording.interrupted
                 _write_summary(out_dir, summary)
                 written[0] = True
-            figures = plot_run(run_data, out_dir)
+            figures = plot_run(run_data, out_dir, fingers)
         except KeyboardInterrupt as interrupt:
             raise _interrupted(signal_name(interrupt), started[0], written[0], out_dir) from None
     if recording.interrupted is not None:

@@ -4,17 +4,25 @@ Each loads through ``GraspModel.from_parameters``, passes the start-up grasp che
 its contact surfaces from the initial grasp, has rolling rates that match finite
 differences of the geometric contact coordinates, and the safety filter turns a nominal
 command that does not squeeze (gravity compensation) into one that holds the object: every
-normal force positive and every contact force inside its friction cone.
+normal force positive and every contact force inside its friction cone. ``grasp-demo`` on
+the box gives the generic verdict (no expected outcome: exit 0) and draws the joints and
+torques in a row per finger.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+import json
 from pathlib import Path
 
 from grasp_states import Configuration, moved
 import numpy as np
 import pytest
 
+from grasp_safety_filter.analysis.figures import FIGURE_FILES, joints_figure, torques_figure
+from grasp_safety_filter.analysis.run_data import load_run
+from grasp_safety_filter.cli import demo_main
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilter
 from grasp_safety_filter.io.schemas import load_node_parameters, SAFETY_FILTER_NODE
@@ -22,6 +30,7 @@ from grasp_safety_filter.model.grasp_check import grasp_findings, load_initial_g
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.quaternion import rotation_matrix
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
+from grasp_safety_filter.runner import RunOptions, scenario_fingers
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 SCENARIOS = ('four_finger_box.yaml', 'four_finger_sphere.yaml')
@@ -114,3 +123,60 @@ def test_the_filter_turns_gravity_compensation_into_a_grasp_that_holds(scenario)
     assert np.all(forces[:, 2] > 0.0)
     assert np.all(np.linalg.norm(forces[:, :2], axis=1) <= mu * forces[:, 2])
     assert min(result.margins.values()) >= -1e-6
+
+
+# ----------------------------------------------------------------------------------------
+# grasp-demo on the example hand: a generic verdict, figures per finger
+
+
+@pytest.fixture(scope='module')
+def box_demo(tmp_path_factory):
+    """Run ``grasp-demo --mode both --duration 0.5`` on the box; its exit code and output."""
+    out = tmp_path_factory.mktemp('box_demo')
+    argv = ['--config', str(CONFIG / 'four_finger_box.yaml'), '--mode', 'both']
+    with contextlib.redirect_stdout(io.StringIO()) as printed:
+        code = demo_main([*argv, '--duration', '0.5', '--out', str(out)])
+    return code, printed.getvalue(), out
+
+
+def test_grasp_demo_on_the_example_gives_the_generic_verdict_and_exits_0(box_demo):
+    code, printed, out = box_demo
+    assert code == 0, printed
+    assert printed.count('held for the duration: ') == 2
+    assert 'paper outcome' not in printed
+    verdicts = json.loads((out / 'verdict.json').read_text())
+    for mode in ('nominal', 'filtered'):
+        summary = json.loads((out / mode / 'summary.json').read_text())
+        verdict = verdicts[mode]
+        assert verdict['expected_outcome'] is None and 'reproduced' not in verdict
+        violated = {f for f, v in summary['violations'].items() if v['count']}
+        assert set(verdict['first_violations']) == violated
+        assert verdict['held'] is (summary['completed'] and not violated)
+        for figure in FIGURE_FILES:
+            assert (out / mode / figure).stat().st_size > 0
+
+
+@pytest.mark.parametrize('which', ['joints', 'torques'])
+def test_the_joint_figures_have_a_row_per_finger_with_its_own_joints(box_demo, which):
+    _, _, out = box_demo
+    run = load_run(out / 'filtered' / 'bag')
+    fingers = scenario_fingers(RunOptions(CONFIG / 'four_finger_box.yaml'))
+    figure = joints_figure(run, fingers) if which == 'joints' else torques_figure(run, fingers)
+    panels = [axes for axes in figure.axes if axes.get_visible()]
+    rows: dict[str, list[str]] = {}
+    label = None
+    for axes in panels:
+        if axes.get_ylabel():
+            label = axes.get_ylabel().splitlines()[0]
+        rows.setdefault(label, []).append(axes.get_title(loc='right'))
+    assert rows == {f.label: list(f.joint_names) for f in fingers}
+    assert list(rows) == ['finger1', 'finger2', 'finger3', 'finger4']
+    for axes in panels:
+        j = run.joint_names.index(axes.get_title(loc='right'))
+        drawn = axes.get_lines()[0 if which == 'joints' else 1].get_ydata()
+        expected = run.q[:, j] if which == 'joints' else run.u_command[:, j]
+        np.testing.assert_array_equal(drawn, expected)
+        if which == 'joints':
+            # The grey beyond this joint's own limits.
+            low, high = axes.get_ylim()
+            assert low <= run.joint_lower_limits[j] and high >= run.joint_upper_limits[j]

@@ -13,14 +13,17 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.analysis.filter_statuses import FilterStatusReader
+from grasp_safety_filter.analysis.report import verdict_document
 from grasp_safety_filter.analysis.run_data import load_run
-from grasp_safety_filter.analysis.summary import summarize
+from grasp_safety_filter.analysis.summary import first_violated_by, summarize
+from grasp_safety_filter.analysis.verdict import expected_verdict, run_verdict
 from grasp_safety_filter.cli import analyze_main
 from grasp_safety_filter.control.safety_filter import FilterStatus
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder, read_bag
-from grasp_safety_filter.runner import analyze_bag, build_endpoints, run, RunOptions
+from grasp_safety_filter.runner import analyze_bag, build_endpoints, record_run, run, RunOptions
+from hand_sim_node.events import EventLog, EventMonitor
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
 STEPS = 30
@@ -229,3 +232,243 @@ def test_a_status_value_that_is_no_number_is_one_clean_error():
         reader.add(0, {'status': 'solved', 'solve_time_us': 'fast'})
     with pytest.raises(m.MessageError, match="'ticks' is not int"):
         reader.add(0, {'status': 'solved', 'ticks': '1.5e3'})
+
+
+# ----------------------------------------------------------------------------------------
+# Verdicts: the generic one of every run, the expected one of a scenario that declares it
+
+FAMILIES = ('fingertip_workspace', 'joint_limits', 'slip', 'separation')
+
+
+def summary_of(
+    mode: str = 'nominal',
+    t_end: float = 15.0,
+    stop_reason: str | None = None,
+    violated: dict[str, tuple[int, float, str, str]] | None = None,
+    families: tuple[str, ...] = FAMILIES,
+) -> dict:
+    """Make a summary of a 15 s run; ``violated``: family -> (steps, first t, name, side)."""
+    violated = violated or {}
+    return {
+        'mode': mode,
+        'completed': stop_reason is None,
+        't_end': t_end,
+        'duration_requested': 15.0,
+        'stop_reason': stop_reason,
+        'violations': {
+            family: {
+                'count': violated[family][0] if family in violated else 0,
+                'first_t': violated[family][1] if family in violated else None,
+            }
+            for family in families
+        },
+        'first_violated_by': {
+            family: {'name': name, 'side': side}
+            for family, (_, _, name, side) in violated.items()
+        },
+    }
+
+
+#: The paper's nominal outcome: slip at 0.793 s, a joint limit at 1.107 s, the stop at 1.205 s.
+PAPER_NOMINAL = {
+    'slip': (400, 0.793, 'finger3', ''),
+    'joint_limits': (98, 1.107, 'finger1_joint2', 'upper'),
+    'fingertip_workspace': (1, 1.205, 'finger2', 'a_max'),
+}
+
+#: name: (expected outcome, summary, held, violated families in order, expected met (None:
+#: none expected, 'not judged': interrupted), words of the printed verdict).
+VERDICT_CASES = {
+    'paper nominal reproduced': (
+        'paper',
+        summary_of('nominal', 1.205, 'fingertip_workspace', PAPER_NOMINAL),
+        False,
+        ['fingertip_workspace', 'joint_limits', 'slip'],
+        True,
+        'paper outcome reproduced',
+    ),
+    'paper nominal too short': (
+        'paper',
+        summary_of('nominal', 15.0),
+        True,
+        [],
+        False,
+        'paper outcome NOT reproduced: not stopped early',
+    ),
+    'paper nominal without slip': (
+        'paper',
+        summary_of(
+            'nominal',
+            1.205,
+            'fingertip_workspace',
+            {k: v for k, v in PAPER_NOMINAL.items() if k != 'slip'},
+        ),
+        False,
+        ['fingertip_workspace', 'joint_limits'],
+        False,
+        'NOT reproduced: not required friction above mu',
+    ),
+    'paper filtered reproduced': (
+        'paper',
+        summary_of('filtered'),
+        True,
+        [],
+        True,
+        'paper outcome reproduced: ran the full duration; no constraint violated',
+    ),
+    'paper filtered slipping': (
+        'paper',
+        summary_of('filtered', violated={'slip': (3, 2.5, 'finger1', '')}),
+        False,
+        ['slip'],
+        False,
+        'NOT reproduced: not no constraint violated',
+    ),
+    'example held': ('none', summary_of('filtered'), True, [], None, None),
+    'example slips': (
+        'none',
+        summary_of('nominal', violated={'slip': (500, 0.0, 'finger1', '')}),
+        False,
+        ['slip'],
+        None,
+        None,
+    ),
+    'example passes a joint limit': (
+        'none',
+        summary_of('filtered', violated={'joint_limits': (7, 3.25, 'finger4_joint1', 'lower')}),
+        False,
+        ['joint_limits'],
+        None,
+        None,
+    ),
+    'example leaves the fingertip workspace': (
+        'none',
+        summary_of('nominal', 2.0, 'fingertip_workspace', {
+            'fingertip_workspace': (1, 2.0, 'finger3', 'b_min'),
+        }),
+        False,
+        ['fingertip_workspace'],
+        None,
+        None,
+    ),
+    'example loses a contact': (
+        'none',
+        summary_of('nominal', violated={'separation': (2, 4.5, 'finger2', '')}),
+        False,
+        ['separation'],
+        None,
+        None,
+    ),
+    'a family this version does not know': (
+        'none',
+        summary_of(
+            'filtered',
+            violated={'object_workspace': (4, 0.5, 'finger1', 'v_max')},
+            families=(*FAMILIES, 'object_workspace'),
+        ),
+        False,
+        ['object_workspace'],
+        None,
+        None,
+    ),
+    'interrupted': ('none', summary_of('filtered', 3.0, 'interrupted'), False, [], None, None),
+    'paper, interrupted': (
+        'paper',
+        summary_of('nominal', 0.5, 'interrupted', {'slip': (3, 0.25, 'finger1', '')}),
+        False,
+        ['slip'],
+        'not judged',
+        'paper outcome not judged: the run was interrupted at 0.500 s',
+    ),
+}
+
+
+@pytest.mark.parametrize('case', VERDICT_CASES)
+def test_verdicts_of_summaries(case):
+    outcome, summary, held, violated, met, words = VERDICT_CASES[case]
+    verdict = run_verdict(summary)
+    assert verdict.held is held
+    assert [f.family for f in verdict.families] == list(summary['violations'])
+    assert [f.family for f in verdict.families if f.violated] == sorted(
+        violated, key=list(summary['violations']).index
+    )
+    text = verdict.text()
+    assert text.startswith(f'held for the duration: {"yes" if held else "no"} (')
+    if summary['completed']:
+        assert 'ran 15 s' in text
+    else:
+        assert f'stopped at {summary["t_end"]:.3f} s of 15 s: {summary["stop_reason"]};' in text
+    for family in verdict.families:
+        if family.family in violated:
+            first = summary['violations'][family.family]['first_t']
+            by = summary['first_violated_by'][family.family]
+            assert f'first violated at {first:.3f} s by {by["name"]}' in family.first_text()
+            assert family.first_text().endswith(f', {by["side"]}' if by['side'] else by['name'])
+            assert family.family in text
+        else:
+            assert family.first_text() == 'never violated'
+    expected = expected_verdict(outcome, summary['mode'], summary)
+    if met is None:
+        assert expected is None
+    else:
+        assert expected.met is (None if met == 'not judged' else met)
+        assert words in expected.text
+    document = verdict_document(verdict, expected)
+    assert set(document['first_violations']) == set(violated)
+    assert ('reproduced' in document) is (met is not None)
+    assert document.get('reproduced') is (None if met == 'not judged' else met)
+
+
+def test_an_unknown_expected_outcome_is_refused():
+    with pytest.raises(ValueError, match=r"expected_outcome: expected one of .*got 'papr'"):
+        expected_verdict('papr', 'nominal', summary_of())
+
+
+def test_the_first_violation_of_each_family_names_its_contact_or_joint():
+    names = ['j1', 'j2', 'j3']
+    monitor = EventMonitor(
+        np.full(3, -1.0), np.full(3, 1.0), (-1.0, 1.0, -1.0, 1.0), 0.5, names, ['c1', 'c2']
+    )
+    log = EventLog()
+    q_of = {0.0: [0.0, 0.0, 0.0], 0.1: [0.0, 1.5, 0.0], 0.2: [-2.0, 1.5, 2.0]}
+    # c2 slips from 0.1 s on (|f_t| / f_n = 1 > 0.5); at 0.2 s j1 and j3 pass theirs too.
+    for t, q in q_of.items():
+        force = np.array([0.0, 0.0, 1.0, 1.0 if t else 0.0, 0.0, 1.0])
+        margins = monitor.margins_at(t, np.array(q), np.zeros((2, 2)), force)
+        log.record(margins, monitor.events(margins))
+    assert first_violated_by(log) == {
+        'joint_limits': {'name': 'j2', 'side': 'upper'},
+        'slip': {'name': 'c2', 'side': ''},
+    }
+
+
+PAPER_BAG_CASES = {
+    # The paper's scenario, too short to fail: its expected outcome is not met.
+    'paper, 50 ms': ({}, None, 1, 'paper outcome NOT reproduced'),
+    # Another friction coefficient is another scenario: no outcome is expected of it.
+    'paper with another mu': (
+        {'model.friction_coefficient': 1.2},
+        None,
+        0,
+        'not checked: the bag records another scenario (differing in friction_coefficient)',
+    ),
+    # A scenario file of another hand for this bag: a user error.
+    'another hand named': ({}, 'four_finger_box.yaml', 2, None),
+}
+
+
+@pytest.mark.parametrize('case', PAPER_BAG_CASES)
+def test_grasp_analyze_judges_a_bag_by_the_scenario_it_records(case, tmp_path, capsys):
+    overrides, config, code, words = PAPER_BAG_CASES[case]
+    bag = tmp_path / 'bag'
+    record_run(RunOptions(CONFIG, 'nominal', duration=0.05, overrides=overrides), bag)
+    extra = [] if config is None else ['--config', str(CONFIG.parent / config)]
+    assert analyze_main([str(bag), '--out', str(tmp_path / 'out'), *extra]) == code
+    captured = capsys.readouterr()
+    if code == 2:
+        (line,) = captured.err.strip().splitlines()
+        assert line.startswith('grasp-analyze: --config ') and 'the bag records joints' in line
+        return
+    assert words in captured.out
+    assert 'held for the duration: yes' in captured.out
+    assert ('paper outcome' in captured.out) is (code == 1)

@@ -1,5 +1,9 @@
 """The paper's figures (Fig. 3 nominal, Fig. 4 filtered) drawn from a run's recorded series.
 
+Contact coordinates and required friction have one line per contact; joint angles and
+torques one panel per joint, a row of panels per finger (the hand's joints grouped by
+finger, :mod:`grasp_safety_filter.model.fingers`), whatever each finger's joint count.
+
 A long run's lines are thinned to their envelope before drawing (:func:`envelope`: each
 line's smallest and largest sample in each of ``MAX_POINTS / 2`` time bins), so that
 drawing takes the same memory and time however long the run: at the figures' width of
@@ -8,6 +12,7 @@ under 1000 pixels nothing visible is lost, spikes (one relaxed tick) included.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import io
 from pathlib import Path
 
@@ -17,6 +22,7 @@ import numpy as np
 
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.files import write_file
+from grasp_safety_filter.model.fingers import all_joints, Finger
 
 #: The figures of a run, in :func:`plot_run`'s order (torques only with commands).
 FIGURE_FILES = ('contacts.png', 'joints.png', 'friction.png', 'torques.png')
@@ -25,6 +31,8 @@ INFEASIBLE = {'color': '0.85', 'zorder': 0}
 LINE_STYLES = ('-', '--', ':', '-.')
 #: Most samples drawn per line (a 15 s run at 1 kHz has 15 001).
 MAX_POINTS = 4000
+#: Most joint panels in a row of the joint and torque figures (a longer finger wraps).
+MAX_COLUMNS = 4
 
 
 def envelope(
@@ -95,26 +103,74 @@ def plot_contacts(run: RunData, path: Path) -> Path:
     return _save(figure, path)
 
 
-def plot_joints(run: RunData, path: Path) -> Path:
-    """Plot each finger's k-th joint in panel k, with that joint's limits (grey beyond)."""
-    per_finger = run.joints_per_finger
-    figure = Figure(figsize=(7, 2.4 * per_finger))
-    axes_list = figure.subplots(per_finger, 1, sharex=True)
-    axes_list = np.atleast_1d(axes_list)
-    for k, axes in enumerate(axes_list):
-        columns = list(range(k, len(run.joint_names), per_finger))
-        for finger, j in enumerate(columns):
-            style = LINE_STYLES[finger % len(LINE_STYLES)]
-            axes.plot(*envelope(run.t, run.q[:, j]), style, label=run.joint_names[j])
-        low = float(np.min(run.joint_lower_limits[columns]))
-        high = float(np.max(run.joint_upper_limits[columns]))
-        _shade_outside(axes, low, high, run.q[:, columns])
-        axes.set_ylabel(f'$q_{{i{k + 1}}}$ [rad]')
-        axes.legend(loc='best', fontsize='small')
-        _stop_marker(axes, run)
-    axes_list[-1].set_xlabel('t [s]')
-    axes_list[0].set_title(f'{run.mode}: joint angles (grey: beyond the joint limits)')
-    return _save(figure, path)
+def _finger_rows(fingers: Sequence[Finger]) -> list[tuple[str, tuple[int, ...]]]:
+    """Lay out a row of panels per finger: label and joints, at most :data:`MAX_COLUMNS` a row.
+
+    A finger with more joints continues on the next rows, labelled ``"<finger> (cont.)"``.
+    """
+    rows = []
+    for finger in fingers:
+        for start in range(0, len(finger.joints), MAX_COLUMNS):
+            label = finger.label if start == 0 else f'{finger.label} (cont.)'
+            rows.append((label, finger.joints[start : start + MAX_COLUMNS]))
+    return rows
+
+
+def _finger_grid(
+    fingers: Sequence[Finger], ylabel: str
+) -> tuple[Figure, list[list[tuple[Axes, int]]]]:
+    """Make a figure of one row of panels per finger (:func:`_finger_rows`), one per joint.
+
+    Returns:
+        The figure and, per row, each panel with its joint's index; unused cells hidden.
+        Each row's first panel is labelled with the finger and ``ylabel``.
+
+    """
+    rows = _finger_rows(fingers)
+    columns = max(len(joints) for _, joints in rows)
+    figure = Figure(figsize=(2.2 + 2.6 * columns, 0.6 + 2.0 * len(rows)))
+    grid = np.atleast_2d(figure.subplots(len(rows), columns, sharex=True, squeeze=False))
+    panels = []
+    for (label, joints), axes_row in zip(rows, grid, strict=True):
+        for axes in axes_row[len(joints) :]:
+            axes.set_visible(False)
+        axes_row[0].set_ylabel(f'{label}\n{ylabel}')
+        panels.append(list(zip(axes_row, joints, strict=False)))
+    for column in range(columns):
+        # Time ticks under the lowest panel of each column (a short finger leaves gaps).
+        lowest = max(row for row, (_, joints) in enumerate(rows) if column < len(joints))
+        grid[lowest][column].xaxis.set_tick_params(labelbottom=True)
+    for axes_row in grid:
+        for axes in axes_row:
+            axes.tick_params(labelsize='small')
+    figure.supxlabel('t [s]')
+    return figure, panels
+
+
+def _joint_title(axes: Axes, name: str) -> None:
+    # On the right: the y axis's scale factor (1e-5) takes the top left corner.
+    axes.set_title(name, fontsize='small', loc='right')
+
+
+def plot_joints(run: RunData, path: Path, fingers: Sequence[Finger] | None = None) -> Path:
+    """Plot :func:`joints_figure` to ``path``."""
+    return _save(joints_figure(run, fingers), path)
+
+
+def joints_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Figure:
+    """Draw each joint's angle in its finger's row, with its limits (grey beyond)."""
+    by = 'by finger' if fingers is not None else 'in command order (fingers not known)'
+    fingers = all_joints(run.joint_names) if fingers is None else fingers
+    figure, panels = _finger_grid(fingers, 'q [rad]')
+    for row in panels:
+        for axes, j in row:
+            axes.plot(*envelope(run.t, run.q[:, j]), color='C0')
+            low, high = run.joint_lower_limits[j], run.joint_upper_limits[j]
+            _shade_outside(axes, float(low), float(high), run.q[:, j])
+            _joint_title(axes, run.joint_names[j])
+            _stop_marker(axes, run)
+    figure.suptitle(f'{run.mode}: joint angles {by} (grey: beyond the joint limits)')
+    return figure
 
 
 def plot_friction(run: RunData, path: Path) -> Path:
@@ -136,38 +192,48 @@ def plot_friction(run: RunData, path: Path) -> Path:
     return _save(figure, path)
 
 
-def plot_torques(run: RunData, path: Path) -> Path:
-    """Plot the commanded torque u against the nominal u_nom, one panel per joint."""
-    m = len(run.joint_names)
-    columns = run.joints_per_finger
-    rows = int(np.ceil(m / columns))
-    figure = Figure(figsize=(3.2 * columns, 2.2 * rows))
-    axes_grid = figure.subplots(rows, columns, sharex=True)
-    for j, axes in enumerate(np.atleast_1d(axes_grid).ravel()):
-        if j >= m:
-            axes.set_visible(False)
-            continue
-        t = run.t_command
-        axes.plot(*envelope(t, run.u_nominal[:, j]), color='0.5', label='$u_{nom}$')
-        axes.plot(*envelope(t, run.u_command[:, j]), color='C3', linewidth=1.0, label='$u^*$')
-        axes.set_title(run.joint_names[j], fontsize='small')
-        if j == 0:
-            axes.legend(fontsize='small')
-    figure.supxlabel('t [s]')
-    figure.supylabel('torque [N m]')
-    return _save(figure, path)
+def plot_torques(run: RunData, path: Path, fingers: Sequence[Finger] | None = None) -> Path:
+    """Plot :func:`torques_figure` to ``path``."""
+    return _save(torques_figure(run, fingers), path)
 
 
-def plot_run(run: RunData, out_dir: Path) -> list[Path]:
-    """Draw every figure of a run into ``out_dir``; return their paths."""
+def torques_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Figure:
+    """Draw the commanded torque u* and the nominal u_nom, per joint in its finger's row."""
+    by = 'by finger' if fingers is not None else 'in command order (fingers not known)'
+    fingers = all_joints(run.joint_names) if fingers is None else fingers
+    figure, panels = _finger_grid(fingers, 'torque [N m]')
+    t = run.t_command
+    for row in panels:
+        for axes, j in row:
+            axes.plot(*envelope(t, run.u_nominal[:, j]), color='0.5')
+            axes.plot(*envelope(t, run.u_command[:, j]), color='C3', linewidth=1.0)
+            _joint_title(axes, run.joint_names[j])
+            _stop_marker(axes, run)
+    figure.suptitle(
+        f'{run.mode}: joint torques {by}\n(grey: nominal $u_{{nom}}$, red: commanded $u^*$)'
+    )
+    return figure
+
+
+def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = None) -> list[Path]:
+    """Draw every figure of a run into ``out_dir``; return their paths.
+
+    Args:
+        run: The run.
+        out_dir: Where the figures go.
+        fingers: The hand's joints by finger (:mod:`grasp_safety_filter.model.fingers`), one
+            row of joint panels each; None: one group of every joint, in rows of
+            :data:`MAX_COLUMNS` (a bag analysed without its hand model).
+
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = [
         plot_contacts(run, out_dir / 'contacts.png'),
-        plot_joints(run, out_dir / 'joints.png'),
+        plot_joints(run, out_dir / 'joints.png', fingers),
         plot_friction(run, out_dir / 'friction.png'),
     ]
     if run.t_command.size:
-        paths.append(plot_torques(run, out_dir / 'torques.png'))
+        paths.append(plot_torques(run, out_dir / 'torques.png', fingers))
     return paths
 
 

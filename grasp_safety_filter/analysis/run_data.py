@@ -185,12 +185,6 @@ class RunData:
         """Friction coefficient: the one all contacts share, else the smallest mu_i."""
         return float(self.mu_per_contact.min())
 
-    @property
-    def joints_per_finger(self) -> int:
-        """Joints of each finger when they are listed finger by finger, else 1."""
-        m, n = len(self.joint_names), len(self.contact_names)
-        return m // n if n and m % n == 0 else 1
-
 
 def load_run(bag: Path | str) -> RunData:
     """Read a run from a rosbag2 directory (mcap or sqlite3), streaming it (module doc).
@@ -273,6 +267,21 @@ def _read_scenario(bag: Path) -> dict[str, Any]:
     for _, _, msg in iter_bag(bag, topics=[topics.SCENARIO]):
         return scenario_from_msg(msg)
     raise RunDataError(f'{bag}: no messages on {topics.SCENARIO}; the analysis needs it')
+
+
+def read_scenario(bag: Path | str) -> dict[str, Any]:
+    """Read a bag's scenario document (``/grasp/scenario``) alone.
+
+    Raises:
+        RunDataError: No readable bag at ``bag``, or no valid scenario in it.
+    """
+    try:
+        return _read_scenario(Path(bag))
+    except RunDataError:
+        raise
+    except (BagReadError, ScenarioError, MessageError) as error:
+        text = ' '.join(str(error).split())
+        raise RunDataError(text if str(bag) in text else f'{bag}: {text}') from error
 
 
 def _load_run(bag: Path) -> RunData:

@@ -8,6 +8,7 @@ Keys (later additions never rename one)::
     {"mode", "completed", "t_end", "duration_requested", "stop_reason",
      "missed_start": {topic: first_stamp},
      "violations": {family: {"count", "first_t"}},
+     "first_violated_by": {family: {"name", "side"}},
      "min_margin": {"fingertip_workspace", "joint_limits", "friction"},
      "max_required_friction", "mu",
      "filter": {"steps", "relaxed_steps", "failed_steps", "rejected_steps",
@@ -17,6 +18,11 @@ Keys (later additions never rename one)::
                 "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"},
                 "tick_us": {"median", "p99"}},
      "barriers": {"messages", "unreadable", "min_h": {row family: h}}}
+
+``first_violated_by`` names, for each violated family, the contact or joint whose
+constraint was violated first and which bound (``side``: ``"a_max"``, ``"upper"``, ... or
+``""`` for slip and separation); of several at the same instant, the first in the family's
+order (contacts or joints in their listed order).
 
 ``missed_start`` lists the topics whose recording began after the run's start (a recorder
 that subscribed late), with their first stamp in s; the verdict is then drawn from the
@@ -57,6 +63,7 @@ import numpy as np
 
 from grasp_safety_filter.analysis.filter_statuses import TIME_KEYS
 from grasp_safety_filter.analysis.run_data import RunData
+from grasp_safety_filter.analysis.verdict import INTERRUPTED
 from grasp_safety_filter.io.diagnostic_keys import (
     FAILED_STATUSES,
     INPUT_STATUSES,
@@ -196,6 +203,14 @@ def filter_summary(run: RunData) -> dict[str, Any]:
     }
 
 
+def first_violated_by(log: EventLog) -> dict[str, dict[str, str]]:
+    """Per violated family, the contact or joint (and bound) violated first in the run."""
+    first: dict[str, dict[str, str]] = {}
+    for event in log.onsets:  # in time order
+        first.setdefault(event.family, {'name': event.name, 'side': event.side})
+    return first
+
+
 def summarize(run: RunData) -> dict[str, Any]:
     """Build the run's ``summary.json`` document."""
     log = constraint_log(run)
@@ -204,7 +219,7 @@ def summarize(run: RunData) -> dict[str, Any]:
     completed = run.stop_reason == 'duration' or (
         run.stop_reason is None and run.t_end >= duration - 0.5 * step
     )
-    stop_reason = None if completed else (run.stop_reason or 'interrupted')
+    stop_reason = None if completed else (run.stop_reason or INTERRUPTED)
     summary: dict[str, Any] = {
         'mode': run.mode,
         'completed': bool(completed),
@@ -213,6 +228,7 @@ def summarize(run: RunData) -> dict[str, Any]:
         'stop_reason': stop_reason,
         'missed_start': dict(run.missed_start),
         'violations': log.violations(),
+        'first_violated_by': first_violated_by(log),
         'min_margin': {k: _finite_or_none(v) for k, v in log.min_margin().items()},
         'max_required_friction': _finite_or_none(log.max_required_friction),
         'mu': compact(run.mu_per_contact),

@@ -64,6 +64,13 @@ MAX_PYRAMID_FACES = 64
 #: Most OSQP iterations per solve: at about 1 us each, a tick stays below ~0.1 s.
 MAX_OSQP_ITERATIONS = 100_000
 
+#: ``expected_outcome`` of the paper's scenario: Shaw-Cortez et al. (CDC 2018), Section IV.
+PAPER_OUTCOME = 'paper'
+#: ``expected_outcome`` of a scenario without a published outcome (only the generic verdict).
+NO_OUTCOME = 'none'
+#: Admissible ``expected_outcome`` values.
+EXPECTED_OUTCOMES = (NO_OUTCOME, PAPER_OUTCOME)
+
 #: Contact-face entry asking for the box face nearest to the fingertip at the first state.
 NEAREST_FACE = 'nearest'
 
@@ -357,6 +364,17 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         BOOL,
         True,
         'End the run when a contact point leaves the fingertip workspace',
+    ),
+    ParameterSpec(
+        'expected_outcome',
+        STRING,
+        NO_OUTCOME,
+        'Published outcome the scenario must reproduce, checked by grasp-demo and grasp-analyze '
+        '(exit code 1 if not): "paper" (Shaw-Cortez et al. 2018, Sec. IV: the nominal run '
+        'slips, passes a joint limit, then stops on leaving the fingertip workspace; the '
+        'filtered run holds to the end, nothing violated) or "none"; unused by the simulator',
+        choices=EXPECTED_OUTCOMES,
+        read_only=True,
     ),
     ParameterSpec(
         'stabilization.position_gain',
