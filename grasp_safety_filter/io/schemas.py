@@ -482,8 +482,9 @@ NOMINAL_CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
         min_value=0.0,
         exclusive_min=True,
     ),
-    *GRASP_CHECK_PARAMETERS,
 )
+"""The nominal controller's gains and reference (read by ``NominalConfig``); its node also
+declares :data:`GRASP_CHECK_PARAMETERS`."""
 
 SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
@@ -677,7 +678,10 @@ SAFETY_FILTER_NODE = 'safety_filter_node'
 NODE_SCHEMAS: dict[str, NodeSchema] = {
     HAND_SIM_NODE: NodeSchema.from_sections(HAND_SIM_NODE, MODEL_PARAMETERS, HAND_SIM_PARAMETERS),
     NOMINAL_CONTROLLER_NODE: NodeSchema.from_sections(
-        NOMINAL_CONTROLLER_NODE, MODEL_PARAMETERS, NOMINAL_CONTROLLER_PARAMETERS
+        NOMINAL_CONTROLLER_NODE,
+        MODEL_PARAMETERS,
+        NOMINAL_CONTROLLER_PARAMETERS,
+        GRASP_CHECK_PARAMETERS,
     ),
     SAFETY_FILTER_NODE: NodeSchema.from_sections(
         SAFETY_FILTER_NODE, MODEL_PARAMETERS, SAFETY_FILTER_PARAMETERS
