@@ -96,7 +96,7 @@ def paper_inputs(params) -> Inputs:
 
 
 def shifted(inputs: Inputs, dy: float, model: GraspModel) -> Inputs:
-    """The object dy (m) along y: finger3's gap (dy < 0) or penetration; 1 and 2 slide."""
+    """Move the object dy (m) along y: finger3 gets a gap (dy < 0) or penetrates; 1, 2 slide."""
     return Inputs(inputs.q, inputs.p_object + np.array([0.0, dy, 0.0]), inputs.R_object)
 
 
