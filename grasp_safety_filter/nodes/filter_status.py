@@ -21,6 +21,7 @@ policy's ``input.*`` values.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 import math
 from typing import Any
 
@@ -66,11 +67,31 @@ def status_message(
     return stamped(DIAGNOSTICS, diagnostics_to_msg(msgs, t, report))
 
 
+@dataclass(frozen=True)
+class TickContext:
+    """The endpoint's values that go with a computed tick's status, in their key order.
+
+    Attributes:
+        switched_at: Node-clock time of the last switch on or off, s (None before any).
+        counters: The publication counts (``ticks``, ``count.<status>``).
+        hold_values: The hold policy's ``input.*`` values.
+        resumed_after: On the first tick after the input watchdog took over: the
+            wall-clock time without one, s (said, and at least WARN); else None.
+
+    """
+
+    switched_at: float | None
+    counters: Mapping[str, Any]
+    hold_values: Mapping[str, Any]
+    resumed_after: float | None = None
+
+
 def tick_status(
     result: FilterResult | None,
     margins: Mapping[str, float],
     step_time: float,
     tick_time: float,
+    context: TickContext,
 ) -> tuple[DiagnosticLevel, str, dict[str, Any]]:
     """Level, summary and values of a computed tick.
 
@@ -79,9 +100,12 @@ def tick_status(
         margins: Barrier value h per row at u*.
         step_time: The filter step (``SafetyFilter.solve``), s.
         tick_time: The whole tick, s.
+        context: The endpoint's values.
 
     """
     values: dict[str, Any] = {}
+    if context.switched_at is not None:
+        values[Key.FILTER_SWITCHED_AT] = context.switched_at
     if result is None:
         # Not an error, but nothing is enforced: say so at WARN on every tick.
         level, text = DiagnosticLevel.WARN, 'filter OFF: u* = u_nom, constraints not enforced'
@@ -106,6 +130,14 @@ def tick_status(
         values[Key.ACTIVE] = ','.join(result.active)
     values[Key.STEP_TIME_US] = step_time * 1e6
     values[Key.TICK_TIME_US] = tick_time * 1e6
+    values.update(context.counters)
+    values.update(min_margin_values(margins))
+    values.update(context.hold_values)
+    if context.resumed_after is not None:
+        values[Key.INPUT_RESUMED_AFTER] = context.resumed_after
+        resumed = context.resumed_after
+        text += f'; inputs back after {resumed:.3f} s without a tick (watchdog ended)'
+        level = max(level, DiagnosticLevel.WARN)
     return level, text, values
 
 

@@ -51,18 +51,15 @@ from grasp_safety_filter.control.safety_filter import (
     SafetyFilter,
     SafetyFilterConfig,
 )
-from grasp_safety_filter.io.diagnostic_keys import Key, TickStatus
+from grasp_safety_filter.io.diagnostic_keys import TickStatus
 from grasp_safety_filter.io.margin_stream import MarginEncoder
 from grasp_safety_filter.io.messages import (
     DiagnosticLevel,
-    effort_from_msg,
     effort_to_msg,
     FutureStampError,
-    joint_state_from_msg,
     MessageError,
     MessageNamespace,
     nanoseconds_to_seconds,
-    odometry_from_msg,
     OutOfOrderError,
     StaleInputError,
     StampGuard,
@@ -74,7 +71,7 @@ from grasp_safety_filter.io.topics import (
     MARGINS,
     OBJECT_ODOM,
 )
-from grasp_safety_filter.nodes.filter_status import min_margin_values, status_message, tick_status
+from grasp_safety_filter.nodes.filter_status import status_message, tick_status, TickContext
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig, GraspWatch, LogLine
 from grasp_safety_filter.nodes.held_commands import HeldCommands
 from grasp_safety_filter.nodes.input_watchdog import InputWatchdog, WAITING_REPORT_PERIOD
@@ -127,6 +124,7 @@ class SafetyFilterEndpoint:
         enabled: Whether u* is filtered (True) or u_nom passed through (False); change it
             with :meth:`switch`.
         last_result: The last tick's :class:`FilterResult` (None when disabled or before).
+        held: The hold policy's commands and statuses; input_watchdog: its wall clocks.
 
     """
 
@@ -164,27 +162,13 @@ class SafetyFilterEndpoint:
         self, msg: Any, now: float | None = None, wall: float | None = None
     ) -> list[Outgoing]:
         """Handle ``/hand/joint_states`` (see :meth:`on_effort_nominal`)."""
-        return self._on_input(
-            JOINT_STATES,
-            msg,
-            now,
-            wall,
-            lambda: joint_state_from_msg(msg, self._joint_names, JOINT_STATES),
-        )
+        return self._on_input(JOINT_STATES, msg, now, wall)
 
     def on_odom(
         self, msg: Any, now: float | None = None, wall: float | None = None
     ) -> list[Outgoing]:
         """Handle ``/object/odom`` (see :meth:`on_effort_nominal`)."""
-        return self._on_input(
-            OBJECT_ODOM,
-            msg,
-            now,
-            wall,
-            lambda: odometry_from_msg(
-                msg, self.model.palm_frame, self.model.object_frame, source=OBJECT_ODOM
-            ),
-        )
+        return self._on_input(OBJECT_ODOM, msg, now, wall)
 
     def on_effort_nominal(
         self, msg: Any, now: float | None = None, wall: float | None = None
@@ -205,13 +189,7 @@ class SafetyFilterEndpoint:
             ``/hand/effort_command`` (held or fallback) and ``/diagnostics``.
 
         """
-        return self._on_input(
-            EFFORT_NOMINAL,
-            msg,
-            now,
-            wall,
-            lambda: effort_from_msg(msg, self._joint_names, EFFORT_NOMINAL),
-        )
+        return self._on_input(EFFORT_NOMINAL, msg, now, wall)
 
     def watchdog(self, now_wall: float, now: float) -> list[Outgoing]:
         """Stand in for ticks that stopped coming: the fallback command and an ERROR.
@@ -227,14 +205,11 @@ class SafetyFilterEndpoint:
                 is under way).
 
         Returns:
-            Before the first accepted tick, every :data:`WAITING_REPORT_PERIOD` s a WARN
-            status naming the inputs not received yet, and no command (there is no state to
-            hold against gravity, and a hand driver should not get torques from a filter
-            that has never seen its hand); nothing while the last tick is at most
-            ``input.hold_timeout`` s old; else the hold policy's fallback (zero torque or
-            ``g(q)`` at the last accepted joint positions, clipped to the actuator limits)
-            on ``/hand/effort_command`` and an ERROR ``/diagnostics`` status naming the
-            missing inputs and how long each has been silent.
+            Before the first answered tick, every :data:`WAITING_REPORT_PERIOD` s a WARN
+            naming the inputs not received yet, and no command (a hand driver should not get
+            torques from a filter that has never seen its hand); nothing while the last tick
+            is at most ``input.hold_timeout`` s old; else the fallback and an ERROR naming
+            the silent inputs (:meth:`HeldCommands.absent`).
 
         """
         if not self.input_watchdog.started:
@@ -304,13 +279,13 @@ class SafetyFilterEndpoint:
 
     # ------------------------------------------------------------------------ internals
     def _on_input(
-        self, topic: str, msg: Any, now: float | None, wall: float | None, parse: Any
+        self, topic: str, msg: Any, now: float | None, wall: float | None
     ) -> list[Outgoing]:
         now_s, is_clock = self.inputs.now(msg, now)
         if wall is not None:
             self.input_watchdog.received(topic, wall)
         try:
-            data = parse()
+            data = self.inputs.parse(topic, msg)
             stamp = self.inputs.check(topic, data.t, now_s)
         except MessageError as error:
             return self._reject(topic, msg, error, now_s, close=is_clock)
@@ -370,18 +345,13 @@ class SafetyFilterEndpoint:
         status = TickStatus.DISABLED if result is None else TickStatus.of(result.status)
         if self.rate.status_due(stamp, status, force=resumed_after is not None):
             tick_time = time.perf_counter() - start
-            level, text, values = tick_status(result, margins, filter_time, tick_time)
-            if self._switched_at is not None:
-                values[Key.FILTER_SWITCHED_AT] = self._switched_at
-            values.update(self.rate.counter_values())
-            values.update(min_margin_values(margins))
-            values.update(self.hold.diagnostic_values(now))
-            if resumed_after is not None:
-                values[Key.INPUT_RESUMED_AFTER] = resumed_after
-                text += (
-                    f'; inputs back after {resumed_after:.3f} s without a tick (watchdog ended)'
-                )
-                level = max(level, DiagnosticLevel.WARN)
+            context = TickContext(
+                self._switched_at,
+                self.rate.counter_values(),
+                self.hold.diagnostic_values(now),
+                resumed_after,
+            )
+            level, text, values = tick_status(result, margins, filter_time, tick_time, context)
             outgoing.append(self._status_message(t, level, text, values))
         self._last_outputs = outgoing
         return list(outgoing)

@@ -1,13 +1,14 @@
 """The safety filter's input checks: stamps, and the three inputs of one tick put together.
 
-A tick of stamp t needs ``/hand/joint_states`` (t), ``/object/odom`` (t) and
-``/hand/effort_nominal`` (t). :class:`TickAssembler` checks each parsed input's stamp (a
-:class:`~grasp_safety_filter.io.messages.StampGuard` per topic: stale, future, out of order;
-and never a stamp of a tick already closed), keeps incomplete sets (at most
+Each input is parsed by joint name (and frame), in model joint order. A tick of stamp t
+needs ``/hand/joint_states`` (t), ``/object/odom`` (t) and ``/hand/effort_nominal`` (t).
+:class:`TickAssembler` checks each parsed input's stamp (a
+:class:`~grasp_safety_filter.io.messages.StampGuard` per topic: stale, future, out of
+order; and never a stamp of a tick already closed), keeps incomplete sets (at most
 :data:`MAX_PENDING` stamps), computes a set's model terms as soon as its state is complete
-(the nominal controller computes u_nom from the same state meanwhile) and hands the set over
-when it is complete. A complete set arriving again for the last tick's stamp (a simulator
-that re-sent its state) is a replay: the endpoint sends the same answer again.
+(the nominal controller computes u_nom from the same state meanwhile) and hands the set
+over when it is complete. A complete set arriving again for the last tick's stamp (a
+simulator that re-sent its state) is a replay: the endpoint sends the same answer again.
 """
 
 from __future__ import annotations
@@ -19,12 +20,15 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.io.messages import (
+    effort_from_msg,
     EffortData,
     header_stamp_ns,
+    joint_state_from_msg,
     JointStateData,
     MessageError,
     nanoseconds_to_seconds,
     ObjectStateData,
+    odometry_from_msg,
     OutOfOrderError,
     seconds_to_nanoseconds,
     StampGuard,
@@ -80,9 +84,24 @@ class TickAssembler:
         self.guard = StampGuard(max_age)
         self.last_tick_ns: int | None = None
         self.model = model
+        self._joint_names = list(model.joint_names)
         self._pending: dict[int, dict[str, Any]] = {}
         self._states: dict[int, TimedState] = {}
         self._replay: dict[str, Any] = {}
+
+    def parse(self, topic: str, msg: Any) -> JointStateData | ObjectStateData | EffortData:
+        """Parse an input message by joint name (and frame), in model joint order.
+
+        Raises:
+            MessageError: The message is not valid (names what and where).
+
+        """
+        if topic == OBJECT_ODOM:
+            frames = (self.model.palm_frame, self.model.object_frame)
+            return odometry_from_msg(msg, *frames, source=OBJECT_ODOM)
+        if topic == JOINT_STATES:
+            return joint_state_from_msg(msg, self._joint_names, JOINT_STATES)
+        return effort_from_msg(msg, self._joint_names, EFFORT_NOMINAL)
 
     def timed_state(self, joint_states: JointStateData, odometry: ObjectStateData) -> TimedState:
         """Compute a state's model terms (or the model's refusal of it), timed in s."""
