@@ -56,6 +56,7 @@ from grasp_safety_filter.io.schemas import (
 )
 from grasp_safety_filter.model.fingers import Finger, fingers_from_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
 from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
@@ -260,6 +261,7 @@ def build_endpoints(
         GraspModel.from_parameters(nominal_params),
         NominalConfig.from_parameters(nominal_params),
         msgs,
+        GraspCheckConfig.from_parameters(nominal_params),
     )
     filter_params = params[SAFETY_FILTER_NODE]
     safety_filter = SafetyFilterEndpoint(
@@ -269,6 +271,7 @@ def build_endpoints(
         msgs,
         enabled=options.mode == 'filtered',
         publication_rate_config=PublicationRateConfig.from_parameters(filter_params),
+        grasp_check_config=GraspCheckConfig.from_parameters(filter_params),
     )
     return sim, nominal, safety_filter
 

@@ -867,7 +867,7 @@ def test_filter_computes_the_model_terms_once_the_state_is_complete(params, orde
     reference.on_odom(odometry)
     expected = reference.on_effort_nominal(effort_nominal)
     safety_filter = make_filter(params)
-    safety_filter.model = CountingModel(safety_filter.model)
+    counting = safety_filter.inputs.model = CountingModel(safety_filter.model)
     handlers = {
         'joints': lambda: safety_filter.on_joint_states(joints),
         'odometry': lambda: safety_filter.on_odom(odometry),
@@ -879,15 +879,15 @@ def test_filter_computes_the_model_terms_once_the_state_is_complete(params, orde
         outgoing = handlers[name]()
         if position == 1:
             # Both state messages in, u_nom not yet: computed already; else not yet.
-            assert len(safety_filter.model.stamps) == (1 if state_done else 0)
-    assert len(safety_filter.model.stamps) == 1
+            assert len(counting.stamps) == (1 if state_done else 0)
+    assert len(counting.stamps) == 1
     assert [o.topic for o in outgoing] == [o.topic for o in expected]
     names = safety_filter.model.joint_names
     np.testing.assert_array_equal(commands(outgoing, names), commands(expected, names))
     np.testing.assert_array_equal(
         m.margins_from_msg(outgoing[1].msg).h, m.margins_from_msg(expected[1].msg).h
     )
-    assert safety_filter._states == {}
+    assert safety_filter.inputs.pending_states() == {}
 
 
 def test_watchdog_never_answers_a_tick_whose_inputs_are_still_coming(params):

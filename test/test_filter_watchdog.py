@@ -11,7 +11,9 @@ Run as a script (``python test_filter_watchdog.py publish``) this file is that p
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+import dataclasses
 from dataclasses import dataclass
 import os
 from pathlib import Path
@@ -52,9 +54,13 @@ START_TIMEOUT = 60.0
 
 
 class TickSource:
-    """Valid inputs of one tick, stamped on demand: the paper's state at t_0 and its u_nom."""
+    """Valid inputs of one tick, stamped on demand: the paper's state at t_0 and its u_nom.
 
-    def __init__(self) -> None:
+    ``object_shift`` (m, palm frame) moves the published object pose: along -y, finger3
+    leaves its face (+y) by that much, and the state is no grasp.
+    """
+
+    def __init__(self, object_shift: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
         params = {
             node: load_node_parameters(CONFIG, node)
             for node in ('hand_sim_node', 'nominal_controller_node')
@@ -72,7 +78,10 @@ class TickSource:
         self.model = model
         self.names = list(model.joint_names)
         self.joints = m.joint_state_from_msg(state[topics.JOINT_STATES], self.names)
-        self.odometry = m.odometry_from_msg(state[topics.OBJECT_ODOM])
+        odometry = m.odometry_from_msg(state[topics.OBJECT_ODOM])
+        self.odometry = dataclasses.replace(
+            odometry, p_object_in_palm=odometry.p_object_in_palm + np.asarray(object_shift)
+        )
         self.u_nom = m.effort_from_msg(effort.msg, self.names).effort
 
     def messages(self, msgs: m.MessageNamespace, t: float) -> dict[str, Any]:
@@ -151,7 +160,7 @@ class Received:
 class Probe:
     """An rclpy node in the test process: publishes ticks, records commands and statuses."""
 
-    def __init__(self, source: TickSource) -> None:
+    def __init__(self, source: TickSource, prefix: str = '') -> None:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
 
@@ -162,9 +171,10 @@ class Probe:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.source = source
+        self.prefix = prefix
         self.msgs = m.MessageNamespace.from_rclpy()
         self.publishers = {
-            t: self.node.create_publisher(_message_class(t), t, _qos(t)) for t in INPUTS
+            t: self.node.create_publisher(_message_class(t), prefix + t, _qos(t)) for t in INPUTS
         }
         self.commands: list[Received] = []
         self.statuses: list[Received] = []
@@ -173,7 +183,9 @@ class Probe:
             (topics.EFFORT_COMMAND, self._on_command),
             (topics.DIAGNOSTICS, self._on_diagnostics),
         ):
-            self.node.create_subscription(_message_class(topic), topic, record, _qos(topic))
+            self.node.create_subscription(
+                _message_class(topic), prefix + topic, record, _qos(topic)
+            )
 
     def _on_command(self, msg: Any) -> None:
         effort = m.effort_from_msg(msg, self.source.names).effort
@@ -214,7 +226,7 @@ class Probe:
     def filter_connected(self) -> bool:
         """Whether the filter subscribes to every input and publishes commands to us."""
         return all(p.get_subscription_count() > 0 for p in self.publishers.values()) and (
-            self.node.count_publishers(topics.EFFORT_COMMAND) > 0
+            self.node.count_publishers(self.prefix + topics.EFFORT_COMMAND) > 0
         )
 
     def ticks_answered(self, since: float) -> list[Received]:
@@ -276,9 +288,9 @@ def source() -> TickSource:
     return TickSource()
 
 
-@pytest.fixture(scope='module')
-def safety_filter(tmp_path_factory) -> FilterProcess:
-    tmp_path = tmp_path_factory.mktemp('safety_filter')
+@contextmanager
+def filter_process(tmp_path: Path, *arguments: str) -> Iterator[FilterProcess]:
+    """Run ``safety_filter_node`` with the paper's parameters (and ``arguments``) as a process."""
     log = tmp_path / 'safety_filter_node.log'
     command = [
         str(BIN / 'safety_filter_node'),
@@ -290,6 +302,7 @@ def safety_filter(tmp_path_factory) -> FilterProcess:
         # Every tick's status: the watchdog's delay is measured from the last answered tick.
         '-p',
         'diagnostics.period:=0.0',
+        *arguments,
     ]
     with log.open('w') as out:
         process = subprocess.Popen(
@@ -308,6 +321,12 @@ def safety_filter(tmp_path_factory) -> FilterProcess:
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
+
+
+@pytest.fixture(scope='module')
+def safety_filter(tmp_path_factory) -> Iterator[FilterProcess]:
+    with filter_process(tmp_path_factory.mktemp('safety_filter')) as process:
+        yield process
 
 
 @pytest.fixture
@@ -475,6 +494,70 @@ def test_switching_the_filter_off_and_on_is_logged_and_reported(probe, safety_fi
     (on_line,) = [line for line in lines if 'safety filter switched ON' in line]
     assert off_line.startswith('[WARN]') and f't = {switched_off:.6f} s' in off_line
     assert on_line.startswith('[INFO]')
+
+
+#: Topics of the grasp test's own filter node, apart from the other tests' node.
+GRASP_PREFIX = '/grasp_check'
+
+
+def test_a_bad_first_grasp_is_reported_on_diagnostics_then_filtering_starts(tmp_path):
+    remaps = [
+        f'{topic}:={GRASP_PREFIX}{topic}'
+        for topic in (*INPUTS, topics.EFFORT_COMMAND, topics.MARGINS, topics.DIAGNOSTICS)
+    ]
+    arguments = [argument for remap in remaps for argument in ('-r', remap)]
+    with filter_process(tmp_path, *arguments) as safety_filter:
+        # The tracker reports the object 5 mm off: finger3 is 5 mm from its face.
+        probe = Probe(TickSource(object_shift=(0.0, -0.005, 0.0)), prefix=GRASP_PREFIX)
+        try:
+            connected = probe.spin_until(probe.filter_connected, START_TIMEOUT)
+            assert connected, f'filter not discovered; its log:\n{safety_filter.log_text()}'
+            start = time.monotonic()
+
+            def grasp_errors() -> list[Received]:
+                return [
+                    s
+                    for s in probe.ticks_answered(start)
+                    if s.msg.values.get(Key.STATUS) == TickStatus.GRASP_INVALID.value
+                ]
+
+            assert probe.spin_until(lambda: len(grasp_errors()) >= 10, 30.0, publish=True), (
+                f'no grasp errors; statuses: {probe.statuses[-1:]}'
+            )
+            for status in grasp_errors():
+                report = status.msg
+                assert report.level is m.DiagnosticLevel.ERROR
+                assert "contact 'finger3'" in report.message
+                assert 'separated from the object by 0.005 m' in report.message
+                assert report.values[Key.GRASP_CONTACTS] == "contact 'finger3'"
+            # Each answer is the fallback: gravity compensation at the published q.
+            stamps = {s.stamp_ns for s in grasp_errors()}
+            fallbacks = [c for c in probe.commands if c.stamp_ns in stamps]
+            assert len(fallbacks) == len(stamps)
+            for command in fallbacks:
+                np.testing.assert_allclose(
+                    command.msg, probe.source.fallback(), rtol=1e-12, atol=1e-12
+                )
+
+            # The tracker is right again: the filter filters.
+            probe.source = TickSource()
+            good = time.monotonic()
+            answered_ticks(probe, good)
+            newest = probe.ticks_answered(good)[-10:]
+            assert all(Key.GRASP_VALID not in s.msg.values for s in newest)
+            assert all(s.msg.level is not m.DiagnosticLevel.ERROR for s in newest)
+        finally:
+            probe.close()
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and 'valid grasp at' not in safety_filter.log_text():
+            time.sleep(0.05)
+        lines = safety_filter.log_text().splitlines()
+        # Logged once each, not with every ERROR status.
+        (error_line,) = [line for line in lines if ': not a valid grasp: ' in line]
+        assert error_line.startswith('[ERROR]') and "contact 'finger3'" in error_line
+        (info_line,) = [line for line in lines if 'valid grasp at' in line]
+        assert info_line.startswith('[INFO]')
+        assert not [line for line in lines if 'not a valid grasp (start-up check)' in line]
 
 
 if __name__ == '__main__':

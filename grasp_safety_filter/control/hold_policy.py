@@ -19,6 +19,14 @@ The first accepted tick returns to ``"ok"``. The mode, the last rejection reason
 rejection count go to ``/diagnostics`` (WARN while holding, ERROR in fallback; the keys are
 :class:`grasp_safety_filter.io.diagnostic_keys.Key`).
 
+A state that is not a grasp is rejected input too (``nodes/grasp_watch.py``): before any
+state has passed the start-up grasp check there is no safe command, so the fallback goes
+out at once; a contact lost at run time (gap or penetration above
+``grasp_check.gap_tolerance``) gets the last safe command for ``hold_timeout``, which rides
+out a bad tracker frame without a jump of torque, then the fallback, which neither squeezes
+nor moves the hand (a hand that really lost the object must not keep pushing after it).
+Both count as rejected ticks; the first grasp that passes returns to ``"ok"``.
+
 Input that does not arrive at all is the same case on another clock: the filter's input
 watchdog calls :meth:`HoldPolicy.absent` with the wall-clock time since the last accepted
 tick (under ``use_sim_time`` a dead simulator also stops the node clock).

@@ -6,6 +6,9 @@
 below, never the strings, so a status or key that one side writes and the other does not
 know cannot go unnoticed.
 
+The grasp keys (``grasp.*``) are also the nominal controller's (its status
+:data:`NOMINAL_DIAGNOSTIC`) on a state that is not a grasp.
+
 Every ``safety_filter`` status that answers a tick (or stands in for a missing one) has a
 :attr:`Key.STATUS` whose value is a :class:`TickStatus`: how the published u* was obtained.
 """
@@ -18,6 +21,9 @@ from grasp_safety_filter.control.safety_filter import FilterStatus
 
 #: Name of the safety filter's ``DiagnosticStatus``.
 FILTER_DIAGNOSTIC = 'safety_filter'
+
+#: Name of the nominal controller's ``DiagnosticStatus``.
+NOMINAL_DIAGNOSTIC = 'nominal_controller'
 
 
 class TickStatus(str, Enum):
@@ -39,6 +45,13 @@ class TickStatus(str, Enum):
     """Input rejected or missing for at most ``input.hold_timeout``: the last safe u* again."""
     INPUT_FALLBACK = 'input_fallback'
     """Input rejected or missing for longer: the hold policy's fallback command."""
+    GRASP_INVALID = 'grasp_invalid'
+    """No state has passed the start-up grasp check yet: the fallback command, no QP."""
+    GRASP_HELD = 'grasp_held'
+    """A contact's gap or penetration is above tolerance for at most ``input.hold_timeout``
+    since the last safe u*: that u* again, no QP."""
+    GRASP_FALLBACK = 'grasp_fallback'
+    """A contact's gap or penetration is above tolerance for longer: the fallback, no QP."""
 
     @classmethod
     def of(cls, status: FilterStatus) -> TickStatus:
@@ -51,6 +64,11 @@ FAILED_STATUSES = frozenset({TickStatus.FALLBACK_LAST_GOOD, TickStatus.FALLBACK_
 
 #: The input was rejected or missing: no u* was computed, the hold policy answered.
 INPUT_STATUSES = frozenset({TickStatus.INPUT_HELD, TickStatus.INPUT_FALLBACK})
+
+#: The state is not a grasp (start-up check, or a contact lost at run time): no u* computed.
+GRASP_STATUSES = frozenset(
+    {TickStatus.GRASP_INVALID, TickStatus.GRASP_HELD, TickStatus.GRASP_FALLBACK}
+)
 
 
 class InputMode(Enum):
@@ -123,6 +141,15 @@ class Key:
     """Followed by a topic: wall-clock time since its last message, s (:func:`silent_for`)."""
     INPUT_RESUMED_AFTER = 'input.resumed_after'
     """On the first tick after the watchdog took over: wall-clock time without one, s."""
+
+    GRASP_VALID = 'grasp.valid'
+    """On a grasp status (filter or nominal controller): ``false``, the state is no grasp."""
+    GRASP_CONTACTS = 'grasp.contacts'
+    """The subjects that fail the grasp check (contacts, joints, ``hand``), comma-separated."""
+    GRASP_FINDINGS = 'grasp.findings'
+    """What fails, one finding per subject, ``; ``-separated (bounded)."""
+    GRASP_GAP_TOLERANCE = 'grasp.gap_tolerance'
+    """The largest admissible gap or penetration per contact, m."""
 
 
 def min_margin(family: str) -> str:

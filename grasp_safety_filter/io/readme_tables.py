@@ -11,6 +11,7 @@ import re
 import sys
 
 from grasp_safety_filter.io.schemas import (
+    GRASP_CHECK_PARAMETERS,
     HAND_SIM_PARAMETERS,
     MODEL_PARAMETERS,
     NOMINAL_CONTROLLER_PARAMETERS,
@@ -25,7 +26,7 @@ def parameter_tables() -> str:
     sections = (
         ('Shared by all nodes (`/**`)', MODEL_PARAMETERS),
         ('`hand_sim_node`', HAND_SIM_PARAMETERS),
-        ('`nominal_controller_node`', NOMINAL_CONTROLLER_PARAMETERS),
+        ('`nominal_controller_node`', NOMINAL_CONTROLLER_PARAMETERS + GRASP_CHECK_PARAMETERS),
         ('`safety_filter_node`', SAFETY_FILTER_PARAMETERS),
     )
     return '\n\n'.join(

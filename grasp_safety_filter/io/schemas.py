@@ -422,6 +422,23 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
     ),
 )
 
+#: The start-up check's gap tolerance (``model.grasp_check.GAP_TOLERANCE``), m: the default
+#: of both controllers' ``grasp_check.gap_tolerance`` (test_grasp_check compares them).
+GRASP_CHECK_GAP_TOLERANCE = 1e-3
+
+GRASP_CHECK_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        'grasp_check.gap_tolerance',
+        DOUBLE,
+        GRASP_CHECK_GAP_TOLERANCE,
+        'Largest gap or penetration between a fingertip and the object per contact; a state '
+        'beyond it is no grasp (start-up and run-time check) [m]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+)
+"""The grasp check of the received states (``nodes.grasp_watch.GraspCheckConfig``)."""
+
 NOMINAL_CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'gains.kp',
@@ -494,6 +511,8 @@ NOMINAL_CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
         exclusive_min=True,
     ),
 )
+"""The nominal controller's gains and reference (read by ``NominalConfig``); its node also
+declares :data:`GRASP_CHECK_PARAMETERS`."""
 
 SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
@@ -706,6 +725,7 @@ SAFETY_FILTER_PARAMETERS: tuple[ParameterSpec, ...] = (
     ),
     *SAFETY_FILTER_QP_PARAMETERS,
     *SAFETY_FILTER_INPUT_PARAMETERS,
+    *GRASP_CHECK_PARAMETERS,
     ParameterSpec(
         'diagnostics.period',
         DOUBLE,
@@ -730,7 +750,10 @@ SAFETY_FILTER_NODE = 'safety_filter_node'
 NODE_SCHEMAS: dict[str, NodeSchema] = {
     HAND_SIM_NODE: NodeSchema.from_sections(HAND_SIM_NODE, MODEL_PARAMETERS, HAND_SIM_PARAMETERS),
     NOMINAL_CONTROLLER_NODE: NodeSchema.from_sections(
-        NOMINAL_CONTROLLER_NODE, MODEL_PARAMETERS, NOMINAL_CONTROLLER_PARAMETERS
+        NOMINAL_CONTROLLER_NODE,
+        MODEL_PARAMETERS,
+        NOMINAL_CONTROLLER_PARAMETERS,
+        GRASP_CHECK_PARAMETERS,
     ),
     SAFETY_FILTER_NODE: NodeSchema.from_sections(
         SAFETY_FILTER_NODE, MODEL_PARAMETERS, SAFETY_FILTER_PARAMETERS

@@ -15,6 +15,18 @@ points held piecewise constant; older than ``reference.timeout``, or before the 
 the last pose is held with zero feed-forward and a WARN ``nominal_controller`` status goes
 to ``/diagnostics`` on that tick).
 
+Grasp check: until a received state passes the start-up grasp check
+(:mod:`grasp_safety_filter.nodes.grasp_watch`: gap or penetration per contact within
+``grasp_check.gap_tolerance``, contact on its face, inside the fingertip workspace, joints
+strictly inside their limits, M_h, J_h, G), the controller does not start the planner's
+motion: it publishes ``u_nom = g(q)``, gravity compensation at the measured joint positions
+(the hand keeps its posture; with the filter off, no motion and no squeeze go to the hand;
+the filter itself sends its fallback then), with an ERROR ``nominal_controller`` status
+naming each failing contact or joint (``grasp.*`` values). The reference (paper: around
+the object pose) and the null-space posture are taken at the first valid state. The change
+is logged once (:meth:`NominalControllerEndpoint.take_log`). Only the first state is
+checked: at run time, lost contacts are the safety filter's to report and hold.
+
 An input that does not parse (non-finite values, wrong lengths, unknown or missing joint
 names, a non-unit quaternion, a wrong frame) yields a WARN status naming the problem and no
 command: the safety filter then holds its last safe command.
@@ -34,6 +46,7 @@ from grasp_safety_filter.control.reference import (
     ReferenceSource,
     TopicReference,
 )
+from grasp_safety_filter.io.diagnostic_keys import NOMINAL_DIAGNOSTIC
 from grasp_safety_filter.io.messages import (
     bounded_text,
     DiagnosticLevel,
@@ -58,10 +71,17 @@ from grasp_safety_filter.io.topics import (
     OBJECT_ODOM,
     OBJECT_REFERENCE,
 )
+from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.nodes.grasp_watch import (
+    findings_text,
+    GraspCheckConfig,
+    GraspWatch,
+    LogLine,
+)
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 
 #: Name of the nominal controller's ``DiagnosticStatus``.
-DIAGNOSTIC_NAME = 'nominal_controller'
+DIAGNOSTIC_NAME = NOMINAL_DIAGNOSTIC
 
 #: Unpaired inputs kept waiting for their partner (older ones are dropped).
 MAX_PENDING = 64
@@ -74,16 +94,25 @@ class NominalControllerEndpoint:
         model: The ``GraspModel`` (``joint_names``, ``state(...)``).
         nominal_config: Gains and reference choice.
         msgs: Message classes to build (rclpy or rosbags).
+        grasp_check_config: ``grasp_check.gap_tolerance`` (default: the start-up check's).
 
     Attributes:
         controller: The nominal controller core.
         reference: The reference source, built at the first tick (None before).
         last_output: The last tick's :class:`NominalOutput` (None before the first).
+        grasp: The start-up grasp check.
 
     """
 
-    def __init__(self, model: Any, nominal_config: NominalConfig, msgs: MessageNamespace) -> None:
+    def __init__(
+        self,
+        model: Any,
+        nominal_config: NominalConfig,
+        msgs: MessageNamespace,
+        grasp_check_config: GraspCheckConfig | None = None,
+    ) -> None:
         self.model = model
+        self.grasp = GraspWatch(model, grasp_check_config)
         self.msgs = msgs
         self.config = nominal_config
         self.controller = NominalController(nominal_config)
@@ -136,8 +165,16 @@ class NominalControllerEndpoint:
             return self._rejected(error)
         return []
 
-    def update_config(self, nominal_config: NominalConfig) -> None:
-        """Apply new gains, paper reference shape or topic timeout from the next tick on.
+    def take_log(self) -> list[LogLine]:
+        """Return and forget the grasp check's log lines (each change of its answer, once)."""
+        return self.grasp.take_log()
+
+    def update_config(
+        self, nominal_config: NominalConfig, grasp_check_config: GraspCheckConfig | None = None
+    ) -> None:
+        """Apply new gains, paper reference shape, topic timeout or gap tolerance.
+
+        From the next tick on (``grasp_check_config`` None: unchanged).
 
         Raises:
             ValueError: ``reference.source`` differs (it is read-only).
@@ -148,6 +185,8 @@ class NominalControllerEndpoint:
                 "parameter 'reference.source' is read-only: it stays "
                 f'{self.config.reference_source!r}'
             )
+        if grasp_check_config is not None:
+            self.grasp.config = grasp_check_config
         self.config = nominal_config
         # New gains, same posture: re-latching it to the current q would undo the hold.
         self.controller = NominalController(nominal_config, posture=self.controller.posture)
@@ -180,6 +219,8 @@ class NominalControllerEndpoint:
                 odometry.R_object_to_palm,
                 odometry.twist_object,
             )
+            if not self.grasp.started and self.grasp.check(state):
+                return self._no_grasp(state)
             sample = self._reference_sample(t, odometry)
             output = self.controller.compute(state, sample)
         except (ValueError, np.linalg.LinAlgError) as error:
@@ -232,6 +273,26 @@ class NominalControllerEndpoint:
             },
         )
         return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))
+
+    def _no_grasp(self, state: GraspState) -> list[Outgoing]:
+        """``u_nom = g(q)`` and an ERROR naming what fails: the grasp is not valid yet."""
+        findings = findings_text(self.grasp.findings)
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            DiagnosticLevel.ERROR,
+            bounded_text(
+                'not a valid grasp (start-up check), u_nom = g(q) (gravity compensation), '
+                f'reference not started: {findings}'
+            ),
+            self.grasp.diagnostic_values(),
+        )
+        return [
+            stamped(
+                EFFORT_NOMINAL,
+                effort_to_msg(self.msgs, state.t, self._joint_names, state.gravity_torque),
+            ),
+            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, state.t, report)),
+        ]
 
     def _rejected(self, error: Exception, t: float | None = None) -> list[Outgoing]:
         if t is None:

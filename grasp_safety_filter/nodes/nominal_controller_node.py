@@ -11,7 +11,8 @@ Everything else is
 
 Live parameters: ``gains.kp``, ``gains.kd``, ``gains.kf``, ``null_space.kp``,
 ``null_space.kd``, ``reference.amplitude``, ``reference.frequency`` and
-``reference.timeout`` apply from the next tick (the null-space posture is kept);
+``reference.timeout`` and ``grasp_check.gap_tolerance`` apply from the next tick (the
+null-space posture is kept);
 ``reference.source`` and the model are read-only (read at start-up).
 """
 
@@ -21,6 +22,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from grasp_safety_filter.control.nominal import NominalConfig
+from grasp_safety_filter.io.diagnostic_keys import Key
+from grasp_safety_filter.io.messages import DiagnosticLevel
 from grasp_safety_filter.io.schemas import NOMINAL_CONTROLLER_NODE
 from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
@@ -31,7 +34,9 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.grasp_watch import GAP_TOLERANCE_PARAMETER, GraspCheckConfig
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
+from grasp_safety_filter.nodes.outgoing import Outgoing
 
 
 class NominalControllerNode(EndpointNode):
@@ -43,18 +48,41 @@ class NominalControllerNode(EndpointNode):
         )
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         config = NominalConfig.from_parameters(self.parameters)
-        self.endpoint = NominalControllerEndpoint(model, config, self.msgs)
-        self.subscribe(JOINT_STATES, lambda msg: self.publish(self.endpoint.on_joint_states(msg)))
-        self.subscribe(OBJECT_ODOM, lambda msg: self.publish(self.endpoint.on_odom(msg)))
+        self.endpoint = NominalControllerEndpoint(
+            model, config, self.msgs, GraspCheckConfig.from_parameters(self.parameters)
+        )
+        self.subscribe(JOINT_STATES, lambda msg: self.answer(self.endpoint.on_joint_states(msg)))
+        self.subscribe(OBJECT_ODOM, lambda msg: self.answer(self.endpoint.on_odom(msg)))
         if config.reference_source == 'topic':
             self.subscribe(
                 OBJECT_REFERENCE, lambda msg: self.publish(self.endpoint.on_reference(msg))
             )
         self.get_logger().info(f'nominal controller ready, reference: {config.reference_source}')
 
+    def answer(self, outgoing: list[Outgoing]) -> None:
+        """Publish a tick's answer; log the grasp check's changes (once each)."""
+        self.publish(outgoing)
+        for level, text in self.endpoint.take_log():
+            # One call site per severity: rclpy refuses to change it between calls.
+            if level == DiagnosticLevel.ERROR:
+                self.get_logger().error(text)
+            else:
+                self.get_logger().info(text)
+
+    def _log_statuses(self, msg: Any) -> None:
+        """Log WARN and ERROR statuses, except the grasp check's (logged once by answer)."""
+        if any(Key.GRASP_VALID in {item.key for item in status.values} for status in msg.status):
+            return
+        super()._log_statuses(msg)
+
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
-        """Apply new gains, paper reference shape or topic reference timeout."""
-        self.endpoint.update_config(NominalConfig.from_parameters(self.parameters))
+        """Apply new gains, paper reference shape, topic reference timeout or gap tolerance."""
+        self.endpoint.update_config(
+            NominalConfig.from_parameters(self.parameters),
+            GraspCheckConfig.from_parameters(self.parameters)
+            if GAP_TOLERANCE_PARAMETER in changed
+            else None,
+        )
 
 
 def main(args: list[str] | None = None) -> None:

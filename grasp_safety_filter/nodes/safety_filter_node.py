@@ -22,12 +22,19 @@ fallback goes to ``/hand/effort_command`` every period, stamped with the node cl
 simulator that waits for that stamp applies the fallback and steps. Wall-clock times are
 ``time.monotonic()``, the same clock as the steady timer's.
 
+Grasp check: until a received state passes the start-up grasp check, and while a contact's
+gap or penetration is above ``grasp_check.gap_tolerance``, the filter sends the hold
+policy's command instead of solving (``SafetyFilterEndpoint``); each change is logged once
+(ERROR when the grasp is not valid, naming the contacts; INFO when it is), not at every
+ERROR status.
+
 Live parameters: ``enabled`` (false passes u_nom through; switching is logged, WARN when
 off, INFO when on, and the status stays WARN while off), the constraint switches,
 ``no_slip.normal_force_margin``, the class-K functions, the relaxation weights, the OSQP
-settings (these rebuild the filter), ``input.*`` (the hold policy), ``diagnostics.period``
-and ``margins.period`` (how often the status and margins of steady ticks go out) apply from
-the next tick; ``no_slip.pyramid_faces`` and the model are read-only (read at start-up).
+settings (these rebuild the filter), ``input.*`` (the hold policy),
+``grasp_check.gap_tolerance``, ``diagnostics.period`` and ``margins.period`` (how often the
+status and margins of steady ticks go out) apply from the next tick;
+``no_slip.pyramid_faces`` and the model are read-only (read at start-up).
 """
 
 from __future__ import annotations
@@ -40,6 +47,8 @@ from rclpy.clock import Clock, ClockType
 
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
+from grasp_safety_filter.io.diagnostic_keys import GRASP_STATUSES, Key
+from grasp_safety_filter.io.messages import DiagnosticLevel
 from grasp_safety_filter.io.schemas import SAFETY_FILTER_NODE
 from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
@@ -51,6 +60,8 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
+from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import (
     PUBLICATION_RATE_PARAMETERS,
     PublicationRateConfig,
@@ -76,24 +87,25 @@ class SafetyFilterNode(EndpointNode):
             self.msgs,
             enabled=self.parameters[ENABLED_PARAMETER],
             publication_rate_config=PublicationRateConfig.from_parameters(self.parameters),
+            grasp_check_config=GraspCheckConfig.from_parameters(self.parameters),
         )
         endpoint = self.endpoint
         monotonic = time.monotonic
         self.subscribe(
             JOINT_STATES,
-            lambda msg: self.publish(
+            lambda msg: self.answer(
                 endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
             ),
         )
         self.subscribe(
             OBJECT_ODOM,
-            lambda msg: self.publish(
+            lambda msg: self.answer(
                 endpoint.on_odom(msg, now=self.now_seconds(), wall=monotonic())
             ),
         )
         self.subscribe(
             EFFORT_NOMINAL,
-            lambda msg: self.publish(
+            lambda msg: self.answer(
                 endpoint.on_effort_nominal(msg, now=self.now_seconds(), wall=monotonic())
             ),
         )
@@ -108,12 +120,31 @@ class SafetyFilterNode(EndpointNode):
             f'safety filter {state}: {len(endpoint.filter.row_names)} constraint rows'
         )
 
+    def answer(self, outgoing: list[Outgoing]) -> None:
+        """Publish a tick's answer; log the grasp check's changes (once each)."""
+        self.publish(outgoing)
+        for level, text in self.endpoint.take_log():
+            # One call site per severity: rclpy refuses to change it between calls.
+            if level == DiagnosticLevel.ERROR:
+                self.get_logger().error(text)
+            else:
+                self.get_logger().info(text)
+
+    def _log_statuses(self, msg: Any) -> None:
+        """Log WARN and ERROR statuses, except the grasp check's (logged once by answer)."""
+        for status in msg.status:
+            values = {item.key: item.value for item in status.values}
+            if values.get(Key.STATUS) in {grasp.value for grasp in GRASP_STATUSES}:
+                return
+        super()._log_statuses(msg)
+
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
         """Rebuild the filter, update the hold policy or switch the filter on or off (logged)."""
         input_changed = any(name.startswith('input.') for name in changed)
         rate_changed = any(name in PUBLICATION_RATE_PARAMETERS for name in changed)
+        grasp_changed = any(name.startswith('grasp_check.') for name in changed)
         filter_changed = any(
-            not name.startswith('input.')
+            not name.startswith(('input.', 'grasp_check.'))
             and name not in PUBLICATION_RATE_PARAMETERS
             and name != ENABLED_PARAMETER
             for name in changed
@@ -127,6 +158,9 @@ class SafetyFilterNode(EndpointNode):
             ),
             publication_rate_config=(
                 PublicationRateConfig.from_parameters(self.parameters) if rate_changed else None
+            ),
+            grasp_check_config=(
+                GraspCheckConfig.from_parameters(self.parameters) if grasp_changed else None
             ),
         )
         if ENABLED_PARAMETER in changed:
