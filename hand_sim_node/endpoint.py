@@ -77,7 +77,6 @@ from grasp_safety_filter.nodes.scenario import (
     scenario_to_text,
 )
 from hand_sim_node.config import SimConfig
-from hand_sim_node.events import object_face_half_widths, OBJECT_FACES_KEY
 from hand_sim_node.simulator import NUMERICAL_FAILURE, Simulator
 
 #: Name of the simulator's ``DiagnosticStatus``.
@@ -124,7 +123,7 @@ class HandSimEndpoint:
         self.scenario_text = (
             scenario_text
             if scenario_text is not None
-            else scenario_to_text(_with_object_faces(scenario_document(model, sim_config), model))
+            else scenario_to_text(scenario_document(model, sim_config))
         )
         self._joint_names = list(model.joint_names)
         self._applied_effort = np.zeros(model.n_joints)
@@ -541,12 +540,3 @@ def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
             blockers.append(f"recorder '{recorder}' subscribed to {', '.join(missing)}")
     return blockers
 
-
-def _with_object_faces(document: dict[str, Any], model: Any) -> dict[str, Any]:
-    """Add each contact's face half extents (m; null: no edge) for a bag's object-face margins."""
-    half = object_face_half_widths(model)
-    if half is not None:
-        document[OBJECT_FACES_KEY] = [
-            [float(h) if np.isfinite(h) else None for h in row] for row in half.tolist()
-        ]
-    return document

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.nodes.scenario import object_face_half_widths
 
 FINGERTIP_WORKSPACE = 'fingertip_workspace'
 JOINT_LIMITS = 'joint_limits'
@@ -42,27 +43,6 @@ FAMILIES: tuple[str, ...] = (FINGERTIP_WORKSPACE, JOINT_LIMITS, SLIP, SEPARATION
 
 WORKSPACE_SIDES: tuple[str, ...] = ('a_min', 'a_max', 'b_min', 'b_max')
 JOINT_SIDES: tuple[str, ...] = ('lower', 'upper')
-
-#: Key of the ``/grasp/scenario`` document holding each contact's face half extents
-#: ``[h_u, h_v]``, m (absent for a sphere object), for judging a bag's object-face margins.
-OBJECT_FACES_KEY = 'object_face_half_widths'
-
-
-def object_face_half_widths(model: Any) -> np.ndarray | None:
-    """Half extents ``(h_u, h_v)`` of each contact's box face, (n, 2), m.
-
-    ``inf`` for a contact not on a bounded face (a sphere object); None when the model has
-    not chosen its contacts' surfaces yet.
-    """
-    if not getattr(model, 'contacts_bound', False):
-        return None
-    return np.array(
-        [
-            getattr(contact.object_surface, 'half_widths', (np.inf, np.inf))
-            for contact in model.contacts
-        ],
-        dtype=float,
-    )
 
 
 #: Bound of each margin column of the two-sided families (slip and separation have none).

@@ -114,6 +114,7 @@ def test_fingers_follow_the_tree_whatever_the_order_and_counts(case):
     for finger in fingers:
         assert tuple(joint_names[j] for j in finger.joints) == finger.joint_names
     assert [f.contact for f in fingers] == [0, 1] + [None] * (len(expected) - 2)
+    assert [f.free for f in fingers] == [False, False] + [True] * (len(expected) - 2)
 
 
 ERROR_CASES = {
@@ -134,3 +135,4 @@ def test_a_name_not_in_the_urdf_is_refused_by_name(case):
 def test_without_a_tree_every_joint_is_one_group_in_command_order():
     (group,) = all_joints(['j2', 'j0', 'j1'])
     assert group.joints == (0, 1, 2) and group.joint_names == ('j2', 'j0', 'j1')
+    assert not group.free  # not known to touch nothing: its figure row is not called free

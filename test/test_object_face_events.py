@@ -18,9 +18,10 @@ from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.scenario import OBJECT_FACES_KEY
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
-from hand_sim_node.events import EventMonitor, OBJECT_FACE, OBJECT_FACES_KEY
+from hand_sim_node.events import EventMonitor, OBJECT_FACE
 
 HALF_EDGE = 0.2604 / 2
 MSGS = MessageNamespace.from_typestore(get_typestore(Stores.ROS2_JAZZY))

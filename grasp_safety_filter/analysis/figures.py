@@ -106,12 +106,14 @@ def plot_contacts(run: RunData, path: Path) -> Path:
 def _finger_rows(fingers: Sequence[Finger]) -> list[tuple[str, tuple[int, ...]]]:
     """Lay out a row of panels per finger: label and joints, at most :data:`MAX_COLUMNS` a row.
 
-    A finger with more joints continues on the next rows, labelled ``"<finger> (cont.)"``.
+    A finger with more joints continues on the next rows, labelled ``"<finger> (cont.)"``; a
+    finger that touches nothing is labelled ``"<branch> (free)"``.
     """
     rows = []
     for finger in fingers:
+        name = f'{finger.label} (free)' if finger.free else finger.label
         for start in range(0, len(finger.joints), MAX_COLUMNS):
-            label = finger.label if start == 0 else f'{finger.label} (cont.)'
+            label = name if start == 0 else f'{name} (cont.)'
             rows.append((label, finger.joints[start : start + MAX_COLUMNS]))
     return rows
 
@@ -174,21 +176,41 @@ def joints_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Figu
 
 
 def plot_friction(run: RunData, path: Path) -> Path:
-    """Plot the required friction beta_i against mu (grey: slip)."""
+    """Plot the required friction beta_i against mu_i (grey: slip).
+
+    With one mu for every contact, the grey band above it is slip for all of them. With a
+    mu_i per contact, each contact's own mu_i is drawn dashed in its colour, and the band
+    starts at the largest mu_i: above it every contact slips.
+    """
     figure = Figure(figsize=(7, 3.5))
     axes = figure.subplots()
     beta = np.where(np.isfinite(run.required_friction), run.required_friction, np.nan)
+    mu = run.mu_per_contact
+    shared = bool(np.all(mu == mu[0]))
     for i, name in enumerate(run.contact_names):
-        axes.plot(*envelope(run.t, beta[:, i]), LINE_STYLES[i % len(LINE_STYLES)], label=name)
-    top = max(1.5 * run.mu, float(np.nanmax(beta)) * 1.05 if np.isfinite(beta).any() else 0.0)
-    axes.axhspan(run.mu, top, **INFEASIBLE)
-    axes.axhline(run.mu, color='k', linewidth=1.0, label=f'$\\mu$ = {run.mu:g}')
+        (line,) = axes.plot(
+            *envelope(run.t, beta[:, i]), LINE_STYLES[i % len(LINE_STYLES)], label=name
+        )
+        if not shared:
+            axes.axhline(
+                mu[i],
+                color=line.get_color(),
+                linestyle='--',
+                linewidth=1.0,
+                label=f'$\\mu$ of {name} = {mu[i]:g}',
+            )
+    highest = float(mu.max())
+    top = max(1.5 * highest, float(np.nanmax(beta)) * 1.05 if np.isfinite(beta).any() else 0.0)
+    axes.axhspan(highest, top, **INFEASIBLE)
+    if shared:
+        axes.axhline(highest, color='k', linewidth=1.0, label=f'$\\mu$ = {highest:g}')
     axes.set_ylim(0.0, top)
     axes.set_xlabel('t [s]')
     axes.set_ylabel('$\\beta_i$')
     axes.legend(loc='best')
     _stop_marker(axes, run)
-    axes.set_title(f'{run.mode}: required friction (grey: slip)')
+    title = 'grey: slip' if shared else "dashed: each contact's mu; grey: above every mu"
+    axes.set_title(f'{run.mode}: required friction ({title})')
     return _save(figure, path)
 
 

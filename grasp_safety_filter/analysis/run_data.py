@@ -41,13 +41,13 @@ from grasp_safety_filter.io.messages import (
     nanoseconds_to_seconds,
 )
 from grasp_safety_filter.nodes.scenario import (
+    OBJECT_FACES_KEY,
     scenario_from_msg,
     scenario_per_contact,
     scenario_workspace,
     ScenarioError,
 )
 from hand_sim_node.endpoint import DIAGNOSTIC_NAME as SIM_DIAGNOSTIC
-from hand_sim_node.events import OBJECT_FACES_KEY
 
 #: Simulation time at which a run starts, s: ``hand_sim_node`` starts every run at t_0 = 0,
 #: with the scenario and the state at t_0.
@@ -151,8 +151,9 @@ class RunData:
     def object_face_half_widths(self) -> np.ndarray | None:
         """Each contact's face half extents ``(h_u, h_v)``, (n, 2), m; None if not recorded.
 
-        From the scenario document's :data:`~hand_sim_node.events.OBJECT_FACES_KEY` (a box
-        object's runs; ``inf`` stands for a contact without an edge).
+        From the scenario document's
+        :data:`~grasp_safety_filter.nodes.scenario.OBJECT_FACES_KEY` (a box object's runs;
+        ``inf`` stands for a contact without an edge).
         """
         rows = self.scenario.get(OBJECT_FACES_KEY)
         if not isinstance(rows, list) or len(rows) != len(self.contact_names):

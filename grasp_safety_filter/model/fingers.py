@@ -31,6 +31,8 @@ class Finger:
         joints: Indices into ``model.joint_names`` (command order), base to tip.
         joint_names: The joints' names, in the same order.
         contact: Index of the finger's contact, or None for a free finger.
+        free: A finger of the hand that touches nothing (its joints are on no fingertip's
+            chain); False for a group of joints whose finger is not known.
 
     """
 
@@ -38,6 +40,7 @@ class Finger:
     joints: tuple[int, ...]
     joint_names: tuple[str, ...]
     contact: int | None = None
+    free: bool = False
 
 
 @dataclass(frozen=True)
@@ -153,7 +156,9 @@ def group_joints_by_finger(
 def _finger(
     label: str, names: Sequence[str], index: Mapping[str, int], contact: int | None
 ) -> Finger:
-    return Finger(label, tuple(index[name] for name in names), tuple(names), contact)
+    return Finger(
+        label, tuple(index[name] for name in names), tuple(names), contact, free=contact is None
+    )
 
 
 def fingers_from_parameters(params: Mapping[str, Any]) -> list[Finger]:

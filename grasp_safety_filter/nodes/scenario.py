@@ -12,7 +12,8 @@ later still gets it) as one JSON object::
       "fingertip_workspace": {"a_min": ..., "a_max": ..., "b_min": ..., "b_max": ...},  # rad
       "time_step": 0.001, "duration": 15.0, "n_steps": 15000,   # s, s, -
       "integrator": "ode3", "lockstep": true,
-      "stop_on_slip": false, "stop_on_workspace_exit": true
+      "stop_on_slip": false, "stop_on_workspace_exit": true,
+      "object_face_half_widths": [[h_u, h_v], ...]   # m, per contact; null: no edge
     }
 
 ``friction_coefficient`` and each workspace bound are one number when every contact has the
@@ -29,6 +30,8 @@ from collections.abc import Mapping
 import json
 import math
 from typing import Any
+
+import numpy as np
 
 from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.model.fingertip_workspace import BOUNDS as WORKSPACE_BOUNDS
@@ -80,6 +83,28 @@ def _floats(values: Any) -> list[float]:
     return [float(v) for v in values]
 
 
+#: Key of the ``/grasp/scenario`` document holding each contact's face half extents
+#: ``[h_u, h_v]``, m (absent for a sphere object), for judging a bag's object-face margins.
+OBJECT_FACES_KEY = 'object_face_half_widths'
+
+
+def object_face_half_widths(model: Any) -> np.ndarray | None:
+    """Half extents ``(h_u, h_v)`` of each contact's box face, (n, 2), m.
+
+    ``inf`` for a contact not on a bounded face (a sphere object); None when the model has
+    not chosen its contacts' surfaces yet.
+    """
+    if not getattr(model, 'contacts_bound', False):
+        return None
+    return np.array(
+        [
+            getattr(contact.object_surface, 'half_widths', (np.inf, np.inf))
+            for contact in model.contacts
+        ],
+        dtype=float,
+    )
+
+
 def scenario_document(model: Any, sim_config: Any) -> dict[str, Any]:
     """Build the scenario document of a run.
 
@@ -90,7 +115,7 @@ def scenario_document(model: Any, sim_config: Any) -> dict[str, Any]:
 
     """
     box = model.fingertip_workspace.per_contact(len(model.contact_names))
-    return {
+    document: dict[str, Any] = {
         'format': SCENARIO_FORMAT,
         'version': SCENARIO_VERSION,
         'joint_names': [str(name) for name in model.joint_names],
@@ -110,6 +135,12 @@ def scenario_document(model: Any, sim_config: Any) -> dict[str, Any]:
         'stop_on_slip': bool(sim_config.stop_on_slip),
         'stop_on_workspace_exit': bool(sim_config.stop_on_workspace_exit),
     }
+    half = object_face_half_widths(model)
+    if half is not None:
+        document[OBJECT_FACES_KEY] = [
+            [float(h) if math.isfinite(h) else None for h in row] for row in half.tolist()
+        ]
+    return document
 
 
 def scenario_to_text(document: Mapping[str, Any]) -> str:
