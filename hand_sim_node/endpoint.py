@@ -539,4 +539,3 @@ def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
         if missing:
             blockers.append(f"recorder '{recorder}' subscribed to {', '.join(missing)}")
     return blockers
-

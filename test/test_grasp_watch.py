@@ -124,7 +124,7 @@ BAD_FIRST_STATES = [
         'outside the fingertip workspace',
         lambda i, mo: finger3_moved(i, 2, -0.5, mo),
         {'model.fingertip_workspace.a_min': -0.3},
-        'outside the fingertip workspace',
+        'outside its fingertip workspace',
     ),
 ]
 
