@@ -246,3 +246,63 @@ def test_a_backend_without_an_answer_gives_the_fallback_never_nan():
         assert np.all(np.abs(result.u) <= effort)
         statuses[result.status.value] += 1
     assert statuses['fallback_last_good'] + statuses['fallback_nominal'] >= 6, statuses
+
+
+@pytest.mark.parametrize('name', sorted(BACKENDS))
+@pytest.mark.parametrize('metric', METRICS)
+def test_the_filter_on_the_example_hand_gives_the_reference_optimum(name, metric):
+    """The filter's u* with either metric and backend against the references, rolling grasps.
+
+    The filter forms W from each tick's state itself; the references get numpy's
+    ``(tr(M_h)/m) M_h^-1`` (identity: None). Its hard QP's dense form carries the same W.
+    """
+    example = ExampleHand()
+    model = example.model
+    config = SafetyFilterConfig(solver=name, metric=metric, alpha1_gain=10.0, alpha2_gain=10.0)
+    filter_ = SafetyFilter.from_config(model, config)
+    effort = np.asarray(model.effort_limits, dtype=float)
+    weights = filter_.relaxed_problem.slack_weights
+    rng = np.random.default_rng(11)
+    c = example.random_configuration(rng, 0.1, 0.3)
+    statuses = Counter()
+    for i in range(40):
+        c = moved(c, 1e-3)
+        state = c.state(model)
+        rows = filter_.constraint_rows(state)
+        centre, radius = chebyshev_radius(rows.A, rows.lower, effort)
+        direction = rng.normal(size=model.n_joints)
+        u_nom = centre + (abs(radius) * 3.0 + 0.01 * (i % 2)) * direction / np.linalg.norm(
+            direction
+        )
+        W = inverse_inertia(state.M_h) if metric == 'inverse_inertia' else None
+        result = filter_.solve(state, u_nom)
+        statuses[result.status.value] += 1
+        feasible, u_ref = hard_optimum(rows.A, rows.lower, u_nom, -effort, effort, W)
+        if not feasible:
+            u_ref, _ = relaxed_optimum(rows.A, rows.lower, weights, u_nom, -effort, effort, W)
+        assert np.abs(result.u - u_ref).max() <= TOLERANCE * (1.0 + np.abs(u_nom).max()), i
+        P, q, *_ = filter_.hard_qp.dense()
+        m = model.n_joints
+        W_expected = np.eye(m) if W is None else W
+        np.testing.assert_allclose(P[:m, :m], W_expected, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(q[:m], -W_expected @ u_nom, rtol=1e-9, atol=1e-12)
+    assert statuses['solved'] + statuses['solved_active_set'] >= 20, statuses
+
+
+def test_the_metric_changes_the_optimum_where_rows_are_active():
+    """On the example hand the two metrics give different u* (the metric is not ignored)."""
+    example = ExampleHand()
+    model = example.model
+    rng = np.random.default_rng(12)
+    gains = {'alpha1_gain': 10.0, 'alpha2_gain': 10.0}
+    filters = {
+        metric: SafetyFilter.from_config(model, SafetyFilterConfig(metric=metric, **gains))
+        for metric in METRICS
+    }
+    differences = []
+    for _ in range(10):
+        state = example.random_configuration(rng, 0.1, 0.3).state(model)
+        u_nom = rng.normal(0.0, 0.05, model.n_joints)
+        u = {metric: f.solve(state, u_nom).u for metric, f in filters.items()}
+        differences.append(np.abs(u['identity'] - u['inverse_inertia']).max())
+    assert max(differences) > 1e-3, differences
