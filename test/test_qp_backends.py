@@ -44,7 +44,7 @@ EXAMPLE_HAND = CONFIG_DIR / 'four_finger_box.yaml'
 
 
 def inverse_inertia(M_h):
-    """The reference metric ``W = (tr(M_h)/m) M_h^-1``, with numpy's inverse."""
+    """Return the reference metric ``W = (tr(M_h)/m) M_h^-1``, with numpy's inverse."""
     return np.trace(M_h) / M_h.shape[0] * np.linalg.inv(M_h)
 
 

@@ -259,7 +259,7 @@ class OSQPBackend:
         self._set_metric(problem.metric_factor, u_nom)
         relaxed = self.relaxed_qp
         relaxed.update(problem.A, problem.lower, u_nom, self._R)
-        exact = self._relaxed_exactly(guess) if guess else None
+        exact = self._relaxed_exactly(u_nom, guess) if guess else None
         iterations = 0
         result = None
         if exact is None or exact.status is not LeastDistanceStatus.OPTIMAL:
@@ -273,7 +273,7 @@ class OSQPBackend:
             iterations = int(result.info.iter)
             y = result.y
             exact = self._relaxed_exactly(
-                self._working_set_guess(y) if np.isfinite(y).all() else ()
+                u_nom, self._working_set_guess(y) if np.isfinite(y).all() else ()
             )
         steps = exact.iterations
         solution = None
@@ -440,7 +440,7 @@ class OSQPBackend:
                 y[k + joint] += value if upper else -value
         return y
 
-    def _relaxed_exactly(self, guess: tuple[int, ...]) -> LeastDistanceSolution:
+    def _relaxed_exactly(self, u_nom: np.ndarray, guess: tuple[int, ...]) -> LeastDistanceSolution:
         """Solve the relaxed problem by the active-set method in ``(y, s~ = sqrt(w) s)``.
 
         ``y = R^-1 u`` (u for the identity metric); the caller maps y back.
@@ -455,7 +455,8 @@ class OSQPBackend:
             C[k : k + 2 * m, :m] = self._box_rows @ self._R
         np.divide(relaxed.slack_scale, self._sqrt_weights, out=self._relaxed_slack_diagonal)
         b[:k] = relaxed.lower_rows
-        start = np.concatenate((self._y_nom, np.zeros(k)))
+        y_nom = u_nom if self._R is None else to_metric_coordinates(self._R, u_nom)
+        start = np.concatenate((y_nom, np.zeros(k)))
         return solve_least_distance(start, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=guess)
 
     def _set_metric(self, R: np.ndarray | None, u_nom: np.ndarray) -> None:
