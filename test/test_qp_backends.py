@@ -306,3 +306,35 @@ def test_the_metric_changes_the_optimum_where_rows_are_active():
         u = {metric: f.solve(state, u_nom).u for metric, f in filters.items()}
         differences.append(np.abs(u['identity'] - u['inverse_inertia']).max())
     assert max(differences) > 1e-3, differences
+
+
+@pytest.mark.parametrize('name', sorted(BACKENDS))
+def test_the_optimum_does_not_depend_on_the_metrics_scale(tables, name):
+    """W and W / 6.25 (R and 2.5 R) give the same u*, hard and relaxed.
+
+    The slacks are normalised by the rows' dual norms: both terms of the relaxed cost scale
+    alike. (The identity tables: W = I against I / 6.25.)
+    """
+    table = tables['example_hand']
+    m, k = table.cases[0][0].shape[1], table.cases[0][1].size
+    settings = SafetyFilterConfig(solver=name).solver_settings()
+    answers = []
+    for scale in (1.0, 2.5):
+        A, lower, g, R = np.zeros((k, m)), np.zeros(k), np.zeros(m), np.eye(m)
+        problem = Problem(g, A, lower, -table.effort, table.effort, metric_factor=R)
+        relaxed = problem.with_slack(table.weights)
+        solver = BACKENDS[name](problem, table.weights, settings)
+        us = []
+        for A_i, lower_i, u_nom, feasible, _, _, M_h in table.cases[:30]:
+            A[:], lower[:], g[:] = A_i, lower_i, -u_nom
+            if table.metric == 'inverse_inertia':
+                write_inertia_factor(M_h, R)
+            R *= scale
+            solution = solver.solve(problem)
+            if not feasible:
+                solution = solver.solve(relaxed)
+            assert solution.status is SolutionStatus.OPTIMAL
+            us.append(solution.u)
+            R[:] = np.eye(m)
+        answers.append(np.array(us))
+    assert np.abs(answers[0] - answers[1]).max() <= TOLERANCE
