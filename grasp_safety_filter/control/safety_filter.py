@@ -36,10 +36,11 @@ instead, :mod:`~grasp_safety_filter.control.qp_metric`; the tick's M_h gives W.)
    ``max_violation`` is inf when a row is not finite.
 
 Relaxation priorities (defaults): slack weights 1e6 on no-slip and joint-limit rows, 1e3 on
-fingertip-workspace rows. Slacks are normalised to torque-space distance (N·m), so the
-weights read directly: giving up 1 mN·m of a no-slip or joint-limit row costs as much as
-moving u by 1 N·m, of a workspace row as much as moving u by 31.6 mN·m. Dropping the object
-or breaking a joint is worse than letting a contact roll towards the fingertip's edge.
+fingertip-workspace rows. Slacks are normalised to torque-space distance (N·m; the
+W-distance with ``qp.metric: inverse_inertia``), so the weights read directly: giving up
+1 mN·m of a no-slip or joint-limit row costs as much as moving u by 1 N·m, of a workspace
+row as much as moving u by 31.6 mN·m. Dropping the object or breaking a joint is worse
+than letting a contact roll towards the fingertip's edge.
 """
 
 from __future__ import annotations

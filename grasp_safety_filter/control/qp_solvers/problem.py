@@ -86,7 +86,7 @@ class Problem:
 
     Attributes:
         g: The nominal torque, negated, shape (m,): ``-u_nom`` (the linear cost for the
-            identity metric; ``-H u_nom`` is it otherwise: :meth:`linear_cost`).
+            identity metric; ``H g`` is it otherwise).
         A: Barrier rows, shape (k, m).
         lower: Their lower bounds, shape (k,).
         u_min, u_max: The actuator box, shape (m,) each.
@@ -140,12 +140,6 @@ class Problem:
         if self.metric_factor is None:
             return np.eye(self.n_torques)
         return metric_matrix(self.metric_factor)
-
-    def linear_cost(self) -> np.ndarray:
-        """Return the linear cost ``-H u_nom`` of ``1/2 u^T H u + f^T u``, shape (m,)."""
-        if self.metric_factor is None:
-            return self.g
-        return self.H @ self.g
 
     def to_metric_coordinates(self, u: np.ndarray) -> np.ndarray:
         """Return ``R^-1 u`` (u itself for the identity): the least-distance form's y."""
