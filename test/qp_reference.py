@@ -4,6 +4,11 @@ Two independent exact solvers answer each problem: daqp's one-shot ``daqp.solve`
 dense, its own dual active-set code) and the package's Goldfarb-Idnani method
 (:func:`solve_least_distance`, cold). They must agree with each other, so a backend built
 on either one is still checked against the other.
+
+A cost metric W (symmetric positive definite, ``1/2 (u - u_nom)^T W (u - u_nom)``; None: the
+identity) goes to daqp as its H, and to the Goldfarb-Idnani method through the change of
+variables ``u = L y``, ``L L^T = W^-1`` (numpy's Cholesky of numpy's inverse), which makes
+the cost ``1/2 ||y - y_nom||^2``.
 """
 
 import daqp
@@ -23,58 +28,70 @@ def _box_rows(u_min, u_max):
     return np.vstack((np.eye(m), -np.eye(m))), np.concatenate((u_min, -u_max))
 
 
-def hard_optimum(A, lower, u_nom, u_min, u_max):
-    """``(feasible, u*)`` of ``min 1/2 ||u - u_nom||^2 s.t. A u >= lower, u_min <= u <= u_max``.
+def _factor(W, m):
+    """``L`` with ``L L^T = W^-1`` (the identity for W = None)."""
+    return np.eye(m) if W is None else np.linalg.cholesky(np.linalg.inv(W))
 
-    Raises AssertionError when the two references disagree.
+
+def hard_optimum(A, lower, u_nom, u_min, u_max, W=None):
+    """``(feasible, u*)`` of ``min 1/2 du^T W du s.t. A u >= lower, u_min <= u <= u_max``.
+
+    ``du = u - u_nom``; W None: the identity. Raises AssertionError when the two references
+    disagree.
     """
     m = u_nom.size
+    H = np.eye(m) if W is None else W
     upper = np.concatenate((u_max, np.full(lower.size, _INF)))
     low = np.concatenate((u_min, lower))
-    x, _, flag, _ = daqp.solve(np.eye(m), -u_nom, np.ascontiguousarray(A), upper, low)
+    x, _, flag, _ = daqp.solve(H, -H @ u_nom, np.ascontiguousarray(A), upper, low)
     assert flag in (1, -1), f'daqp exit flag {flag}'
     B, c = _box_rows(u_min, u_max)
-    exact = solve_least_distance(u_nom, np.vstack((A, B)), np.concatenate((lower, c)))
+    L = _factor(W, m)
+    y_nom = np.linalg.solve(L, u_nom)
+    exact = solve_least_distance(y_nom, np.vstack((A, B)) @ L, np.concatenate((lower, c)))
     assert exact.status is not LeastDistanceStatus.ITERATION_LIMIT
     feasible = flag == 1
     assert feasible == (exact.status is LeastDistanceStatus.OPTIMAL), 'references disagree'
     if feasible:
-        gap = np.abs(np.asarray(x) - exact.u).max()
+        gap = np.abs(np.asarray(x) - L @ exact.u).max()
         assert gap <= REFERENCE_AGREEMENT * (1.0 + np.abs(u_nom).max()), gap
     return feasible, np.asarray(x)
 
 
-def relaxed_optimum(A, lower, weights, u_nom, u_min, u_max):
-    """``u*`` of the relaxed QP (slack ``s_r >= 0`` per row, normalised by ``||A_r||``).
+def relaxed_optimum(A, lower, weights, u_nom, u_min, u_max, W=None):
+    """``u*`` of the relaxed QP (slack ``s_r >= 0`` per row, normalised by its dual norm).
 
-    ``min 1/2 ||u - u_nom||^2 + 1/2 sum_r w_r s_r^2`` s.t. ``A_r u + d_r s_r >= lower_r``
-    (``d_r = ||A_r||``, 1 below 1e-9), ``u_min <= u <= u_max``, ``s >= 0``.
-    Returns ``(u*, s*)``.
+    ``min 1/2 du^T W du + 1/2 sum_r w_r s_r^2`` s.t. ``A_r u + d_r s_r >= lower_r``
+    (``d_r = sqrt(A_r W^-1 A_r^T)``, ``||A_r||`` for W = I; 1 below 1e-9),
+    ``u_min <= u <= u_max``, ``s >= 0``. Returns ``(u*, s*)``.
     """
     m, k = u_nom.size, lower.size
-    norms = np.linalg.norm(A, axis=1)
+    W_u = np.eye(m) if W is None else W
+    norms = np.sqrt(np.einsum('ij,ij->i', A @ np.linalg.inv(W_u), A))
     d = np.where(norms < 1e-9, 1.0, norms)
-    H = np.diag(np.concatenate((np.ones(m), weights)))
-    f = np.concatenate((-u_nom, np.zeros(k)))
+    H = np.zeros((m + k, m + k))
+    H[:m, :m] = W_u
+    H[m:, m:] = np.diag(weights)
+    f = np.concatenate((-W_u @ u_nom, np.zeros(k)))
     C = np.hstack((A, np.diag(d)))
     upper = np.concatenate((u_max, np.full(k, _INF), np.full(k, _INF)))
     low = np.concatenate((u_min, np.zeros(k), lower))
     x, _, flag, _ = daqp.solve(H, f, np.ascontiguousarray(C), upper, low)
     assert flag == 1, flag
-    # The same problem in (u, sqrt(w) s): a least-distance problem.
+    # The same problem in (L^-1 u, sqrt(w) s): a least-distance problem.
     B, c = _box_rows(u_min, u_max)
+    L = _factor(W, m)
     rows = np.block(
         [
-            [A, np.diag(d / np.sqrt(weights))],
-            [B, np.zeros((2 * m, k))],
+            [A @ L, np.diag(d / np.sqrt(weights))],
+            [B @ L, np.zeros((2 * m, k))],
             [np.zeros((k, m)), np.eye(k)],
         ]
     )
-    exact = solve_least_distance(
-        np.concatenate((u_nom, np.zeros(k))), rows, np.concatenate((lower, c, np.zeros(k)))
-    )
+    start = np.concatenate((np.linalg.solve(L, u_nom), np.zeros(k)))
+    exact = solve_least_distance(start, rows, np.concatenate((lower, c, np.zeros(k))))
     assert exact.status is LeastDistanceStatus.OPTIMAL
-    gap = np.abs(np.asarray(x[:m]) - exact.u[:m]).max()
+    gap = np.abs(np.asarray(x[:m]) - L @ exact.u[:m]).max()
     assert gap <= REFERENCE_AGREEMENT * (1.0 + np.abs(u_nom).max()), gap
     return np.asarray(x[:m]), np.asarray(x[m:])
 

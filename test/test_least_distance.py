@@ -9,6 +9,12 @@ from grasp_safety_filter.control.least_distance import (
     LeastDistanceStatus,
     solve_least_distance,
 )
+from grasp_safety_filter.control.qp_metric import (
+    metric_matrix,
+    metric_row_norms,
+    to_metric_coordinates,
+    write_inertia_factor,
+)
 
 
 def reference(u0, C, b):
@@ -97,3 +103,44 @@ def test_no_rows_returns_the_start():
     solution = solve_least_distance(np.array([1.0, 2.0]), np.zeros((0, 2)), np.zeros(0))
     assert solution.status is LeastDistanceStatus.OPTIMAL
     assert np.array_equal(solution.u, [1.0, 2.0])
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_a_general_metric_by_the_change_of_variables_is_the_optimum_of_daqp_with_h(seed):
+    """``min 1/2 du^T W du`` by ``u = R y`` (qp_metric's factor) equals daqp with ``H = W``.
+
+    M is an ill-conditioned SPD matrix (condition ~1e4, as a hand's joint inertia): R R^T =
+    M / (tr M / m), W = (tr M / m) M^-1; the multipliers of the y problem are those of u.
+    """
+    rng = np.random.default_rng(100 + seed)
+    m = 16
+    Q, _ = np.linalg.qr(rng.normal(size=(m, m)))
+    M = Q @ np.diag(10.0 ** rng.uniform(-6.0, -2.0, m)) @ Q.T
+    R = np.zeros((m, m))
+    write_inertia_factor(M, R)
+    c = np.trace(M) / m
+    np.testing.assert_allclose(R @ R.T, M / c, rtol=1e-10, atol=1e-12)
+    assert np.allclose(R, np.tril(R))
+    W = c * np.linalg.inv(M)
+    np.testing.assert_allclose(metric_matrix(R), W, rtol=1e-8, atol=1e-8 * np.abs(W).max())
+    u0, C, b = random_problem(rng, m=m, k=30)
+    np.testing.assert_allclose(
+        metric_row_norms(C, R), np.sqrt(np.einsum('ij,jk,ik->i', C, M / c, C)), rtol=1e-10
+    )
+    x, _, flag, _ = daqp.solve(W, -W @ u0, C, np.full(b.size, 1e30), b)
+    y = solve_least_distance(to_metric_coordinates(R, u0), C @ R, b)
+    assert (flag == 1) == (y.status is LeastDistanceStatus.OPTIMAL)
+    if flag == 1:
+        u = R @ y.u
+        np.testing.assert_allclose(u, x, atol=1e-7 * (1.0 + np.abs(u0).max()))
+        # The same multipliers: W (u - u0) = C_W^T lambda.
+        stationarity = W @ (u - u0) - C[list(y.active)].T @ y.multipliers
+        assert np.abs(stationarity).max() <= 1e-7 * (1.0 + np.abs(W @ (u - u0)).max())
+
+
+def test_the_metric_factor_refuses_an_inertia_that_is_not_positive_definite():
+    R = np.zeros((3, 3))
+    with pytest.raises(ValueError, match='M_h: expected a positive definite'):
+        write_inertia_factor(np.diag([1.0, -1.0, 1.0]), R)
+    with pytest.raises(ValueError, match='M_h: expected a finite'):
+        write_inertia_factor(np.diag([1.0, np.nan, 1.0]), R)

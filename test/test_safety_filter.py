@@ -565,6 +565,7 @@ def test_parameter_names_and_defaults():
         'osqp.max_iter',
         'osqp.polish',
         'qp.solver',
+        'qp.metric',
     }
     defaults = {spec.name: spec.default for spec in SAFETY_FILTER_QP_PARAMETERS}
     assert SafetyFilterConfig().to_parameters() == defaults

@@ -34,6 +34,7 @@ _FIELDS: dict[str, str] = {
     'osqp.max_iter': 'max_iter',
     'osqp.polish': 'polish',
     'qp.solver': 'solver',
+    'qp.metric': 'metric',
 }
 
 
@@ -55,12 +56,14 @@ class SafetyFilterConfig:
         alpha2_kind, alpha2_gain: alpha_2 (same choices).
         no_slip_weight, joint_limits_weight, fingertip_workspace_weight,
             object_workspace_weight: Slack weights of the relaxed QP (> 0), per (N·m)² of
-            torque-space violation.
+            torque-space violation (of W-distance violation with the inverse-inertia metric).
         eps_abs, eps_rel: OSQP tolerances (> 0).
         max_iter: OSQP iteration limit (>= 1).
         polish: OSQP solution polishing.
         solver: The QP backend (a key of
             :data:`~grasp_safety_filter.control.qp_solvers.BACKENDS`).
+        metric: The QP cost's metric (:data:`~grasp_safety_filter.control.qp_metric.
+            QP_METRICS`): ``"identity"`` (the paper's) or ``"inverse_inertia"``.
     """
 
     no_slip_enabled: bool = True
@@ -85,6 +88,7 @@ class SafetyFilterConfig:
     max_iter: int = 50
     polish: bool = False
     solver: str = 'osqp'
+    metric: str = 'identity'
 
     def __post_init__(self) -> None:
         for spec in SAFETY_FILTER_QP_PARAMETERS:

@@ -4,6 +4,11 @@ Solves, for a point u0 (m,) and rows ``C u >= b`` (k rows, dense)::
 
     min_u  1/2 ||u - u0||^2   s.t.   C u >= b
 
+The metric is the identity (H = I) throughout. A general metric ``1/2 (u - u0)^T H (u - u0)``
+(``qp.metric: inverse_inertia``) is brought to this form by its caller with ``u = R y``,
+``R R^T = H^-1``: ``min 1/2 ||y - R^-1 u0||^2 s.t. (C R) y >= b``, the same multipliers
+(:mod:`~grasp_safety_filter.control.qp_metric`). Tolerances are then distances in y.
+
 The method keeps a working set W of linearly independent rows held with equality and their
 multipliers ``lambda_W >= 0``: u is then the optimum of the problem restricted to W (dual
 feasible). Each step adds the most violated row and moves along the direction that keeps

@@ -16,6 +16,15 @@ normalised by its row's norm, ``d_r = ||A_r||`` (1 for a row with ``||A_r|| < 1e
 own unit (N, rad/s²): weights w_r are then comparable across families and against the
 torque deviation. The actuator box stays hard in both problems.
 
+With the inverse-inertia metric (``qp.metric``, :mod:`~grasp_safety_filter.control.qp_metric`)
+the cost is ``1/2 (u - u_nom)^T W (u - u_nom)`` with ``W = (R R^T)^-1`` (R the metric factor,
+written every tick), and the norm of the distances is W's: ``d_r = ||R^T A_r||`` (the row's
+dual norm), so ``s_r`` is the distance in the metric ``||du||_W = sqrt(du^T W du)`` by which
+row r is given up (N·m-equivalent: W is dimensionless and the identity for equal, uncoupled
+joint inertias). Scaling W by any factor scales both terms of the relaxed cost alike: the
+optimum does not depend on the metric's overall scale, and w_r reads as before, in W's
+distance instead of the torque distance.
+
 In the solver's form ``min 1/2 x^T P x + q^T x  s.t.  lower <= C x <= upper``::
 
     hard:     C = [ A   ]        relaxed:  C = [ A    diag(d) ]
@@ -33,6 +42,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from grasp_safety_filter.control.qp_metric import metric_matrix, metric_row_norms
+
 #: Threshold below which a row is treated as independent of u when normalising its slack.
 ROW_NORM_FLOOR = 1e-9
 
@@ -44,8 +55,14 @@ class SafetyQP:
         n_torques: m, the number of joint torques.
         n_rows: k, the number of barrier rows.
         relaxed: True for the relaxed problem (slack variables present).
-        P: Upper triangle of the (constant, diagonal) cost matrix, CSC.
-        q: Linear cost, shape (n_variables,): ``(-u_nom, 0)``.
+        metric_factor: R of the metric ``W = (R R^T)^-1``, shape (m, m), lower triangular,
+            written by the owner each tick; None for the identity metric.
+        P: Upper triangle of the cost matrix, CSC (a fresh copy of :attr:`P_data`): diagonal
+            for the identity metric, ``W`` dense in the torque block otherwise.
+        P_data: The values of P in CSC order (:meth:`update_metric` rewrites them).
+        q: Linear cost, shape (n_variables,): ``(-u_nom, 0)``, or ``(-W u_nom, 0)`` with a
+            metric (W of the last :meth:`update_metric`).
+        nominal: u_nom, shape (m,) (the last :meth:`set_nominal`).
         lower, upper: Constraint bounds, shape (n_constraints,) (``upper`` is ``+inf`` on
             barrier rows and slack bounds).
         C_data: The values of ``C`` in CSC order, shape (nnz,), updated in place.
@@ -60,6 +77,7 @@ class SafetyQP:
         u_min: np.ndarray,
         u_max: np.ndarray,
         row_weights: np.ndarray | None = None,
+        metric: bool = False,
     ) -> None:
         """Allocate the buffers and the CSC pattern.
 
@@ -70,6 +88,9 @@ class SafetyQP:
             u_max: Upper actuator limits, shape (m,), N·m.
             row_weights: Slack weights w_r > 0, shape (k,), for the relaxed problem;
                 None for the hard problem.
+            metric: False: the identity metric (P constant and diagonal); True: a metric
+                factor R is kept (:attr:`metric_factor`, the identity until written) and P's
+                torque block is the dense upper triangle of ``W = (R R^T)^-1``.
 
         Raises:
             ValueError: Inconsistent sizes or non-positive weights.
@@ -97,13 +118,27 @@ class SafetyQP:
                 raise ValueError(f'SafetyQP: expected {k} finite row weights > 0, got {weights!r}')
             cost[m:] = weights
         self.row_weights = cost[m:].copy()
-        diagonal = np.arange(self.n_variables, dtype=np.int32)
-        self.P = sp.csc_matrix(
-            (cost, diagonal, np.arange(self.n_variables + 1, dtype=np.int32)),
-            shape=(self.n_variables, self.n_variables),
-        )
-
+        self.metric_factor = np.eye(m) if metric else None
+        self.W = np.eye(m)
+        self.nominal = np.zeros(m)
         self.q = np.zeros(self.n_variables)
+        if metric:
+            # Torque column j: rows 0..j (upper triangle); slack column r: its diagonal.
+            self._P_indices = np.concatenate(
+                [np.arange(j + 1) for j in range(m)] + [m + np.arange(n_slack)]
+            ).astype(np.int32)
+            n_upper = m * (m + 1) // 2
+            columns = (np.arange(m + 1) * np.arange(1, m + 2)) // 2
+            slack_columns = n_upper + np.arange(1, n_slack + 1)
+            self._P_indptr = np.concatenate((columns, slack_columns)).astype(np.int32)
+            self.P_data = np.empty(self._P_indices.size)
+            self.P_data[n_upper:] = cost[m:]
+            self.update_metric()
+        else:
+            self._P_indices = np.arange(self.n_variables, dtype=np.int32)
+            self._P_indptr = np.arange(self.n_variables + 1, dtype=np.int32)
+            self.P_data = cost
+
         self.lower = np.zeros(self.n_constraints)
         self.upper = np.full(self.n_constraints, np.inf)
         self.lower[k : k + m] = u_min
@@ -133,6 +168,23 @@ class SafetyQP:
         self.A_rows[:] = 0.0
 
     @property
+    def P(self) -> sp.csc_matrix:
+        """The cost matrix's upper triangle with its fixed pattern (a fresh CSC copy)."""
+        return sp.csc_matrix(
+            (self.P_data.copy(), self._P_indices.copy(), self._P_indptr.copy()),
+            shape=(self.n_variables, self.n_variables),
+        )
+
+    def update_metric(self) -> None:
+        """Write ``W = (R R^T)^-1`` of :attr:`metric_factor` into P and q (identity: no-op)."""
+        if self.metric_factor is not None:
+            self.W = metric_matrix(self.metric_factor)
+            m = self.n_torques
+            # Column-major upper triangle: the transpose's row-major lower triangle.
+            self.P_data[: m * (m + 1) // 2] = self.W.T[np.tril_indices(m)]
+            self.set_nominal(self.nominal)
+
+    @property
     def slack_scale(self) -> np.ndarray:
         """The slack columns' entries d (relaxed problem), shape (k,) (empty when hard)."""
         return self._slack_scale
@@ -146,20 +198,41 @@ class SafetyQP:
         )
 
     def set_nominal(self, u_nom: np.ndarray) -> None:
-        """Set the nominal torque: ``q = (-u_nom, 0)``."""
-        np.negative(u_nom, out=self.q[: self.n_torques])
+        """Set the nominal torque: ``q = (-u_nom, 0)``, or ``(-W u_nom, 0)`` with a metric."""
+        self.nominal[:] = u_nom
+        if self.metric_factor is None:
+            np.negative(u_nom, out=self.q[: self.n_torques])
+        else:
+            np.matmul(self.W, -self.nominal, out=self.q[: self.n_torques])
 
     def normalise_slacks(self) -> None:
-        """Set the slack columns ``d_r = ||A_r||`` (relaxed problem; call after the rows)."""
+        """Set the slack columns ``d_r = ||A_r||``, or ``||R^T A_r||`` with a metric.
+
+        Relaxed problem only; call after the rows and the metric factor are written.
+        """
         if self.relaxed:
-            norms = np.sqrt(np.einsum('ij,ij->i', self.A_rows, self.A_rows))
+            norms = metric_row_norms(self.A_rows, self.metric_factor)
             self._slack_scale[:] = np.where(norms < ROW_NORM_FLOOR, 1.0, norms)
 
-    def update(self, A: np.ndarray, lower: np.ndarray, u_nom: np.ndarray) -> None:
-        """Write a tick's barrier rows ``A u >= lower`` and nominal torque into the buffers."""
+    def update(
+        self,
+        A: np.ndarray,
+        lower: np.ndarray,
+        u_nom: np.ndarray,
+        metric_factor: np.ndarray | None = None,
+    ) -> None:
+        """Write a tick's rows ``A u >= lower``, nominal torque and metric into the buffers.
+
+        ``metric_factor``: this tick's R (metric problems only; None keeps the last one).
+        """
         self.A_rows[:] = A
         self.lower_rows[:] = lower
-        self.set_nominal(u_nom)
+        if metric_factor is not None and self.metric_factor is not None:
+            self.metric_factor[:] = metric_factor
+            self.nominal[:] = u_nom
+            self.update_metric()
+        else:
+            self.set_nominal(u_nom)
         self.normalise_slacks()
 
     def dense(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -167,8 +240,10 @@ class SafetyQP:
 
         For independent solvers and benchmarks; not for the control loop.
         """
+        self.update_metric()
+        upper = self.P.toarray()
         return (
-            self.P.toarray(),
+            upper + np.triu(upper, 1).T,
             self.q.copy(),
             self.C.toarray(),
             self.lower.copy(),

@@ -6,6 +6,9 @@ Every tick (paper eq. 28)::
          s.t.  no slip (friction pyramids), joint-limit ZCBFs, fingertip-workspace ZCBFs,
                u_min <= u <= u_max
 
+(``qp.metric: inverse_inertia`` measures ``u - u_nom`` in ``W = (tr(M_h)/m) M_h^-1``
+instead, :mod:`~grasp_safety_filter.control.qp_metric`; the tick's M_h gives W.)
+
 :meth:`SafetyFilter.solve` reads top-down:
 
 1. **Rows.** Check u_nom (size, finite) and write every family's rows ``A u >= lower``
@@ -33,10 +36,11 @@ Every tick (paper eq. 28)::
    ``max_violation`` is inf when a row is not finite.
 
 Relaxation priorities (defaults): slack weights 1e6 on no-slip and joint-limit rows, 1e3 on
-fingertip-workspace rows. Slacks are normalised to torque-space distance (N·m), so the
-weights read directly: giving up 1 mN·m of a no-slip or joint-limit row costs as much as
-moving u by 1 N·m, of a workspace row as much as moving u by 31.6 mN·m. Dropping the object
-or breaking a joint is worse than letting a contact roll towards the fingertip's edge.
+fingertip-workspace rows. Slacks are normalised to torque-space distance (N·m; the
+W-distance with ``qp.metric: inverse_inertia``), so the weights read directly: giving up
+1 mN·m of a no-slip or joint-limit row costs as much as moving u by 1 N·m, of a workspace
+row as much as moving u by 31.6 mN·m. Dropping the object or breaking a joint is worse
+than letting a contact roll towards the fingertip's edge.
 """
 
 from __future__ import annotations
@@ -66,6 +70,7 @@ from grasp_safety_filter.control.filter_inputs import (
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
 from grasp_safety_filter.control.margins import Margins
 from grasp_safety_filter.control.qp import SafetyQP
+from grasp_safety_filter.control.qp_metric import INVERSE_INERTIA, write_inertia_factor
 from grasp_safety_filter.control.qp_solvers import (
     BACKENDS,
     FEASIBILITY_TOLERANCE,
@@ -197,14 +202,17 @@ class SafetyFilter:
 
         self._u_min = self.actuator_limits.lower
         self._u_max = self.actuator_limits.upper
-        self.hard_qp = SafetyQP(m, k, self._u_min, self._u_max)
-        # The problems read the rows where _assemble_rows writes them (no copy per tick).
+        metric = config.metric == INVERSE_INERTIA
+        self.hard_qp = SafetyQP(m, k, self._u_min, self._u_max, metric=metric)
+        # The problems read the rows (and the metric factor) where _assemble_rows writes
+        # them (no copy per tick); g = -u_nom is the hard QP's q only for the identity.
         self.problem = Problem(
-            self.hard_qp.q,
+            np.zeros(m) if metric else self.hard_qp.q,
             self.hard_qp.A_rows,
             self.hard_qp.lower_rows,
             self._u_min,
             self._u_max,
+            metric_factor=self.hard_qp.metric_factor,
         )
         self.relaxed_problem = self.problem.with_slack(weights)
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
@@ -300,6 +308,8 @@ class SafetyFilter:
         u_nom = checked_torque(u_nom, self.joint_names)
         rows_finite = self._assemble_rows(state)
         self.hard_qp.set_nominal(u_nom)
+        if self.problem.metric_factor is not None:
+            np.negative(u_nom, out=self.problem.g)
         return u_nom, rows_finite
 
     def solve(self, state: GraspState, u_nom: np.ndarray) -> FilterResult:
@@ -373,7 +383,13 @@ class SafetyFilter:
                 block = family.rows(state)
                 A[rows] = block.A
                 lower[rows] = block.lower
-        if np.isfinite(self.hard_qp.C_data).all() and np.isfinite(lower).all():
+        metric_ok = True
+        if self.problem.metric_factor is not None:
+            try:
+                write_inertia_factor(state.M_h, self.problem.metric_factor)
+            except ValueError:
+                metric_ok = False  # an M_h that overflowed: as rows that did
+        if metric_ok and np.isfinite(self.hard_qp.C_data).all() and np.isfinite(lower).all():
             return True
         raise_if_measured_not_finite(state)
         return False

@@ -22,6 +22,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from grasp_safety_filter.control.qp_metric import QP_METRICS
 from grasp_safety_filter.io.parameters import (
     load_parameter_file,
     misspelt_node_sections,
@@ -684,6 +685,15 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'osqp',
         'QP backend: osqp (ADMM, certified or refined exactly) or daqp (dual active set)',
         choices=('osqp', 'daqp'),
+    ),
+    ParameterSpec(
+        'qp.metric',
+        STRING,
+        'identity',
+        "Cost of the correction du = u - u_nom: identity ||du||^2 (the paper's) or "
+        'inverse_inertia du^T W du, W = (tr(M_h)/m) M_h^-1 (the kinetic-energy norm of the '
+        'joint acceleration du excites; relaxation slack then in W distance)',
+        choices=QP_METRICS,
     ),
 )
 """The safety filter's own parameters (read by ``SafetyFilterConfig``)."""

@@ -11,7 +11,10 @@ an empty working set: a working set left by a failed solve is no valid start.
 The hard problem: ``x = u``, ``H = I``, ``f = g``, the box as simple bounds, the barrier
 rows ``lower <= A u``. The relaxed problem is the same :class:`~.problem.Problem` with its
 slacks as variables: ``x = (u, s)``, ``H = diag(1, w)``, simple bounds ``s >= 0``, rows
-``lower_r <= A_r u + d_r s_r`` (``d_r`` of :meth:`~.problem.Problem.slack_scale`). daqp's
+``lower_r <= A_r u + d_r s_r`` (``d_r`` of :meth:`~.problem.Problem.slack_scale`). With
+the inverse-inertia metric the torque block of H is the tick's ``W`` and ``f = -W u_nom``
+(daqp's own Cholesky factorisation of H turns it into its least-distance problem); the box
+stays simple bounds on u, held exactly. daqp's
 soft constraints would add a slack of their own per row with its own weight convention;
 explicit slacks keep the relaxed problem the one every backend solves.
 
@@ -58,7 +61,7 @@ class _Model:
         lower: np.ndarray,
         settings: Mapping[str, Any],
     ) -> None:
-        self.A, self.upper, self.lower = A, upper, lower
+        self.H, self.A, self.upper, self.lower = H, A, upper, lower
         self.n_bounds = upper.shape[0] - A.shape[0]
         self.f = np.zeros(H.shape[0])
         self.cold = np.zeros(upper.shape[0], dtype=np.int32)
@@ -67,12 +70,13 @@ class _Model:
         self.model.settings = dict(settings)
         self.warm = False
 
-    def solve(self) -> tuple[np.ndarray, int, int, np.ndarray]:
-        """Hand over this tick's data and solve: ``(x, exit flag, iterations, lam)``."""
+    def solve(self, new_cost: bool) -> tuple[np.ndarray, int, int, np.ndarray]:
+        """Hand over this tick's data (H too if ``new_cost``): ``(x, flag, iterations, lam)``."""
+        H = self.H if new_cost else None
         if self.warm:
-            self.model.update(f=self.f, A=self.A, blower=self.lower)
+            self.model.update(H=H, f=self.f, A=self.A, blower=self.lower)
         else:
-            self.model.update(f=self.f, A=self.A, blower=self.lower, sense=self.cold)
+            self.model.update(H=H, f=self.f, A=self.A, blower=self.lower, sense=self.cold)
         x, _, flag, info = self.model.solve()
         self.warm = flag == _OPTIMAL
         return np.asarray(x, dtype=float), int(flag), int(info['iterations']), info['lam']
@@ -130,12 +134,17 @@ class DAQPBackend:
         """Solve the hard or the relaxed problem."""
         m = self._m
         model = self._relaxed if problem.relaxed else self._hard
-        np.copyto(model.f[:m], problem.g)
+        metric = problem.metric_factor is not None
+        if metric:
+            model.H[:m, :m] = problem.H
+            np.matmul(model.H[:m, :m], problem.g, out=model.f[:m])
+        else:
+            np.copyto(model.f[:m], problem.g)
         model.A[:, :m] = problem.A
         model.lower[model.n_bounds :] = problem.lower
         if problem.relaxed:
             self._slack_diagonal[:] = problem.slack_scale()
-        x, flag, iterations, lam = model.solve()
+        x, flag, iterations, lam = model.solve(metric)
         if flag == _INFEASIBLE:
             u = self._clip(-problem.g)
             return Solution(u, SolutionStatus.INFEASIBLE, iterations=iterations)

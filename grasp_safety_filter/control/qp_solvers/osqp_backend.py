@@ -32,6 +32,12 @@ infeasible; OSQP's relaxed solution gives the start only if that does not end op
 
 Every answer's rows are checked by the :class:`~.problem.Solution` (``row_violation`` at
 most :data:`~.problem.FEASIBILITY_TOLERANCE`) before it is returned as optimal.
+
+With the inverse-inertia metric (a problem with a ``metric_factor`` R) OSQP gets the tick's
+cost ``P = W``, ``q = -W u_nom`` and keeps the box as bounds on u; every active-set step
+works in ``y = R^-1 u``, where the cost is ``||y - y_nom||^2`` and the rows (the box
+included) are ``[A; B] R`` (:meth:`~.problem.Problem.least_distance_form`), and maps its
+answer back, ``u = R y``. The multipliers are the same in both variables.
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ from grasp_safety_filter.control.least_distance import (
     solve_on_working_set,
 )
 from grasp_safety_filter.control.qp import SafetyQP
+from grasp_safety_filter.control.qp_metric import to_metric_coordinates
 from grasp_safety_filter.control.qp_solvers.problem import (
     FEASIBILITY_TOLERANCE,
     Problem,
@@ -94,14 +101,18 @@ class OSQPBackend:
         m, k = problem.n_torques, problem.n_rows
         self._m, self._k = m, k
         self._u_min, self._u_max = problem.u_min, problem.u_max
-        self.hard_qp = SafetyQP(m, k, problem.u_min, problem.u_max)
-        self.relaxed_qp = SafetyQP(m, k, problem.u_min, problem.u_max, row_weights=slack_weights)
+        metric = problem.metric_factor is not None
+        self.hard_qp = SafetyQP(m, k, problem.u_min, problem.u_max, metric=metric)
+        self.relaxed_qp = SafetyQP(
+            m, k, problem.u_min, problem.u_max, row_weights=slack_weights, metric=metric
+        )
         self._hard = osqp.OSQP()
         self._relaxed = osqp.OSQP()
         for solver, qp in ((self._hard, self.hard_qp), (self._relaxed, self.relaxed_qp)):
             solver.setup(qp.P, qp.q, qp.C, qp.lower, qp.upper, **settings)
         # The least-distance forms' rows (Problem.least_distance_form), filled in place.
         B, c = problem.box
+        self._box_rows = B
         self._hard_rows = np.concatenate((np.zeros((k, m)), B))
         self._hard_lower = np.concatenate((np.zeros(k), c))
         self._relaxed_rows = np.zeros((2 * k + 2 * m, m + k))
@@ -113,6 +124,11 @@ class OSQPBackend:
             m : m + k * (m + k + 1) : m + k + 1
         ]
         self._sqrt_weights = np.sqrt(self.relaxed_qp.row_weights)
+        # This tick's metric factor (None: the identity) and the hard least-distance form
+        # in y = R^-1 u: its rows and its start y_nom.
+        self._R: np.ndarray | None = None
+        self._rows_y = self._hard_rows
+        self._y_nom = np.zeros(m)
         self.reset()
 
     def reset(self) -> None:
@@ -159,13 +175,15 @@ class OSQPBackend:
         C[:k] = problem.A
         b[:k] = problem.lower
         u_nom = -problem.g
+        self._set_metric(problem.metric_factor, u_nom)
+        C, y_nom = self._rows_y, self._y_nom
         if self._last_active:
-            solution = self._on_guess(problem, u_nom, self._last_active, 0)
+            solution = self._on_guess(problem, self._last_active, 0)
             if solution is not None:
                 return solution
         if infeasible_rows is not None:
             exact = solve_least_distance(
-                u_nom, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=infeasible_rows
+                y_nom, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=infeasible_rows
             )
             if exact.status is LeastDistanceStatus.OPTIMAL:
                 solution = self._accept_exact(problem, exact, 0)
@@ -175,12 +193,15 @@ class OSQPBackend:
                 return self._not_solved(exact, 0)
 
         hard = self.hard_qp
-        hard.update(problem.A, problem.lower, u_nom)
+        hard.update(problem.A, problem.lower, u_nom, self._R)
         if self._pending is not None:
             u_start, active, multipliers = self._pending
             self._hard.warm_start(x=u_start, y=self._osqp_duals(active, multipliers))
             self._pending = None
-        self._hard.update(q=hard.q, l=hard.lower, Ax=hard.C_data)
+        if self._R is None:
+            self._hard.update(q=hard.q, l=hard.lower, Ax=hard.C_data)
+        else:
+            self._hard.update(q=hard.q, l=hard.lower, Ax=hard.C_data, Px=hard.P_data)
         result = self._hard.solve(raise_error=False)
         iterations = int(result.info.iter)
         status = result.info.status_val
@@ -194,11 +215,11 @@ class OSQPBackend:
         guess: tuple[int, ...] = ()  # y is an infeasibility certificate, not multipliers
         if status not in _INFEASIBLE and np.isfinite(result.y).all():
             guess = self._working_set_guess(result.y)
-            solution = self._on_guess(problem, u_nom, guess, iterations)
+            solution = self._on_guess(problem, guess, iterations)
             if solution is not None:
                 return solution
         exact = solve_least_distance(
-            u_nom, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=guess
+            y_nom, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=guess
         )
         if exact.status is LeastDistanceStatus.OPTIMAL:
             solution = self._accept_exact(problem, exact, iterations)
@@ -213,7 +234,7 @@ class OSQPBackend:
         self._last_active = None
         # The next tick starts its infeasibility proof from the rows of this one.
         self._infeasible_rows = exact.active if infeasible else None
-        u = self._clip_finite(exact.u)
+        u = self._clip_finite(self._to_u(exact.u))
         return Solution(
             u if u is not None else np.zeros(self._m).clip(self._u_min, self._u_max),
             SolutionStatus.INFEASIBLE if infeasible else SolutionStatus.FAILED,
@@ -234,13 +255,20 @@ class OSQPBackend:
             guess = attempt.active
         m = self._m
         u_nom = -problem.g
+        self._hard_rows[: self._k] = problem.A
+        self._set_metric(problem.metric_factor, u_nom)
         relaxed = self.relaxed_qp
-        relaxed.update(problem.A, problem.lower, u_nom)
+        relaxed.update(problem.A, problem.lower, u_nom, self._R)
         exact = self._relaxed_exactly(u_nom, guess) if guess else None
         iterations = 0
         result = None
         if exact is None or exact.status is not LeastDistanceStatus.OPTIMAL:
-            self._relaxed.update(q=relaxed.q, l=relaxed.lower, Ax=relaxed.C_data)
+            if self._R is None:
+                self._relaxed.update(q=relaxed.q, l=relaxed.lower, Ax=relaxed.C_data)
+            else:
+                self._relaxed.update(
+                    q=relaxed.q, l=relaxed.lower, Ax=relaxed.C_data, Px=relaxed.P_data
+                )
             result = self._relaxed.solve(raise_error=False)
             iterations = int(result.info.iter)
             y = result.y
@@ -250,7 +278,7 @@ class OSQPBackend:
         steps = exact.iterations
         solution = None
         if exact.status is LeastDistanceStatus.OPTIMAL:
-            u = self._clip_finite(exact.u)
+            u = self._clip_finite(self._to_u(exact.u[:m]))
             if u is not None:
                 self._relaxed_active = exact.active
                 solution = Solution(
@@ -279,7 +307,7 @@ class OSQPBackend:
         return solution
 
     def _on_guess(
-        self, problem: Problem, u_nom: np.ndarray, guess: tuple[int, ...], iterations: int
+        self, problem: Problem, guess: tuple[int, ...], iterations: int
     ) -> Solution | None:
         """Return the optimum on a guessed active set W if it satisfies the KKT conditions.
 
@@ -290,11 +318,11 @@ class OSQPBackend:
         """
         if not guess:
             return None
-        C, b = self._hard_rows, self._hard_lower
-        guessed = solve_on_working_set(u_nom, C, b, guess)
+        C, b = self._rows_y, self._hard_lower
+        guessed = solve_on_working_set(self._y_nom, C, b, guess)
         if guessed is None:
             return None
-        u_guess, multipliers = guessed
+        u_guess, multipliers = guessed  # y = R^-1 u with a metric
         # Null rows get a floor: such a row holds only if its residual does.
         scale = np.maximum(np.sqrt(np.einsum('ij,ij->i', C, C)), _NULL_ROW_NORM)
         distance = (C @ u_guess - b) / scale
@@ -305,7 +333,7 @@ class OSQPBackend:
             or (multipliers * scale.take(rows)).min() < -ACTIVE_SET_TOLERANCE
         ):
             return None
-        u = self._clip_finite(u_guess)
+        u = self._clip_finite(self._to_u(u_guess))
         if u is None:
             return None
         solution = Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
@@ -319,7 +347,7 @@ class OSQPBackend:
         self, problem: Problem, exact: LeastDistanceSolution, iterations: int
     ) -> Solution | None:
         """Return the active-set optimum, or None if a row fails the check."""
-        u = self._clip_finite(exact.u)
+        u = self._clip_finite(self._to_u(exact.u))
         if u is None:
             return None
         solution = Solution(
@@ -347,7 +375,7 @@ class OSQPBackend:
         ``n_i = ||A_i||``: every row holds (``A_i u - lower_i >= -tol n_i``); barrier
         multipliers are <= 0; each row and box bound is held with equality or has no
         multiplier (``min(|y_i| n_i, |slack_i| / n_i) <= tol``); and
-        ``u - u_nom + A^T y_rows + y_box = 0`` to tol.
+        ``W (u - u_nom) + A^T y_rows + y_box = 0`` to tol (W = I for the identity metric).
         """
         A, lower = problem.A, problem.lower
         k = self._k
@@ -369,7 +397,8 @@ class OSQPBackend:
             to_bound = np.where(y_box < 0.0, u - self._u_min, self._u_max - u)
             if np.minimum(np.abs(y_box), np.abs(to_bound)).max() > tolerance:
                 return None
-        if np.abs(u - u_nom + A.T @ y_rows + y_box).max() > tolerance:
+        gradient = u - u_nom if self._R is None else self.hard_qp.W @ (u - u_nom)
+        if np.abs(gradient + A.T @ y_rows + y_box).max() > tolerance:
             return None
         return np.minimum(np.maximum(u, self._u_min), self._u_max)
 
@@ -412,15 +441,40 @@ class OSQPBackend:
         return y
 
     def _relaxed_exactly(self, u_nom: np.ndarray, guess: tuple[int, ...]) -> LeastDistanceSolution:
-        """Solve the relaxed problem by the active-set method in ``(u, s~ = sqrt(w) s)``."""
+        """Solve the relaxed problem by the active-set method in ``(y, s~ = sqrt(w) s)``.
+
+        ``y = R^-1 u`` (u for the identity metric); the caller maps y back.
+        """
         relaxed = self.relaxed_qp
-        k = self._k
+        k, m = self._k, self._m
         C, b = self._relaxed_rows, self._relaxed_lower
-        C[:k, : self._m] = relaxed.A_rows
+        if self._R is None:
+            C[:k, :m] = relaxed.A_rows
+        else:
+            C[:k, :m] = relaxed.A_rows @ self._R
+            C[k : k + 2 * m, :m] = self._box_rows @ self._R
         np.divide(relaxed.slack_scale, self._sqrt_weights, out=self._relaxed_slack_diagonal)
         b[:k] = relaxed.lower_rows
-        start = np.concatenate((u_nom, np.zeros(k)))
+        y_nom = u_nom if self._R is None else to_metric_coordinates(self._R, u_nom)
+        start = np.concatenate((y_nom, np.zeros(k)))
         return solve_least_distance(start, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=guess)
+
+    def _set_metric(self, R: np.ndarray | None, u_nom: np.ndarray) -> None:
+        """Take this tick's metric factor: the hard rows and u_nom in ``y = R^-1 u``.
+
+        Call after the hard rows (:attr:`_hard_rows`) hold this tick's A.
+        """
+        self._R = R
+        if R is None:
+            self._rows_y = self._hard_rows
+            self._y_nom = u_nom
+        else:
+            self._rows_y = self._hard_rows @ R
+            self._y_nom = to_metric_coordinates(R, u_nom)
+
+    def _to_u(self, y: np.ndarray) -> np.ndarray:
+        """Map the least-distance form's torque part back: ``u = R y`` (y for the identity)."""
+        return y if self._R is None else self._R @ y
 
     def _clip_finite(self, x: np.ndarray) -> np.ndarray | None:
         u = np.asarray(x[: self._m], dtype=float)

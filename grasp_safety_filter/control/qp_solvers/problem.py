@@ -3,29 +3,32 @@
 In the style of qpsolvers (S. Caron): the problem is data, a backend maps it to a
 :class:`Solution`, and the solution measures its own residuals against the problem.
 
-The hard problem, over the m joint torques u, with H = I (the filter's cost is the torque
-distance to u_nom = -g)::
+The hard problem, over the m joint torques u, with the metric H (the identity, the
+paper's; or ``W = (R R^T)^-1`` of :mod:`~grasp_safety_filter.control.qp_metric`, R the
+problem's ``metric_factor``) and ``u_nom = -g``::
 
-    min_u    1/2 u^T H u + g^T u
+    min_u    1/2 (u - u_nom)^T H (u - u_nom)
     s.t.     A u >= lower,   u_min <= u <= u_max
 
 The relaxed problem (``slack_weights`` w given) adds one slack s_r >= 0 per barrier row r,
-normalised to torque-space distance (N·m) by the row's norm ``d_r = ||A_r||`` (1 for a
-row with ``||A_r|| < ROW_NORM_FLOOR``)::
+normalised to a distance in the metric by the row's dual norm ``d_r = ||R^T A_r||``
+(``||A_r||`` for the identity, N·m; 1 below ``ROW_NORM_FLOOR``)::
 
-    min_u,s  1/2 u^T H u + g^T u + 1/2 sum_r w_r s_r^2
+    min_u,s  1/2 (u - u_nom)^T H (u - u_nom) + 1/2 sum_r w_r s_r^2
     s.t.     A u + d_r s_r >= lower_r,   u_min <= u <= u_max,   s >= 0
 
 Both are least-distance problems ``min 1/2 ||x - x0||^2 s.t. C x >= b``
-(:meth:`Problem.least_distance_form`): hard, ``x = u``, ``x0 = -g``; relaxed,
-``x = (u, s~)`` with ``s~ = sqrt(w) s`` and ``x0 = (-g, 0)``. Its rows, in the one row
-numbering of every :class:`Solution`'s active set:
+(:meth:`Problem.least_distance_form`), with ``y = R^-1 u`` (``y = u`` for the identity):
+hard, ``x = y``, ``x0 = R^-1 u_nom``; relaxed, ``x = (y, s~)`` with ``s~ = sqrt(w) s`` and
+``x0 = (R^-1 u_nom, 0)``. Its rows, in the one row numbering of every :class:`Solution`'s
+active set (``C`` holds them times R in the y columns):
 
 - ``0 .. k-1``: the barrier rows ``A_r u (+ d_r / sqrt(w_r) s~_r) >= lower_r``,
 - ``k + 2 j``: ``u_j >= u_min,j``;  ``k + 2 j + 1``: ``-u_j >= -u_max,j``,
 - ``k + 2 m + r`` (relaxed only): ``s~_r >= 0``.
 
-Multipliers are those of this form (``lambda >= 0``, ``x - x0 = C_W^T lambda_W``).
+Multipliers are those of this form (``lambda >= 0``, ``x - x0 = C_W^T lambda_W``), which
+are also the multipliers in u: ``H (u - u_nom) = [A; B]_W^T lambda_W``.
 """
 
 from __future__ import annotations
@@ -38,6 +41,11 @@ import numpy as np
 
 # The relaxed problem's slack normalisation, one definition for every form of it.
 from grasp_safety_filter.control.qp import ROW_NORM_FLOOR
+from grasp_safety_filter.control.qp_metric import (
+    metric_matrix,
+    metric_row_norms,
+    to_metric_coordinates,
+)
 
 #: A row ``A u >= lower`` counts as satisfied when ``A u - lower >= -FEASIBILITY_TOLERANCE``
 #: (in the row's unit: N for no slip, rad/s² for the barriers).
@@ -77,11 +85,14 @@ class Problem:
     them at each ``solve`` and keeps nothing derived from their values.
 
     Attributes:
-        g: Linear cost, shape (m,): ``-u_nom``.
+        g: The nominal torque, negated, shape (m,): ``-u_nom`` (the linear cost for the
+            identity metric; ``H g`` is it otherwise).
         A: Barrier rows, shape (k, m).
         lower: Their lower bounds, shape (k,).
         u_min, u_max: The actuator box, shape (m,) each.
         slack_weights: w, shape (k,), all > 0, for the relaxed problem; None when hard.
+        metric_factor: R of the metric ``H = (R R^T)^-1``, shape (m, m), lower triangular
+            with a positive diagonal; None for the identity (the paper's).
     """
 
     g: np.ndarray
@@ -90,6 +101,7 @@ class Problem:
     u_min: np.ndarray
     u_max: np.ndarray
     slack_weights: np.ndarray | None = None
+    metric_factor: np.ndarray | None = None
     _box: tuple[np.ndarray, np.ndarray] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -105,6 +117,11 @@ class Problem:
             weights.shape != (k,) or not np.all(np.isfinite(weights) & (weights > 0.0))
         ):
             raise ValueError(f'Problem: expected {k} finite slack weights > 0, got {weights!r}')
+        R = self.metric_factor
+        if R is not None and R.shape != (m, m):
+            raise ValueError(
+                f'Problem: expected a metric factor of shape ({m}, {m}), got {R.shape}'
+            )
         object.__setattr__(self, '_box', box_rows(self.u_min, self.u_max))
 
     @property
@@ -119,8 +136,16 @@ class Problem:
 
     @property
     def H(self) -> np.ndarray:
-        """The cost matrix: the identity (the cost is the distance to u_nom)."""
-        return np.eye(self.n_torques)
+        """The cost matrix: the identity, or ``(R R^T)^-1`` with a metric factor R."""
+        if self.metric_factor is None:
+            return np.eye(self.n_torques)
+        return metric_matrix(self.metric_factor)
+
+    def to_metric_coordinates(self, u: np.ndarray) -> np.ndarray:
+        """Return ``R^-1 u`` (u itself for the identity): the least-distance form's y."""
+        if self.metric_factor is None:
+            return u
+        return to_metric_coordinates(self.metric_factor, u)
 
     @property
     def relaxed(self) -> bool:
@@ -134,26 +159,32 @@ class Problem:
 
     def with_slack(self, weights: np.ndarray) -> Problem:
         """Return the relaxed problem on the same arrays, with slack weights w."""
-        return Problem(self.g, self.A, self.lower, self.u_min, self.u_max, weights)
+        return Problem(
+            self.g, self.A, self.lower, self.u_min, self.u_max, weights, self.metric_factor
+        )
 
     def slack_scale(self) -> np.ndarray:
-        """Return ``d_r = ||A_r||`` (1 below :data:`ROW_NORM_FLOOR`), shape (k,)."""
-        norms = np.sqrt(np.einsum('ij,ij->i', self.A, self.A))
+        """Return ``d_r = ||R^T A_r||`` (``||A_r||``; 1 below :data:`ROW_NORM_FLOOR`), (k,)."""
+        norms = metric_row_norms(self.A, self.metric_factor)
         return np.where(norms < ROW_NORM_FLOOR, 1.0, norms)
 
     def least_distance_form(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(x0, C, b)``: the problem as ``min 1/2 ||x - x0||^2 s.t. C x >= b``."""
         m, k = self.n_torques, self.n_rows
         B, c = self._box
+        R = self.metric_factor
+        rows = np.concatenate((self.A, B))
+        if R is not None:
+            rows = rows @ R
+        y0 = self.to_metric_coordinates(-self.g)
         if not self.relaxed:
-            return -self.g, np.concatenate((self.A, B)), np.concatenate((self.lower, c))
+            return y0, rows, np.concatenate((self.lower, c))
         C = np.zeros((2 * k + 2 * m, m + k))
-        C[:k, :m] = self.A
+        C[: k + 2 * m, :m] = rows
         C[np.arange(k), m + np.arange(k)] = self.slack_scale() / np.sqrt(self.slack_weights)
-        C[k : k + 2 * m, :m] = B
         C[k + 2 * m :, m:] = np.eye(k)
         b = np.concatenate((self.lower, c, np.zeros(k)))
-        return np.concatenate((-self.g, np.zeros(k))), C, b
+        return np.concatenate((y0, np.zeros(k))), C, b
 
 
 class Residuals(NamedTuple):
@@ -184,7 +215,8 @@ class Solution:
         active: Active rows in the problem's row numbering (OPTIMAL), or the rows that
             prove infeasibility (INFEASIBLE, when the backend knows them).
         multipliers: Their multipliers ``lambda >= 0`` (least-distance form), same order.
-        slack: The relaxed problem's slack s (N·m), shape (k,); None when hard.
+        slack: The relaxed problem's slack s (N·m, or W's distance), shape (k,); None when
+            hard.
         iterations: The QP solver's own iterations (0: it was not called).
         refinement_steps: Exact active-set steps after the solver (add or drop a row).
     """
@@ -203,11 +235,15 @@ class Solution:
         return self.status is SolutionStatus.OPTIMAL
 
     def x(self, problem: Problem) -> np.ndarray:
-        """Return the least-distance form's variable: u, or ``(u, sqrt(w) s)`` when relaxed."""
+        """Return the least-distance form's variable: y, or ``(y, sqrt(w) s)`` when relaxed.
+
+        ``y = R^-1 u`` (u for the identity metric).
+        """
+        y = problem.to_metric_coordinates(self.u)
         if not problem.relaxed:
-            return self.u
+            return y
         slack = self.slack if self.slack is not None else np.zeros(problem.n_rows)
-        return np.concatenate((self.u, np.sqrt(problem.slack_weights) * slack))
+        return np.concatenate((y, np.sqrt(problem.slack_weights) * slack))
 
     def row_violation(self, problem: Problem) -> float:
         """``max(0, max_r (lower_r - A_r u - d_r s_r))`` in the rows' own units (N, rad/s²)."""
