@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 from grasp_safety_filter.io import parameters
+from grasp_safety_filter.io.parameters import files as parameter_files
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
@@ -27,16 +28,16 @@ def bulk_section(entries: int) -> str:
 def parses(monkeypatch) -> list[Path]:
     """Record every YAML parse of a parameter file."""
     calls: list[Path] = []
-    read = parameters._read_document
+    read = parameter_files._read_document
 
     def counting(path: Path):
         calls.append(path)
         return read(path)
 
-    parameters._parsed_file.cache_clear()
-    monkeypatch.setattr(parameters, '_read_document', counting)
+    parameter_files._parsed_file.cache_clear()
+    monkeypatch.setattr(parameter_files, '_read_document', counting)
     yield calls
-    parameters._parsed_file.cache_clear()
+    parameter_files._parsed_file.cache_clear()
 
 
 @pytest.fixture
@@ -94,19 +95,19 @@ def test_a_refused_file_is_refused_again(tmp_path: Path, parses) -> None:
 
 def test_yaml_work_grows_linearly_with_the_file(tmp_path: Path, monkeypatch) -> None:
     constructed = []
-    construct = parameters._RosYamlLoader.construct_object
+    construct = parameter_files._RosYamlLoader.construct_object
 
     def counting(self, node, deep=False):
         constructed.append(node)
         return construct(self, node, deep=deep)
 
-    monkeypatch.setattr(parameters._RosYamlLoader, 'construct_object', counting)
+    monkeypatch.setattr(parameter_files._RosYamlLoader, 'construct_object', counting)
     counts = []
     for entries in (1_000, 4_000):
         path = tmp_path / f'bulk_{entries}.yaml'
         path.write_text(bulk_section(entries), encoding='utf-8')
         constructed.clear()
-        parameters._read_document(path)
+        parameter_files._read_document(path)
         counts.append(len(constructed))
     # Each key, value and array element at most twice (the duplicate-key check's lookup).
     assert counts[0] <= 2 * 3 * 1_000 + 20
