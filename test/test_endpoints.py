@@ -9,6 +9,7 @@ import math
 from pathlib import Path
 import re
 
+from counting_filter import CountingFilter
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -462,21 +463,6 @@ def test_a_live_gain_change_keeps_the_null_space_posture(params):
 
 # ----------------------------------------------------------------------------------------
 # The safety filter endpoint: bad input is reported and never filtered
-
-
-class CountingFilter:
-    """Wraps a SafetyFilter and counts solve calls."""
-
-    def __init__(self, core):
-        self.core = core
-        self.calls = 0
-
-    def solve(self, state, u_nom):
-        self.calls += 1
-        return self.core.solve(state, u_nom)
-
-    def __getattr__(self, name):
-        return getattr(self.core, name)
 
 
 def tick_inputs(params):

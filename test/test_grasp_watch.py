@@ -14,6 +14,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from counting_filter import CountingFilter
 import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
@@ -127,21 +128,6 @@ BAD_FIRST_STATES = [
         'outside its fingertip workspace',
     ),
 ]
-
-
-class CountingFilter:
-    """Wraps a SafetyFilter and counts solve calls."""
-
-    def __init__(self, core):
-        self.core = core
-        self.calls = 0
-
-    def solve(self, state, u_nom):
-        self.calls += 1
-        return self.core.solve(state, u_nom)
-
-    def __getattr__(self, name):
-        return getattr(self.core, name)
 
 
 def make_filter(params, enabled=True, **overrides) -> SafetyFilterEndpoint:

@@ -197,6 +197,15 @@ class EndpointNode(Node):
             if topic == DIAGNOSTICS:
                 self._log_statuses(msg)
 
+    def log_lines(self, lines: Iterable[tuple[DiagnosticLevel, str]]) -> None:
+        """Log an endpoint's lines: ERROR as errors, anything else as information."""
+        for level, text in lines:
+            # One call site per severity: rclpy refuses to change it between calls.
+            if level == DiagnosticLevel.ERROR:
+                self.get_logger().error(text)
+            else:
+                self.get_logger().info(text)
+
     def now_seconds(self) -> float:
         """Return the node clock's time in s (simulation time under ``use_sim_time``)."""
         return self.get_clock().now().nanoseconds / 1e9

@@ -48,7 +48,6 @@ from rclpy.clock import Clock, ClockType
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io.diagnostic_keys import GRASP_STATUSES, Key
-from grasp_safety_filter.io.messages import DiagnosticLevel
 from grasp_safety_filter.io.schemas import SAFETY_FILTER_NODE
 from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
@@ -123,12 +122,7 @@ class SafetyFilterNode(EndpointNode):
     def answer(self, outgoing: list[Outgoing]) -> None:
         """Publish a tick's answer; log the grasp check's changes (once each)."""
         self.publish(outgoing)
-        for level, text in self.endpoint.take_log():
-            # One call site per severity: rclpy refuses to change it between calls.
-            if level == DiagnosticLevel.ERROR:
-                self.get_logger().error(text)
-            else:
-                self.get_logger().info(text)
+        self.log_lines(self.endpoint.take_log())
 
     def _log_statuses(self, msg: Any) -> None:
         """Log WARN and ERROR statuses, except the grasp check's (logged once by answer)."""
