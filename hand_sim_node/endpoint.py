@@ -26,7 +26,15 @@ publishes the current state again (same stamp), which recovers a command or stat
 while the graph was still connecting. The run ends after ``duration`` (the state at
 ``t = duration`` is published) or when the simulator stops on an event; a last
 ``hand_sim`` status says which (``run.stop_reason``: ``duration``, ``fingertip_workspace``,
-``slip`` or ``numerical_failure``).
+``slip`` or ``numerical_failure``; on MuJoCo ``object_dropped``).
+
+The plant (parameter ``plant``) is our rigid model or MuJoCo (:mod:`hand_sim_node.plant`);
+both give the same topics. ``/hand/contacts`` then holds our model's contact coordinates at
+MuJoCo's state and MuJoCo's contact forces in our contact frames, and a plant with real
+contacts adds its events to ``hand_sim`` statuses (:class:`~grasp_safety_filter.io.
+sim_diagnostic_keys.PlantEvents`): a WARN stamped t_k+1 when a contact is first lost or the
+object drops, and the record so far (with the slip distance per contact) in it and in the
+end-of-run status.
 
 Without lockstep, :meth:`HandSimEndpoint.on_command` only stores the latest valid
 command and :meth:`HandSimEndpoint.advance` (called by a wall-clock timer) integrates one
@@ -60,6 +68,7 @@ from grasp_safety_filter.io.messages import (
     odometry_to_msg,
     seconds_to_nanoseconds,
 )
+from grasp_safety_filter.io.sim_diagnostic_keys import SIM_DIAGNOSTIC, SimKey
 from grasp_safety_filter.io.topics import (
     CLOCK,
     CONTACTS,
@@ -77,10 +86,12 @@ from grasp_safety_filter.nodes.scenario import (
     scenario_to_text,
 )
 from hand_sim_node.config import SimConfig
+from hand_sim_node.contact_events import ContactEventTracker
+from hand_sim_node.plant import Plant, PlantConfig
 from hand_sim_node.simulator import NUMERICAL_FAILURE, Simulator
 
 #: Name of the simulator's ``DiagnosticStatus``.
-DIAGNOSTIC_NAME = 'hand_sim'
+DIAGNOSTIC_NAME = SIM_DIAGNOSTIC
 
 #: ``run.stop_reason`` of a run that reached its duration.
 DURATION = 'duration'
@@ -104,9 +115,10 @@ class HandSimEndpoint:
         msgs: Message classes to build (rclpy or rosbags).
         scenario_text: The ``/grasp/scenario`` JSON; default: built from ``model`` and
             ``sim_config`` (:func:`grasp_safety_filter.nodes.scenario.scenario_document`).
+        plant_config: The plant to simulate (default: the rigid one).
 
     Attributes:
-        simulator: The plant.
+        plant: The plant.
 
     """
 
@@ -116,10 +128,17 @@ class HandSimEndpoint:
         sim_config: SimConfig,
         msgs: MessageNamespace,
         scenario_text: str | None = None,
+        plant_config: PlantConfig | None = None,
     ) -> None:
         self.model = model
         self.msgs = msgs
-        self.simulator = Simulator(model, sim_config)
+        self.plant_config = plant_config or PlantConfig()
+        self.plant: Plant = self.plant_config.build(model, sim_config)
+        self._contact_events = (
+            None
+            if self.plant.contact_report() is None
+            else ContactEventTracker(self.plant_config.kind, model.contact_names)
+        )
         self.scenario_text = (
             scenario_text
             if scenario_text is not None
@@ -135,9 +154,14 @@ class HandSimEndpoint:
 
     # ------------------------------------------------------------------------ properties
     @property
+    def simulator(self) -> Simulator:
+        """The rigid plant's simulator (AttributeError for another plant)."""
+        return self.plant.simulator  # type: ignore[attr-defined]
+
+    @property
     def config(self) -> SimConfig:
         """The simulator configuration in force."""
-        return self.simulator.config
+        return self.plant.config
 
     @property
     def command_timeout(self) -> float:
@@ -157,27 +181,24 @@ class HandSimEndpoint:
     @property
     def finished(self) -> bool:
         """Whether the run is over (duration reached or stopped on an event)."""
-        return (
-            self.simulator.stop_reason is not None
-            or self.simulator.step_index >= self.config.n_steps
-        )
+        return self.plant.stop_reason is not None or self.plant.step_index >= self.config.n_steps
 
     @property
     def stop_reason(self) -> str | None:
-        """``"duration"``, the simulator's stop reason, or None while the run goes on."""
-        if self.simulator.stop_reason is not None:
-            return self.simulator.stop_reason
+        """``"duration"``, the plant's stop reason, or None while the run goes on."""
+        if self.plant.stop_reason is not None:
+            return self.plant.stop_reason
         return DURATION if self.finished else None
 
     @property
     def t(self) -> float:
         """Simulation time of the current state, s."""
-        return self.simulator.t
+        return self.plant.observe().t
 
     @property
     def stamp_ns(self) -> int:
         """Stamp of the current state, integer ns."""
-        return seconds_to_nanoseconds(self.simulator.t)
+        return seconds_to_nanoseconds(self.t)
 
     @property
     def awaited_stamp_ns(self) -> int | None:
@@ -194,7 +215,9 @@ class HandSimEndpoint:
             now: Wall-clock time, s (any origin), for the lockstep timeout.
 
         """
-        self.simulator.reset()
+        self.plant.reset()
+        if self._contact_events is not None:
+            self._contact_events.reset()
         self._applied_effort = np.zeros(self.model.n_joints)
         self._latest_command = None
         self._latest_command_ns = None
@@ -304,7 +327,7 @@ class HandSimEndpoint:
                 lockstep, publish_clock) differs from the one in force.
 
         """
-        current = self.simulator.config
+        current = self.plant.config
         changed = [
             f.name
             for f in dataclasses.fields(SimConfig)
@@ -315,23 +338,40 @@ class HandSimEndpoint:
             raise ValueError(
                 f'HandSimEndpoint.update_config: {changed} are read-only while the simulator runs'
             )
-        self.simulator.config = sim_config
+        self.plant.config = sim_config
 
     # ------------------------------------------------------------------------- internals
     def _step(self, effort: np.ndarray) -> list[Outgoing]:
         applied, clipped = self._clip_to_limits(effort)
-        report = self.simulator.step(applied)
+        self.plant.step(applied)
+        report = self.plant.last_report
         contacts = ContactData.from_grasp_state(report.grasp_state, report.contact_force)
         outgoing = [] if clipped is None else [clipped]
         outgoing.append(
             stamped(CONTACTS, contacts_to_msg(self.msgs, contacts, self.model.contact_names))
         )
-        if report.stop_reason is None:
+        if report.state is not report.start:  # integrated (a rigid stop is not)
             self._applied_effort = np.array(report.effort)
             outgoing += self._state_messages()
+        outgoing += self._contact_event_onsets()
         if self.finished and not self._reported_end:
             outgoing.append(self._end_of_run())
         return outgoing
+
+    def _contact_event_onsets(self) -> list[Outgoing]:
+        """Return a WARN ``hand_sim`` status if the last step lost a contact or the object."""
+        if self._contact_events is None:
+            return []
+        onsets = self._contact_events.update(self.plant.contact_report())
+        if not onsets:
+            return []
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            DiagnosticLevel.WARN,
+            bounded_text('; '.join(onsets)),
+            {'t': self.t, **self._contact_events.events().to_values()},
+        )
+        return [self._diagnostics(report)]
 
     def _clip_to_limits(self, effort: np.ndarray) -> tuple[np.ndarray, Outgoing | None]:
         """Clip a command to the URDF effort limits, as a driver does; WARN if it was over.
@@ -367,7 +407,7 @@ class HandSimEndpoint:
         return applied, self._diagnostics(report)
 
     def _state_messages(self) -> list[Outgoing]:
-        state = self.simulator.state
+        state = self.plant.observe()
         messages = []
         if self.config.publish_clock:
             messages.append(stamped(CLOCK, clock_to_msg(self.msgs, state.t)))
@@ -403,17 +443,15 @@ class HandSimEndpoint:
         else:
             level = DiagnosticLevel.ERROR if reason == NUMERICAL_FAILURE else DiagnosticLevel.WARN
             text = f'run stopped at t = {self.t:.9f} s: {reason}'
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            level,
-            text,
-            {
-                'run.finished': True,
-                'run.stop_reason': reason,
-                'run.t_end': self.t,
-                'run.steps': self.simulator.step_index,
-            },
-        )
+        values: dict[str, Any] = {
+            SimKey.RUN_FINISHED: True,
+            SimKey.RUN_STOP_REASON: reason,
+            SimKey.RUN_T_END: self.t,
+            SimKey.RUN_STEPS: self.plant.step_index,
+        }
+        if self._contact_events is not None:
+            values.update(self._contact_events.events().to_values())
+        report = DiagnosticReport.create(DIAGNOSTIC_NAME, level, text, values)
         return self._diagnostics(report)
 
     def _warn(self, text: str, msg: Any) -> list[Outgoing]:

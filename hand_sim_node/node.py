@@ -55,6 +55,7 @@ from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import GraphSnapshot, HandSimEndpoint, start_blockers
+from hand_sim_node.plant import PlantConfig
 
 #: Wall-clock period of the start-up and watchdog checks, s.
 CHECK_PERIOD = 0.05
@@ -92,7 +93,10 @@ class HandSimNode(EndpointNode):
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         check_initial_grasp(model, self.parameters)
         self.endpoint = HandSimEndpoint(
-            model, SimConfig.from_parameters(self.parameters), self.msgs
+            model,
+            SimConfig.from_parameters(self.parameters),
+            self.msgs,
+            plant_config=PlantConfig.from_parameters(self.parameters),
         )
         self._command_subscription = self.subscribe(EFFORT_COMMAND, self._on_command)
         # Timers on the steady clock: simulation time stands still while the simulator waits.
@@ -109,7 +113,8 @@ class HandSimNode(EndpointNode):
         self.recorder = str(self.parameters[RECORDER_PARAMETER])
         recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
         self.get_logger().info(
-            f'simulating {model.n_joints} joints, {model.n_contacts} contacts for '
+            f'simulating {model.n_joints} joints, {model.n_contacts} contacts on the '
+            f'{self.endpoint.plant_config.kind} plant for '
             f'{self.endpoint.config.duration} s in steps of {self.endpoint.config.time_step} s '
             f'({"lockstep" if self.endpoint.lockstep else "free-running"}); waiting for a '
             f'controller on {self._command_subscription.topic_name}{recorder}'
