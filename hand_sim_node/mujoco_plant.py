@@ -169,6 +169,7 @@ class MuJoCoPlant:
         data.time = state.t
         self._t0 = state.t
         self._step_index = 0
+        self._substep_index = 0
         self._stop_reason: str | None = None
         self._slip_distance = np.zeros(self.model.n_contacts)
         #: The last step's report (None before the first step).
@@ -246,6 +247,7 @@ class MuJoCoPlant:
                 force = self._contact_forces(state0)
             # Contacts and forces at the new state.
             mujoco.mj_forward(mj, data)
+            self._substep_index += 1
             if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
                 self._stop_reason = NUMERICAL_FAILURE
                 break
@@ -344,7 +346,8 @@ class MuJoCoPlant:
             self.min_object_height is not None and height < self.min_object_height
         )
         return ContactReport(
-            t=float(data.time),
+            # From the step count, as the state's time: no round-off accumulation.
+            t=self._t0 + self._substep_index * self.options.timestep,
             present=present,
             distance=distance,
             normal_force=normal,
