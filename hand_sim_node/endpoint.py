@@ -155,7 +155,7 @@ class HandSimEndpoint:
     # ------------------------------------------------------------------------ properties
     @property
     def simulator(self) -> Simulator:
-        """The rigid plant's simulator (AttributeError for another plant)."""
+        """Rigid plant only: the Simulator it wraps; another plant raises AttributeError."""
         return self.plant.simulator  # type: ignore[attr-defined]
 
     @property
@@ -577,4 +577,3 @@ def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
         if missing:
             blockers.append(f"recorder '{recorder}' subscribed to {', '.join(missing)}")
     return blockers
-

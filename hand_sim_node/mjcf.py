@@ -58,6 +58,8 @@ def _default(name: str) -> Any:
     """Return the default of parameter ``mujoco.<name>`` (a tuple for an array)."""
     value = _SPECS[PARAMETER_PREFIX + name].default
     return tuple(value) if isinstance(value, list) else value
+
+
 #: Name of the object's free body (and of its geom and free joint, with suffixes).
 OBJECT_BODY = 'object'
 

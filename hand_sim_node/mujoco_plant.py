@@ -284,10 +284,11 @@ class MuJoCoPlant:
         return int(hits[0]) if len(hits) else None
 
     def _contact_forces(self, state: GraspState) -> np.ndarray:
-        """MuJoCo's contact forces on the object in our contact frames at ``state``, (3n,), N.
+        """Return MuJoCo's contact forces on the object in our contact frames, (3n,), N.
 
-        Per contact ``(f_x, f_y, f_n)`` in ``state.R_contact_to_palm`` (z along the fingertip
-        normal into the object), summed over MuJoCo's contacts of the pair; 0 without one.
+        Per contact, at ``state`` (the step's start), ``(f_x, f_y, f_n)`` in
+        ``state.R_contact_to_palm`` (z along the fingertip normal into the object), summed
+        over MuJoCo's contacts of the pair; 0 without one.
         """
         mujoco, mj, data = self._mujoco, self.mj_model, self.mj_data
         force_in_palm = np.zeros((self.model.n_contacts, 3))
