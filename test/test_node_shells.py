@@ -36,6 +36,7 @@ PURE_MODULES = (
     'grasp_safety_filter.nodes.nominal_controller',
     'grasp_safety_filter.nodes.safety_filter',
     'hand_sim_node.endpoint',
+    'hand_sim_node.start_up',
 )
 
 ROS_PACKAGES = ('rclpy', 'launch', 'launch_ros', 'ament_index_python', 'std_msgs', 'sensor_msgs')
