@@ -16,6 +16,7 @@ from grasp_safety_filter.analysis.verdict import paper_verdict as _paper_verdict
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.parameters import ParameterError, parse_parameter_value
 from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.io.plant_schema import PLANTS
 from grasp_safety_filter.model.quaternion import rotation_matrix
 
 if TYPE_CHECKING:
@@ -166,6 +167,12 @@ def _demo(argv: list[str] | None) -> int:
         '--storage', choices=('mcap', 'sqlite3'), default='mcap', help='bag storage format'
     )
     parser.add_argument(
+        '--plant',
+        choices=PLANTS,
+        help="simulated plant (default: the scenario's plant parameter, rigid); the same as "
+        "--set plant=NAME; MuJoCo's options: --set mujoco.cone=elliptic, ...",
+    )
+    parser.add_argument(
         '--set',
         dest='overrides',
         action='append',
@@ -181,6 +188,8 @@ def _demo(argv: list[str] | None) -> int:
         help='write into OUT even if it holds files that are not a previous output',
     )
     args = parser.parse_args(argv)
+    if args.plant is not None:
+        args.overrides.append(('plant', args.plant))
     modes = ('nominal', 'filtered') if args.mode == 'both' else (args.mode,)
     verdicts = {}
     try:
@@ -232,6 +241,11 @@ file whose hand_sim_node section sets expected_outcome (config/paper_scenario.ya
 "paper") is also judged against that outcome: "paper outcome reproduced" or "NOT
 reproduced" (an interrupted run's recording: "not judged"). grasp-demo writes the
 verdicts to OUT/verdict.json.
+
+On MuJoCo (--plant mujoco) a run is judged by MuJoCo's real contact events: "held" when
+it ran its duration with no contact lost, the object not dropped and no joint limit
+passed; the slip distance per contact is reported; the paper's expected outcome is about
+the rigid plant and is "not judged".
 
 exit codes:
   0    the runs completed as asked (a run that slips or stops early is an outcome)

@@ -63,6 +63,7 @@ from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
 from hand_sim_node.events import EventLog
+from hand_sim_node.plant import PlantConfig
 
 MODES = ('nominal', 'filtered')
 BAG_DIRECTORY = 'bag'
@@ -190,8 +191,8 @@ class Recording:
         interrupted: None when the simulator finished (ran to its duration or stopped on a
             violation), else the signal that interrupted it (``"SIGINT"`` or ``"SIGTERM"``;
             a run ended by another exception raises it instead).
-        live_log: The simulator's own constraint record of the run.
-        stop_reason: The simulator's stop reason (``"duration"`` when it ran to the end).
+        live_log: The plant's own constraint record of the run.
+        stop_reason: The plant's stop reason (``"duration"`` when it ran to the end).
         t_end: Simulated time reached, s.
     """
 
@@ -255,7 +256,12 @@ def build_endpoints(
         if value is not None
     }
     sim_config = dataclasses.replace(sim_config, **overrides)
-    sim = HandSimEndpoint(GraspModel.from_parameters(params[HAND_SIM_NODE]), sim_config, msgs)
+    sim = HandSimEndpoint(
+        GraspModel.from_parameters(params[HAND_SIM_NODE]),
+        sim_config,
+        msgs,
+        plant_config=PlantConfig.from_parameters(params[HAND_SIM_NODE]),
+    )
     nominal_params = params[NOMINAL_CONTROLLER_NODE]
     nominal = NominalControllerEndpoint(
         GraspModel.from_parameters(nominal_params),
@@ -352,8 +358,7 @@ def _record(
     except Exception as error:
         bag.set_custom_data('interrupted', type(error).__name__)
         raise
-    simulator = sim.simulator
-    return Recording(interrupted, simulator.log, sim.stop_reason, simulator.t)
+    return Recording(interrupted, sim.plant.log, sim.stop_reason, sim.t)
 
 
 def _write_summary(out_dir: Path, summary: dict[str, Any]) -> None:

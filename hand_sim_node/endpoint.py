@@ -26,7 +26,15 @@ publishes the current state again (same stamp), which recovers a command or stat
 while the graph was still connecting. The run ends after ``duration`` (the state at
 ``t = duration`` is published) or when the simulator stops on an event; a last
 ``hand_sim`` status says which (``run.stop_reason``: ``duration``, ``fingertip_workspace``,
-``slip`` or ``numerical_failure``).
+``slip`` or ``numerical_failure``; on MuJoCo ``object_dropped``).
+
+The plant (parameter ``plant``) is our rigid model or MuJoCo (:mod:`hand_sim_node.plant`);
+both give the same topics. ``/hand/contacts`` then holds our model's contact coordinates at
+MuJoCo's state and MuJoCo's contact forces in our contact frames, and a plant with real
+contacts adds its events to ``hand_sim`` statuses (:class:`~grasp_safety_filter.io.
+sim_diagnostic_keys.PlantEvents`): a WARN stamped t_k+1 when a contact is first lost or the
+object drops, and the record so far (with the slip distance per contact) in it and in the
+end-of-run status.
 
 Without lockstep, :meth:`HandSimEndpoint.on_command` only stores the latest valid
 command and :meth:`HandSimEndpoint.advance` (called by a wall-clock timer) integrates one
@@ -35,9 +43,7 @@ step with it, zero-order hold, whatever its stamp.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 import dataclasses
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -60,6 +66,7 @@ from grasp_safety_filter.io.messages import (
     odometry_to_msg,
     seconds_to_nanoseconds,
 )
+from grasp_safety_filter.io.sim_diagnostic_keys import SIM_DIAGNOSTIC, SimKey
 from grasp_safety_filter.io.topics import (
     CLOCK,
     CONTACTS,
@@ -67,9 +74,7 @@ from grasp_safety_filter.io.topics import (
     EFFORT_COMMAND,
     JOINT_STATES,
     OBJECT_ODOM,
-    OBJECT_REFERENCE,
     SCENARIO,
-    TOPICS,
 )
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 from grasp_safety_filter.nodes.scenario import (
@@ -77,10 +82,12 @@ from grasp_safety_filter.nodes.scenario import (
     scenario_to_text,
 )
 from hand_sim_node.config import SimConfig
+from hand_sim_node.contact_events import ContactEventTracker
+from hand_sim_node.plant import Plant, PlantConfig
 from hand_sim_node.simulator import NUMERICAL_FAILURE, Simulator
 
 #: Name of the simulator's ``DiagnosticStatus``.
-DIAGNOSTIC_NAME = 'hand_sim'
+DIAGNOSTIC_NAME = SIM_DIAGNOSTIC
 
 #: ``run.stop_reason`` of a run that reached its duration.
 DURATION = 'duration'
@@ -104,9 +111,10 @@ class HandSimEndpoint:
         msgs: Message classes to build (rclpy or rosbags).
         scenario_text: The ``/grasp/scenario`` JSON; default: built from ``model`` and
             ``sim_config`` (:func:`grasp_safety_filter.nodes.scenario.scenario_document`).
+        plant_config: The plant to simulate (default: the rigid one).
 
     Attributes:
-        simulator: The plant.
+        plant: The plant.
 
     """
 
@@ -116,10 +124,17 @@ class HandSimEndpoint:
         sim_config: SimConfig,
         msgs: MessageNamespace,
         scenario_text: str | None = None,
+        plant_config: PlantConfig | None = None,
     ) -> None:
         self.model = model
         self.msgs = msgs
-        self.simulator = Simulator(model, sim_config)
+        self.plant_config = plant_config or PlantConfig()
+        self.plant: Plant = self.plant_config.build(model, sim_config)
+        self._contact_events = (
+            None
+            if self.plant.contact_report() is None
+            else ContactEventTracker(self.plant_config.kind, model.contact_names)
+        )
         self.scenario_text = (
             scenario_text
             if scenario_text is not None
@@ -135,9 +150,14 @@ class HandSimEndpoint:
 
     # ------------------------------------------------------------------------ properties
     @property
+    def simulator(self) -> Simulator:
+        """Rigid plant only: the Simulator it wraps; another plant raises AttributeError."""
+        return self.plant.simulator  # type: ignore[attr-defined]
+
+    @property
     def config(self) -> SimConfig:
         """The simulator configuration in force."""
-        return self.simulator.config
+        return self.plant.config
 
     @property
     def command_timeout(self) -> float:
@@ -157,27 +177,24 @@ class HandSimEndpoint:
     @property
     def finished(self) -> bool:
         """Whether the run is over (duration reached or stopped on an event)."""
-        return (
-            self.simulator.stop_reason is not None
-            or self.simulator.step_index >= self.config.n_steps
-        )
+        return self.plant.stop_reason is not None or self.plant.step_index >= self.config.n_steps
 
     @property
     def stop_reason(self) -> str | None:
-        """``"duration"``, the simulator's stop reason, or None while the run goes on."""
-        if self.simulator.stop_reason is not None:
-            return self.simulator.stop_reason
+        """``"duration"``, the plant's stop reason, or None while the run goes on."""
+        if self.plant.stop_reason is not None:
+            return self.plant.stop_reason
         return DURATION if self.finished else None
 
     @property
     def t(self) -> float:
         """Simulation time of the current state, s."""
-        return self.simulator.t
+        return self.plant.observe().t
 
     @property
     def stamp_ns(self) -> int:
         """Stamp of the current state, integer ns."""
-        return seconds_to_nanoseconds(self.simulator.t)
+        return seconds_to_nanoseconds(self.t)
 
     @property
     def awaited_stamp_ns(self) -> int | None:
@@ -194,7 +211,9 @@ class HandSimEndpoint:
             now: Wall-clock time, s (any origin), for the lockstep timeout.
 
         """
-        self.simulator.reset()
+        self.plant.reset()
+        if self._contact_events is not None:
+            self._contact_events.reset()
         self._applied_effort = np.zeros(self.model.n_joints)
         self._latest_command = None
         self._latest_command_ns = None
@@ -304,7 +323,7 @@ class HandSimEndpoint:
                 lockstep, publish_clock) differs from the one in force.
 
         """
-        current = self.simulator.config
+        current = self.plant.config
         changed = [
             f.name
             for f in dataclasses.fields(SimConfig)
@@ -315,23 +334,40 @@ class HandSimEndpoint:
             raise ValueError(
                 f'HandSimEndpoint.update_config: {changed} are read-only while the simulator runs'
             )
-        self.simulator.config = sim_config
+        self.plant.config = sim_config
 
     # ------------------------------------------------------------------------- internals
     def _step(self, effort: np.ndarray) -> list[Outgoing]:
         applied, clipped = self._clip_to_limits(effort)
-        report = self.simulator.step(applied)
+        self.plant.step(applied)
+        report = self.plant.last_report
         contacts = ContactData.from_grasp_state(report.grasp_state, report.contact_force)
         outgoing = [] if clipped is None else [clipped]
         outgoing.append(
             stamped(CONTACTS, contacts_to_msg(self.msgs, contacts, self.model.contact_names))
         )
-        if report.stop_reason is None:
+        if report.state is not report.start:  # integrated (a rigid stop is not)
             self._applied_effort = np.array(report.effort)
             outgoing += self._state_messages()
+        outgoing += self._contact_event_onsets()
         if self.finished and not self._reported_end:
             outgoing.append(self._end_of_run())
         return outgoing
+
+    def _contact_event_onsets(self) -> list[Outgoing]:
+        """Return a WARN ``hand_sim`` status if the last step lost a contact or the object."""
+        if self._contact_events is None:
+            return []
+        onsets = self._contact_events.update(self.plant.contact_report())
+        if not onsets:
+            return []
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            DiagnosticLevel.WARN,
+            bounded_text('; '.join(onsets)),
+            {'t': self.t, **self._contact_events.events().to_values()},
+        )
+        return [self._diagnostics(report)]
 
     def _clip_to_limits(self, effort: np.ndarray) -> tuple[np.ndarray, Outgoing | None]:
         """Clip a command to the URDF effort limits, as a driver does; WARN if it was over.
@@ -367,7 +403,7 @@ class HandSimEndpoint:
         return applied, self._diagnostics(report)
 
     def _state_messages(self) -> list[Outgoing]:
-        state = self.simulator.state
+        state = self.plant.observe()
         messages = []
         if self.config.publish_clock:
             messages.append(stamped(CLOCK, clock_to_msg(self.msgs, state.t)))
@@ -403,17 +439,15 @@ class HandSimEndpoint:
         else:
             level = DiagnosticLevel.ERROR if reason == NUMERICAL_FAILURE else DiagnosticLevel.WARN
             text = f'run stopped at t = {self.t:.9f} s: {reason}'
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            level,
-            text,
-            {
-                'run.finished': True,
-                'run.stop_reason': reason,
-                'run.t_end': self.t,
-                'run.steps': self.simulator.step_index,
-            },
-        )
+        values: dict[str, Any] = {
+            SimKey.RUN_FINISHED: True,
+            SimKey.RUN_STOP_REASON: reason,
+            SimKey.RUN_T_END: self.t,
+            SimKey.RUN_STEPS: self.plant.step_index,
+        }
+        if self._contact_events is not None:
+            values.update(self._contact_events.events().to_values())
+        report = DiagnosticReport.create(DIAGNOSTIC_NAME, level, text, values)
         return self._diagnostics(report)
 
     def _warn(self, text: str, msg: Any) -> list[Outgoing]:
@@ -429,113 +463,3 @@ class HandSimEndpoint:
 
     def _diagnostics(self, report: DiagnosticReport) -> Outgoing:
         return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, self.t, report))
-
-
-# ----------------------------------------------------------------------------------------
-# Start-up: when the graph is ready for the run
-
-
-#: What the graph API gives as a node's name until the node's own announcement arrives.
-UNKNOWN_NODE_NAME = '_NODE_NAME_UNKNOWN_'
-
-#: Topics the simulator publishes (it does not wait for other publishers of these).
-SIMULATOR_TOPICS = frozenset((SCENARIO, CLOCK, JOINT_STATES, OBJECT_ODOM, CONTACTS, DIAGNOSTICS))
-
-
-@dataclass(frozen=True)
-class GraphSnapshot:
-    """Who publishes and subscribes each topic of the topic table, at one instant.
-
-    Node names are fully qualified (``"/safety_filter_node"``); the simulator's own node is
-    left out.
-
-    Attributes:
-        publishers: Topic -> the nodes publishing it (topics without any may be missing).
-        subscribers: Topic -> the nodes subscribed to it.
-        matched: Simulator topic -> subscriptions matched by the simulator's own publisher.
-
-    """
-
-    publishers: Mapping[str, frozenset[str]] = field(default_factory=dict)
-    subscribers: Mapping[str, frozenset[str]] = field(default_factory=dict)
-    matched: Mapping[str, int] = field(default_factory=dict)
-
-    def published_by(self, topic: str) -> frozenset[str]:
-        """Return the nodes publishing ``topic``."""
-        return self.publishers.get(topic, frozenset())
-
-    def subscribed_by(self, topic: str) -> frozenset[str]:
-        """Return the nodes subscribed to ``topic``."""
-        return self.subscribers.get(topic, frozenset())
-
-    def topics_of(self, node: str) -> list[str]:
-        """Return the table topics ``node`` subscribes to, in table order."""
-        return [spec.name for spec in TOPICS if node in self.subscribed_by(spec.name)]
-
-
-def same_node(name: str, qualified: str) -> bool:
-    """Whether ``name`` (``"rosbag2_recorder"`` or ``"/ns/rosbag2_recorder"``) is ``qualified``."""
-    if name.startswith('/'):
-        return name == qualified
-    return qualified.rsplit('/', 1)[-1] == name
-
-
-def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
-    """Return what the simulator still waits for before it starts the run (empty: start).
-
-    - A controller: a node publishing ``/hand/effort_command``. That node and every node
-      whose topics it needs (the publishers of the table topics it subscribes to, other than
-      the simulator's and the optional ``/object/reference``, recursively: the nominal
-      controller behind the safety filter) must be subscribed to ``/hand/joint_states``,
-      each such topic must have a publisher, and the simulator's state topics must have
-      matched subscriptions. Otherwise the first state would reach only part of the graph.
-    - With ``recorder`` (a node name): that node subscribed to every table topic that has a
-      publisher, the simulator's own included, so the bag holds the run from its first tick.
-
-    - Every endpoint's node name known: DDS discovers an endpoint before the name of its node,
-      and until then two nodes are indistinguishable.
-
-    Args:
-        graph: The graph as the simulator sees it.
-        recorder: Node name of the recorder; empty: none to wait for.
-
-    """
-    blockers: list[str] = []
-    unknown = sorted(
-        topic
-        for topic, nodes in (*graph.publishers.items(), *graph.subscribers.items())
-        if any(UNKNOWN_NODE_NAME in node for node in nodes)
-    )
-    if unknown:
-        blockers.append(f"the names of the nodes on {', '.join(dict.fromkeys(unknown))}")
-    controllers = sorted(graph.published_by(EFFORT_COMMAND))
-    if not controllers:
-        blockers.append(f'a publisher on {EFFORT_COMMAND}')
-    chain, seen = list(controllers), set(controllers)
-    while chain:
-        node = chain.pop(0)
-        subscribed = graph.topics_of(node)
-        if JOINT_STATES not in subscribed:
-            blockers.append(f'{node} subscribed to {JOINT_STATES}')
-        for topic in subscribed:
-            if topic in SIMULATOR_TOPICS or topic == OBJECT_REFERENCE:
-                continue
-            upstream = graph.published_by(topic)
-            if not upstream:
-                blockers.append(f'a publisher on {topic} (for {node})')
-            for other in sorted(upstream - seen):
-                seen.add(other)
-                chain.append(other)
-    for topic in (JOINT_STATES, OBJECT_ODOM):
-        if graph.matched.get(topic, 0) == 0:
-            blockers.append(f'a subscription on {topic}')
-    if recorder:
-        missing = [
-            spec.name
-            for spec in TOPICS
-            if (spec.name in SIMULATOR_TOPICS or graph.published_by(spec.name))
-            and not any(same_node(recorder, n) for n in graph.subscribed_by(spec.name))
-        ]
-        if missing:
-            blockers.append(f"recorder '{recorder}' subscribed to {', '.join(missing)}")
-    return blockers

@@ -24,21 +24,42 @@ contact push from that distance on (the surfaces act inflated by the sum of the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
 import xml.etree.ElementTree as ET
 
 import numpy as np
 import pinocchio as pin
 
 from grasp_safety_filter.errors import ConfigError
+from grasp_safety_filter.io.parameters import flatten_parameters
+from grasp_safety_filter.io.plant_schema import (
+    MUJOCO_CONES,
+    MUJOCO_INTEGRATORS,
+    PLANT_PARAMETERS,
+)
 from grasp_safety_filter.model.grasp_model import GraspModel
 
 #: MuJoCo's friction cones.
-CONES = ('pyramidal', 'elliptic')
+CONES = MUJOCO_CONES
+#: MuJoCo's integrators (MJCF spelling).
+INTEGRATORS = MUJOCO_INTEGRATORS
+
 #: MuJoCo's contact dimensionalities: frictionless, tangential, + torsional, + rolling.
 CONDIMS = (1, 3, 4, 6)
-#: MuJoCo's integrators (MJCF spelling).
-INTEGRATORS = ('Euler', 'RK4', 'implicit', 'implicitfast')
+#: Prefix of the ``hand_sim_node`` parameters of :class:`MjcfOptions`.
+PARAMETER_PREFIX = 'mujoco.'
+
+_SPECS = {spec.name: spec for spec in PLANT_PARAMETERS}
+
+
+def _default(name: str) -> Any:
+    """Return the default of parameter ``mujoco.<name>`` (a tuple for an array)."""
+    value = _SPECS[PARAMETER_PREFIX + name].default
+    return tuple(value) if isinstance(value, list) else value
+
+
 #: Name of the object's free body (and of its geom and free joint, with suffixes).
 OBJECT_BODY = 'object'
 
@@ -83,17 +104,17 @@ class MjcfOptions:
     """
 
     friction_coefficient: float | None = None
-    torsional_friction: float = 0.005
-    rolling_friction: float = 0.0001
-    cone: str = 'pyramidal'
-    condim: int = 3
-    solref: tuple[float, float] = (0.02, 1.0)
-    solimp: tuple[float, float, float, float, float] = field(default=(0.9, 0.95, 0.001, 0.5, 2.0))
-    impratio: float = 1.0
-    noslip_iterations: int = 0
-    timestep: float = 0.001
-    integrator: str = 'Euler'
-    joint_limits: bool = True
+    torsional_friction: float = _default('torsional_friction')
+    rolling_friction: float = _default('rolling_friction')
+    cone: str = _default('cone')
+    condim: int = _default('condim')
+    solref: tuple[float, float] = _default('solref')
+    solimp: tuple[float, float, float, float, float] = _default('solimp')
+    impratio: float = _default('impratio')
+    noslip_iterations: int = _default('noslip_iterations')
+    timestep: float = _default('timestep')
+    integrator: str = _default('integrator')
+    joint_limits: bool = _default('joint_limits')
 
     def __post_init__(self) -> None:
         def positive(name: str, value: float) -> None:
@@ -129,6 +150,26 @@ class MjcfOptions:
                 'mujoco.solimp: expected 0 < dmin <= dmax < 1, width > 0, 0 < midpoint < 1, '
                 f'power >= 1, got {self.solimp!r}'
             )
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any]) -> MjcfOptions:
+        """Build from ``hand_sim_node``'s ``mujoco.*`` parameters (missing: defaults).
+
+        ``mujoco.friction_coefficient`` 0 stands for None (each contact's model μ).
+
+        Raises:
+            ParameterError: A parameter of the wrong type or out of range.
+            MjcfError: Values the schema admits and MuJoCo does not (``condim`` 2, ...).
+        """
+        flat = flatten_parameters(params)
+        values: dict[str, Any] = {}
+        for f in fields(cls):
+            name = PARAMETER_PREFIX + f.name
+            value = _SPECS[name].validate(flat[name]) if name in flat else _default(f.name)
+            values[f.name] = tuple(value) if isinstance(value, list) else value
+        if values['friction_coefficient'] == 0.0:
+            values['friction_coefficient'] = None
+        return cls(**values)
 
     def friction(self, model: GraspModel) -> np.ndarray:
         """Return the sliding friction coefficient of each contact MuJoCo uses, shape (n,)."""

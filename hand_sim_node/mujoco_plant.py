@@ -4,11 +4,20 @@ The MJCF is generated from our grasp model (:mod:`hand_sim_node.mjcf`). One cont
 (the scenario's ``time_step``) is ``n_substeps`` MuJoCo steps with the torque held
 (``ctrl``, clamped by MuJoCo to the URDF effort limits).
 
+After each step the plant gives a :class:`~hand_sim_node.simulator.StepReport` as the rigid
+simulator does: our model's terms at the start of the step, MuJoCo's contact forces on the
+object over the step's first MuJoCo step (the forces of the start state under the applied
+torque with the Euler and implicit integrators) in our contact frames, and the constraint
+margins and events they give (:class:`~hand_sim_node.events.EventMonitor`, recorded in
+:attr:`MuJoCoPlant.log`). The rigid model's stop rules (``stop_on_slip``,
+``stop_on_workspace_exit``) do not apply: MuJoCo's contacts really slip and separate, and
+the plant stops only when the object dropped or on a numerical failure.
+
 Besides the state, the plant reports per contact what MuJoCo measures
-(:class:`ContactReport`): whether the fingertip touches the object, their distance, the
-normal and tangential contact force, the slip speed (relative tangential velocity of the
-fingertip's and the object's material points at the contact) and the slip distance
-accumulated since the reset; and whether the object dropped.
+(:class:`~hand_sim_node.plant.ContactReport`): whether the fingertip touches the object,
+their distance, the normal and tangential contact force, the slip speed (relative
+tangential velocity of the fingertip's and the object's material points at the contact)
+and the slip distance accumulated since the reset; and whether the object dropped.
 
 The ``mujoco`` package is imported here only, when the plant is built: without it the rest
 of the package works, and asking for this plant raises :class:`MuJoCoUnavailableError`.
@@ -16,7 +25,6 @@ of the package works, and asking for this plant raises :class:`MuJoCoUnavailable
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
@@ -26,6 +34,7 @@ from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.config import SimConfig
+from hand_sim_node.events import EventLog, EventMonitor
 from hand_sim_node.mjcf import (
     fingertip_geom_name,
     mjcf_from_model,
@@ -33,8 +42,10 @@ from hand_sim_node.mjcf import (
     MjcfOptions,
     OBJECT_BODY,
 )
-from hand_sim_node.plant import initial_state, Observation
-from hand_sim_node.simulator import NUMERICAL_FAILURE, SimState
+from hand_sim_node.plant import ContactReport, initial_state, Observation
+from hand_sim_node.simulator import NUMERICAL_FAILURE, SimState, StepReport
+
+__all__ = ['OBJECT_DROPPED', 'ContactReport', 'MuJoCoPlant', 'MuJoCoUnavailableError']
 
 #: Stop reason when no fingertip touches the object any more, or it fell below the floor.
 OBJECT_DROPPED = 'object_dropped'
@@ -54,35 +65,6 @@ def import_mujoco() -> ModuleType:
             "extra: pip install 'grasp_safety_filter[mujoco]' (or pip install 'mujoco>=3.2')"
         ) from None
     return mujoco
-
-
-@dataclass(frozen=True, eq=False)
-class ContactReport:
-    """What MuJoCo measures at every contact, arrays in contact order (n,).
-
-    Attributes:
-        t: Time, s.
-        present: The fingertip touches the object: a normal force, or a distance up to the
-            touch tolerance.
-        distance: Signed distance fingertip sphere–object (``mj_geomDistance``), m
-            (< 0: interpenetration; at most ``distance_limit``).
-        normal_force: Normal contact force, N (≥ 0; 0 without contact; summed over MuJoCo's
-            contacts of the pair, one for a sphere on a box or a sphere).
-        tangential_force: Magnitude of the friction force, N.
-        slip_speed: Tangential speed of the fingertip's material point relative to the
-            object's at the contact point, m/s (0 without contact).
-        slip_distance: Slip speed integrated over MuJoCo's steps since the reset, m.
-        object_dropped: No fingertip touches the object, or it is below ``min_object_height``.
-    """
-
-    t: float
-    present: np.ndarray
-    distance: np.ndarray
-    normal_force: np.ndarray
-    tangential_force: np.ndarray
-    slip_speed: np.ndarray
-    slip_distance: np.ndarray
-    object_dropped: bool
 
 
 class MuJoCoPlant:
@@ -154,6 +136,7 @@ class MuJoCoPlant:
         )
         self.fingertip_bodies = np.array([mj.geom_bodyid[g] for g in self.fingertip_geoms])
         self._jacobian = np.zeros((2, 3, mj.nv))
+        self.monitor = EventMonitor.from_model(model)
         self.reset()
 
     # ----------------------------------------------------------------------------- state
@@ -186,8 +169,13 @@ class MuJoCoPlant:
         data.time = state.t
         self._t0 = state.t
         self._step_index = 0
+        self._substep_index = 0
         self._stop_reason: str | None = None
         self._slip_distance = np.zeros(self.model.n_contacts)
+        #: The last step's report (None before the first step).
+        self.last_report: StepReport | None = None
+        #: Constraint margins and events of every step since the reset.
+        self.log = EventLog()
         mujoco.mj_forward(self.mj_model, data)
         self._observation = self._read_state()
         self._grasp_state: GraspState | None = None
@@ -208,6 +196,10 @@ class MuJoCoPlant:
         return self._grasp_state
 
     def contacts(self) -> ContactReport:
+        """Return what MuJoCo measures at the contacts at the current state."""
+        return self._contacts
+
+    def contact_report(self) -> ContactReport:
         """Return what MuJoCo measures at the contacts at the current state."""
         return self._contacts
 
@@ -245,20 +237,40 @@ class MuJoCoPlant:
         if u.shape != (m,) or not np.all(np.isfinite(u)):
             raise ValueError(f'MuJoCoPlant.step: expected {m} finite joint torques, got {u}')
         mujoco, mj, data = self._mujoco, self.mj_model, self.mj_data
+        start, state0 = self._observation, self.grasp_state()
+        force = np.full(3 * self.model.n_contacts, np.nan)
         data.ctrl[:] = u
-        for _ in range(self.n_substeps):
+        for substep in range(self.n_substeps):
             mujoco.mj_step(mj, data)
-            # Contacts and forces at the new state (mj_step leaves those of the old one).
+            if substep == 0:
+                # mj_step leaves the contacts and forces of the state it started from.
+                force = self._contact_forces(state0)
+            # Contacts and forces at the new state.
             mujoco.mj_forward(mj, data)
+            self._substep_index += 1
             if not (np.all(np.isfinite(data.qpos)) and np.all(np.isfinite(data.qvel))):
                 self._stop_reason = NUMERICAL_FAILURE
                 break
             self._contacts = self._measure_contacts(self.options.timestep)
-        self._step_index += 1
-        self._observation = self._read_state()
-        self._grasp_state = None
-        if self._stop_reason is None and self.stop_on_drop and self._contacts.object_dropped:
-            self._stop_reason = OBJECT_DROPPED
+        if self._stop_reason is None:
+            self._step_index += 1
+            self._observation = self._read_state()
+            self._grasp_state = None
+            if self.stop_on_drop and self._contacts.object_dropped:
+                self._stop_reason = OBJECT_DROPPED
+        margins = self.monitor.margins(state0, force)
+        events = self.monitor.events(margins)
+        self.log.record(margins, events)
+        self.last_report = StepReport(
+            start=start,
+            state=self._observation,
+            grasp_state=state0,
+            effort=u,
+            contact_force=force,
+            margins=margins,
+            events=events,
+            stop_reason=self._stop_reason,
+        )
         return self._observation
 
     # -------------------------------------------------------------------------- contacts
@@ -270,6 +282,28 @@ class MuJoCoPlant:
         geoms.discard(self.object_geom)
         hits = np.flatnonzero(self.fingertip_geoms == geoms.pop()) if geoms else []
         return int(hits[0]) if len(hits) else None
+
+    def _contact_forces(self, state: GraspState) -> np.ndarray:
+        """Return MuJoCo's contact forces on the object in our contact frames, (3n,), N.
+
+        Per contact, at ``state`` (the step's start), ``(f_x, f_y, f_n)`` in
+        ``state.R_contact_to_palm`` (z along the fingertip normal into the object), summed
+        over MuJoCo's contacts of the pair; 0 without one.
+        """
+        mujoco, mj, data = self._mujoco, self.mj_model, self.mj_data
+        force_in_palm = np.zeros((self.model.n_contacts, 3))
+        wrench = np.zeros(6)
+        for c in range(data.ncon):
+            contact = data.contact[c]
+            i = self._pair(contact)
+            if i is None or contact.efc_address < 0:
+                continue
+            mujoco.mj_contactForce(mj, data, c, wrench)
+            # The force of geom1 on geom2, in the contact frame whose rows are its axes
+            # (the first the normal from geom1 to geom2).
+            on_geom2 = np.asarray(contact.frame).reshape(3, 3).T @ wrench[:3]
+            force_in_palm[i] += on_geom2 if int(contact.geom2) == self.object_geom else -on_geom2
+        return np.einsum('nji,nj->ni', state.R_contact_to_palm, force_in_palm).ravel()
 
     def _measure_contacts(self, dt: float) -> ContactReport:
         """Measure every fingertip's contact at the current (forwarded) state.
@@ -313,7 +347,8 @@ class MuJoCoPlant:
             self.min_object_height is not None and height < self.min_object_height
         )
         return ContactReport(
-            t=float(data.time),
+            # From the step count, as the state's time: no round-off accumulation.
+            t=self._t0 + self._substep_index * self.options.timestep,
             present=present,
             distance=distance,
             normal_force=normal,

@@ -11,7 +11,7 @@ Start-up: the initial grasp is checked (:mod:`grasp_safety_filter.model.grasp_ch
 joint limits, every fingertip on its face within ``GAP_TOLERANCE``); a bad one stops the
 node with one line naming the joint or contact. The run starts (scenario and state at t_0
 published) once the controllers are connected
-(:func:`hand_sim_node.endpoint.start_blockers`: a node publishing the command, it and the
+(:func:`hand_sim_node.start_up.start_blockers`: a node publishing the command, it and the
 nodes it reads from subscribed to the state) and, with
 ``start.wait_for_recorder`` set to a recorder's node name (``rosbag2_recorder`` for
 ``ros2 bag record``), once that recorder is subscribed to every published topic of the topic
@@ -54,7 +54,9 @@ from grasp_safety_filter.model.grasp_check import check_initial_grasp
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from hand_sim_node.config import SimConfig
-from hand_sim_node.endpoint import GraphSnapshot, HandSimEndpoint, start_blockers
+from hand_sim_node.endpoint import HandSimEndpoint
+from hand_sim_node.plant import PlantConfig
+from hand_sim_node.start_up import GraphSnapshot, start_blockers
 
 #: Wall-clock period of the start-up and watchdog checks, s.
 CHECK_PERIOD = 0.05
@@ -92,7 +94,10 @@ class HandSimNode(EndpointNode):
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         check_initial_grasp(model, self.parameters)
         self.endpoint = HandSimEndpoint(
-            model, SimConfig.from_parameters(self.parameters), self.msgs
+            model,
+            SimConfig.from_parameters(self.parameters),
+            self.msgs,
+            plant_config=PlantConfig.from_parameters(self.parameters),
         )
         self._command_subscription = self.subscribe(EFFORT_COMMAND, self._on_command)
         # Timers on the steady clock: simulation time stands still while the simulator waits.
@@ -109,7 +114,8 @@ class HandSimNode(EndpointNode):
         self.recorder = str(self.parameters[RECORDER_PARAMETER])
         recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
         self.get_logger().info(
-            f'simulating {model.n_joints} joints, {model.n_contacts} contacts for '
+            f'simulating {model.n_joints} joints, {model.n_contacts} contacts on the '
+            f'{self.endpoint.plant_config.kind} plant for '
             f'{self.endpoint.config.duration} s in steps of {self.endpoint.config.time_step} s '
             f'({"lockstep" if self.endpoint.lockstep else "free-running"}); waiting for a '
             f'controller on {self._command_subscription.topic_name}{recorder}'

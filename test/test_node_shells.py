@@ -36,6 +36,7 @@ PURE_MODULES = (
     'grasp_safety_filter.nodes.nominal_controller',
     'grasp_safety_filter.nodes.safety_filter',
     'hand_sim_node.endpoint',
+    'hand_sim_node.start_up',
 )
 
 ROS_PACKAGES = ('rclpy', 'launch', 'launch_ros', 'ament_index_python', 'std_msgs', 'sensor_msgs')
@@ -185,7 +186,7 @@ def ros_context():
     rclpy.try_shutdown(context=context)
 
 
-def make_nodes(context, duration):
+def make_nodes(context, duration, sim_parameters=()):
     from rclpy.parameter import Parameter
 
     from grasp_safety_filter.nodes.nominal_controller_node import NominalControllerNode
@@ -198,7 +199,11 @@ def make_nodes(context, duration):
         HandSimNode(
             context=context,
             cli_args=args,
-            parameter_overrides=[sim_time, Parameter('duration', value=duration)],
+            parameter_overrides=[
+                sim_time,
+                Parameter('duration', value=duration),
+                *(Parameter(name, value=value) for name, value in sim_parameters),
+            ],
         ),
         NominalControllerNode(context=context, cli_args=args, parameter_overrides=[sim_time]),
         SafetyFilterNode(context=context, cli_args=args, parameter_overrides=[sim_time]),
@@ -221,6 +226,36 @@ def test_nodes_run_the_lockstep_loop_to_the_end(ros_context):
         assert sim.endpoint.simulator.step_index == 5
         assert safety_filter.endpoint.hold.rejected_ticks == 0
         assert nominal.endpoint.last_output is not None
+    finally:
+        executor.shutdown()
+        for node in (sim, nominal, safety_filter):
+            node.destroy_node()
+
+
+def test_the_simulator_node_runs_the_mujoco_plant(ros_context):
+    """plant:=mujoco: the node steps MuJoCo (with its -p mujoco.* options) in the same loop."""
+    from rclpy.executors import SingleThreadedExecutor
+
+    from hand_sim_node.mujoco_plant import MuJoCoPlant
+
+    sim, nominal, safety_filter = make_nodes(
+        ros_context,
+        duration=0.005,
+        sim_parameters=(('plant', 'mujoco'), ('mujoco.cone', 'elliptic')),
+    )
+    executor = SingleThreadedExecutor(context=ros_context)
+    for node in (sim, nominal, safety_filter):
+        executor.add_node(node)
+    try:
+        assert isinstance(sim.endpoint.plant, MuJoCoPlant)
+        assert sim.endpoint.plant.options.cone == 'elliptic'
+        assert 'cone="elliptic"' in sim.endpoint.plant.mjcf
+        deadline = time.monotonic() + 60.0
+        while not sim.endpoint.finished and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+        assert sim.endpoint.stop_reason == 'duration'
+        assert sim.endpoint.plant.step_index == 5
+        assert safety_filter.endpoint.hold.rejected_ticks == 0
     finally:
         executor.shutdown()
         for node in (sim, nominal, safety_filter):

@@ -35,7 +35,7 @@ from grasp_safety_filter.io.bag import read_bag
 from grasp_safety_filter.io.launch_arguments import NodeLaunch, paper_demo, RECORDER_NODE
 from grasp_safety_filter.io.messages import header_stamp_ns
 from grasp_safety_filter.runner import record_run, RunOptions
-from hand_sim_node.endpoint import GraphSnapshot, start_blockers
+from hand_sim_node.start_up import GraphSnapshot, start_blockers
 
 #: Wall-clock limit of one graph run, s (the graph runs ~80 ticks/s on a shared 2-core box).
 RUN_TIMEOUT = 90.0

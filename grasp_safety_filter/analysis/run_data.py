@@ -40,6 +40,7 @@ from grasp_safety_filter.io.messages import (
     MessageError,
     nanoseconds_to_seconds,
 )
+from grasp_safety_filter.io.sim_diagnostic_keys import PlantEvents, SIM_DIAGNOSTIC, SimKey
 from grasp_safety_filter.nodes.scenario import (
     OBJECT_FACES_KEY,
     scenario_from_msg,
@@ -47,7 +48,6 @@ from grasp_safety_filter.nodes.scenario import (
     scenario_workspace,
     ScenarioError,
 )
-from hand_sim_node.endpoint import DIAGNOSTIC_NAME as SIM_DIAGNOSTIC
 
 #: Simulation time at which a run starts, s: ``hand_sim_node`` starts every run at t_0 = 0,
 #: with the scenario and the state at t_0.
@@ -91,6 +91,8 @@ class RunData:
             ``/safety_filter/margins`` (:meth:`BarrierReader.summary`); None without them.
         xi_co: Object surface contact coordinates at ``t``, shape (K, n, 2) (m on a face);
             None if not read.
+        plant_events: The real contact events of a plant that measures them (MuJoCo): the
+            last record the simulator published; None for the rigid plant.
     """
 
     scenario: dict[str, Any]
@@ -111,6 +113,7 @@ class RunData:
     missed_start: dict[str, float] = field(default_factory=dict)
     barriers: dict[str, Any] | None = None
     xi_co: np.ndarray | None = None
+    plant_events: PlantEvents | None = None
 
     @property
     def t_filter(self) -> np.ndarray:
@@ -236,7 +239,9 @@ class _Series:
 class _Diagnostics:
     """What the analysis keeps of ``/diagnostics``, read in bag order."""
 
-    def __init__(self) -> None:
+    def __init__(self, contact_names: list[str]) -> None:
+        self.contact_names = contact_names
+        self.plant_events: PlantEvents | None = None
         self.filter = FilterStatusReader()
         self.watchdog: Counter[str] = Counter()
         self.watchdog_after_end = 0
@@ -253,9 +258,13 @@ class _Diagnostics:
                     self.watchdog[values[Key.STATUS]] += 1
                 else:
                     self.filter.add(header_stamp_ns(msg), values)
-            elif report.name == SIM_DIAGNOSTIC and 'run.stop_reason' in values:
-                self.stop_reason = values['run.stop_reason']
-                self.t_end = float(values['run.t_end'])
+            elif report.name == SIM_DIAGNOSTIC:
+                events = PlantEvents.from_values(values, self.contact_names)
+                if events is not None:
+                    self.plant_events = events
+                if SimKey.RUN_STOP_REASON in values:
+                    self.stop_reason = values[SimKey.RUN_STOP_REASON]
+                    self.t_end = float(values[SimKey.RUN_T_END])
 
 
 def _first_per_stamp(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -297,7 +306,7 @@ def _load_run(bag: Path) -> RunData:
     joint_names, contact_names = scenario['joint_names'], scenario['contact_names']
     m = len(joint_names)
     series = _Series(m, len(contact_names))
-    diagnostics = _Diagnostics()
+    diagnostics = _Diagnostics(list(contact_names))
     barriers = None
     wanted = [name for name in ANALYSED_TOPICS if name != topics.SCENARIO]
     margins = recorded.get(topics.MARGINS)
@@ -413,4 +422,5 @@ def _assemble(
         missed_start=missed_start,
         barriers=None if barriers is None else barriers.summary(),
         xi_co=series.xi_co.array()[kept],
+        plant_events=diagnostics.plant_events,
     )

@@ -17,7 +17,15 @@ Keys (later additions never rename one)::
                 "relaxed_families": {family: steps},
                 "qp_solve_us": {"median", "p99"}, "step_us": {"median", "p99"},
                 "tick_us": {"median", "p99"}},
-     "barriers": {"messages", "unreadable", "min_h": {row family: h}}}
+     "barriers": {"messages", "unreadable", "min_h": {row family: h}},
+     "plant",
+     "contact_events": {"contact_lost": {contact: t}, "object_dropped",
+                        "slip_distance": {contact: m}}}
+
+``plant`` is ``"rigid"`` (our model) or the plant whose real contact events the simulator
+published (``"mujoco"``); only then is ``contact_events`` there: per contact when it was
+first lost (no touch, no force; null: never), when the object dropped (null: never), and
+per contact the distance its fingertip slipped on the object over the run, m.
 
 ``first_violated_by`` names, for each violated family, the contact or joint whose
 constraint was violated first and which bound (``side``: ``"a_max"``, ``"upper"``, ... or
@@ -70,6 +78,7 @@ from grasp_safety_filter.io.diagnostic_keys import (
     Key,
     TickStatus,
 )
+from grasp_safety_filter.io.plant_schema import RIGID_PLANT
 from grasp_safety_filter.model.per_contact import compact
 from hand_sim_node.events import EventLog, EventMonitor
 
@@ -233,6 +242,16 @@ def summarize(run: RunData) -> dict[str, Any]:
         'max_required_friction': _finite_or_none(log.max_required_friction),
         'mu': compact(run.mu_per_contact),
     }
+    events = run.plant_events
+    summary['plant'] = RIGID_PLANT if events is None else events.plant
+    if events is not None:
+        summary['contact_events'] = {
+            'contact_lost': {name: events.contact_lost.get(name) for name in run.contact_names},
+            'object_dropped': events.object_dropped,
+            'slip_distance': {
+                name: events.slip_distance.get(name) for name in run.contact_names
+            },
+        }
     if run.mode == 'filtered':
         summary['filter'] = filter_summary(run)
     if run.barriers is not None:

@@ -13,6 +13,14 @@ against the outcome Shaw-Cortez et al. (CDC 2018) publish in Section IV
 (:func:`paper_verdict`). ``grasp-demo`` and ``grasp-analyze`` exit 1 only when such an
 outcome is not met. An interrupted run (a recording without the simulator's end of run: a
 signal, a killed process) is not judged against it: it did not run as the scenario asks.
+
+On a plant with real contacts (``"plant": "mujoco"`` in the summary) the grasp is judged by
+what the plant measured: it held when the run reached its duration with no contact lost, the
+object not dropped and no joint limit passed; the other families (slip as beta > mu from
+MuJoCo's forces, the fingertip workspace of our model's contact coordinates) are reported,
+not judged, and the slip distance per contact is reported. An expected outcome is not
+judged there: the paper's is about our rigid plant (its slip is beta > mu, its stop a
+workspace exit), not about a plant whose contacts really slip and separate.
 """
 
 from __future__ import annotations
@@ -21,7 +29,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from grasp_safety_filter.io.plant_schema import RIGID_PLANT
 from grasp_safety_filter.io.schemas import EXPECTED_OUTCOMES, NO_OUTCOME, PAPER_OUTCOME
+
+#: The family that still decides ``held`` on a plant with real contact events.
+JOINT_LIMITS = 'joint_limits'
 
 #: ``stop_reason`` of a run whose recording has no end-of-run status from the simulator.
 INTERRUPTED = 'interrupted'
@@ -65,13 +77,16 @@ class RunVerdict:
     """The generic verdict of a run (module docstring).
 
     Attributes:
-        held: Ran its requested duration with no constraint family violated.
+        held: Ran its requested duration with no constraint family violated (on a plant
+            with real contacts: no contact lost, no drop, no joint limit passed).
         completed: Ran its requested duration.
         stop_reason: Why it stopped early (``"fingertip_workspace"``, ``"interrupted"``, ...),
             or None when it ran to the end.
         t_end: Time reached, s.
         duration: Time requested, s.
         families: Per constraint family of the summary, in its order.
+        plant: ``"rigid"`` or the plant that measured ``contact_events``.
+        contact_events: The summary's ``contact_events`` (None on the rigid plant).
 
     """
 
@@ -81,10 +96,14 @@ class RunVerdict:
     t_end: float
     duration: float
     families: tuple[FamilyVerdict, ...]
+    plant: str = RIGID_PLANT
+    contact_events: Mapping[str, Any] | None = None
 
     def text(self) -> str:
         """One line: ``held for the duration: yes`` or ``no``, with the reasons."""
         violated = [f.family for f in self.families if f.violated]
+        if self.contact_events is not None:
+            return self._plant_text(violated)
         if self.completed:
             ran = f'ran {self.duration:g} s'
         else:
@@ -95,9 +114,37 @@ class RunVerdict:
         broken = f'violated: {", ".join(violated)}' if violated else 'no constraint violated'
         return f'held for the duration: {"yes" if self.held else "no"} ({ran}; {broken})'
 
+    def _plant_text(self, violated: list[str]) -> str:
+        """Return the line of a run on a plant with real contacts (module docstring)."""
+        events = self.contact_events or {}
+        lost = {k: t for k, t in events['contact_lost'].items() if t is not None}
+        ran = (
+            f'ran {self.duration:g} s on {self.plant}'
+            if self.completed
+            else f'stopped at {self.t_end:.3f} s of {self.duration:g} s on {self.plant}: '
+            f'{self.stop_reason or INTERRUPTED}'
+        )
+        parts = [
+            'contacts lost: '
+            + (', '.join(f'{k} at {t:.3f} s' for k, t in lost.items()) if lost else 'none'),
+            'object dropped'
+            + (f' at {events["object_dropped"]:.3f} s' if events['object_dropped'] is not None
+               else ': no'),
+            f'joint limits passed: {"yes" if JOINT_LIMITS in violated else "no"}',
+            'slip '
+            + ', '.join(
+                f'{k} {1e3 * d:.2f} mm' if d is not None else f'{k} n/a'
+                for k, d in events['slip_distance'].items()
+            ),
+        ]
+        reported = [f for f in violated if f != JOINT_LIMITS]
+        if reported:
+            parts.append(f'model families violated (reported): {", ".join(reported)}')
+        return f'held for the duration: {"yes" if self.held else "no"} ({ran}; {"; ".join(parts)})'
+
     def to_json(self) -> dict[str, Any]:
         """Return the verdict as ``verdict.json`` writes it."""
-        return {
+        document: dict[str, Any] = {
             'held': self.held,
             'stop_reason': self.stop_reason,
             't_end': self.t_end,
@@ -108,6 +155,10 @@ class RunVerdict:
                 if f.violated
             },
         }
+        if self.contact_events is not None:
+            document['plant'] = self.plant
+            document['contact_events'] = dict(self.contact_events)
+        return document
 
 
 def run_verdict(summary: Mapping[str, Any]) -> RunVerdict:
@@ -124,13 +175,25 @@ def run_verdict(summary: Mapping[str, Any]) -> RunVerdict:
         for family, record in summary['violations'].items()
     )
     completed = bool(summary['completed'])
+    events = summary.get('contact_events')
+    if events is None:
+        held = completed and not any(f.violated for f in families)
+    else:
+        held = (
+            completed
+            and not any(t is not None for t in events['contact_lost'].values())
+            and events['object_dropped'] is None
+            and not any(f.violated for f in families if f.family == JOINT_LIMITS)
+        )
     return RunVerdict(
-        held=completed and not any(f.violated for f in families),
+        held=held,
         completed=completed,
         stop_reason=None if completed else summary['stop_reason'],
         t_end=float(summary['t_end']),
         duration=float(summary['duration_requested']),
         families=families,
+        plant=str(summary.get('plant', RIGID_PLANT)),
+        contact_events=events,
     )
 
 
@@ -194,6 +257,14 @@ def expected_verdict(
     if outcome == NO_OUTCOME:
         return None
     label, judge = OUTCOME_JUDGES[outcome]
+    plant = summary.get('plant', RIGID_PLANT)
+    if plant != RIGID_PLANT:
+        return ExpectedVerdict(
+            outcome,
+            None,
+            f"{label} not judged: it is the {RIGID_PLANT} plant's; this run is on {plant} "
+            '(see the verdict above)',
+        )
     if summary['stop_reason'] == INTERRUPTED:
         return ExpectedVerdict(
             outcome,

@@ -24,7 +24,9 @@ from grasp_safety_filter.io.schemas import (
     SAFETY_FILTER_NODE,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
+from hand_sim_node.closed_loop import run_closed_loop
 from hand_sim_node.config import SimConfig
+from hand_sim_node.plant import RigidPlant
 from hand_sim_node.simulator import SimState, Simulator
 
 
@@ -195,13 +197,19 @@ def record_filtered_run(
 
 
 def nominal_loop_rate(scenario: Scenario, duration: float) -> LoopRate:
-    """Real-time factor of simulator + nominal controller (the paper's unfiltered run)."""
-    simulator, controller, reference, n_steps = _closed_loop(scenario, duration)
-    wall_start = time.perf_counter()
-    while simulator.stop_reason is None and simulator.step_index < n_steps:
-        state = simulator.grasp_state()
-        simulator.step(controller.compute(state, reference.sample(state.t)).u)
-    return LoopRate.of(simulator, time.perf_counter() - wall_start)
+    """Real-time factor of simulator + nominal controller (the paper's unfiltered run).
+
+    The closed loop of :func:`hand_sim_node.closed_loop.run_closed_loop` on the rigid plant.
+    """
+    plant = RigidPlant(scenario.model, scenario.sim_config)
+    loop = run_closed_loop(
+        plant,
+        NominalController(scenario.nominal_config),
+        scenario.reference(plant.observe()),
+        None,
+        duration,
+    )
+    return LoopRate.of(plant.simulator, loop.wall)
 
 
 def runner_loop_rate(config: Path, duration: float, time_step: float) -> LoopRate:

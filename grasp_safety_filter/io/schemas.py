@@ -34,6 +34,7 @@ from grasp_safety_filter.io.parameters import (
     resolve_relative_paths,
     validate_parameters,
 )
+from grasp_safety_filter.io.plant_schema import PLANT_PARAMETERS
 
 BOOL = ParameterType.BOOL
 INTEGER = ParameterType.INTEGER
@@ -421,6 +422,7 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         'topic of the topic table; empty: do not wait',
         read_only=True,
     ),
+    *PLANT_PARAMETERS,
 )
 
 #: The start-up check's gap tolerance (``model.grasp_check.GAP_TOLERANCE``), m: the default
