@@ -15,6 +15,8 @@ creep of soft friction)::
         --solref 0.004 1.0
     python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
         --noslip-iterations 10
+    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode filtered \
+        --set torque_rate.enabled=true --set torque_rate.max_step=0.05
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import sys
 from typing import Any
 
 import numpy as np
+import yaml
 
 from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.control.nominal import NominalController
@@ -90,8 +93,29 @@ def measure(run: LoopRun, reports: list[ContactReport], plant: MuJoCoPlant) -> d
         'joint_limits_passed_rad': passed,
         'object_position_end_m': run.final.p_object_in_palm.tolist(),
         'max_abs_torque_Nm': float(np.max(np.abs(run.array('u')))),
+        'max_torque_step_Nm': max_torque_step(run.array('u')),
         'filter_statuses': dict(statuses),
     }
+
+
+def max_torque_step(u: np.ndarray) -> float:
+    """Largest ``|u_k,j - u_k-1,j|`` over ticks k and joints j (u shape (ticks, m)), N·m."""
+    return float(np.max(np.abs(np.diff(u, axis=0)))) if len(u) > 1 else 0.0
+
+
+def parse_overrides(pairs: list[str]) -> dict[str, Any]:
+    """``["name=value", ...]`` as ``{name: value}``, each value read as YAML.
+
+    Raises:
+        ValueError: A pair without ``=``.
+    """
+    overrides: dict[str, Any] = {}
+    for pair in pairs:
+        name, sep, value = pair.partition('=')
+        if not sep or not name:
+            raise ValueError(f'--set {pair!r}: expected NAME=VALUE')
+        overrides[name.strip()] = yaml.safe_load(value)
+    return overrides
 
 
 def run_on_mujoco(
@@ -139,6 +163,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--timestep', type=float, default=defaults.timestep, help='MuJoCo step, s')
     parser.add_argument('--integrator', choices=INTEGRATORS, default=defaults.integrator)
     parser.add_argument('--friction', type=float, help="plant mu (default: the model's)")
+    parser.add_argument(
+        '--set',
+        action='append',
+        default=[],
+        metavar='NAME=VALUE',
+        help='override a safety-filter parameter (repeatable), e.g. torque_rate.enabled=true',
+    )
     parser.add_argument('--json', type=Path, help='also write the figures here')
     return parser.parse_args(argv)
 
@@ -157,13 +188,14 @@ def main(argv: list[str] | None = None) -> int:
             timestep=args.timestep,
             integrator=args.integrator,
         )
-        scenario = Scenario.load(args.config)
-    except ConfigError as error:
+        scenario = Scenario.load(args.config, parse_overrides(args.set))
+    except (ConfigError, ValueError) as error:
         print(config_error_line('mujoco_run', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
     duration = args.duration or scenario.sim_config.duration
     figures = {
         'config': str(args.config),
+        'filter_overrides': args.set,
         'duration_s': duration,
         'mujoco': {
             'solref': list(options.solref),
