@@ -37,6 +37,7 @@ from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONF
 from hand_sim_node.closed_loop import LoopRun, run_closed_loop
 from hand_sim_node.mjcf import CONES, INTEGRATORS, MjcfOptions
 from hand_sim_node.mujoco_plant import ContactReport, MuJoCoPlant
+from hand_sim_node.plant import RigidPlant
 
 #: Times at which the slip distance so far is reported too, s.
 SLIP_CHECKPOINTS = (0.3, 1.0, 5.0)
@@ -135,6 +136,33 @@ def run_on_mujoco(
     return measure(run, reports, plant)
 
 
+def run_on_rigid(scenario: Scenario, mode: str, duration: float) -> dict[str, Any]:
+    """Run on our rigid plant: steps violating each constraint family, statuses."""
+    plant = RigidPlant(scenario.model, scenario.sim_config)
+    events: Counter[str] = Counter()
+
+    def count(_plant: object) -> None:
+        if plant.last_report is not None:
+            events.update(event.family for event in plant.last_report.events)
+
+    run = run_closed_loop(
+        plant,
+        NominalController(scenario.nominal_config),
+        scenario.reference(plant.observe()),
+        scenario.safety_filter() if mode == 'filtered' else None,
+        duration,
+        after_step=count,
+    )
+    statuses = Counter(str(tick.status.value) for tick in run.ticks if tick.status is not None)
+    return {
+        'stop_reason': run.stop_reason,
+        't_end_s': run.final.t,
+        'violation_steps': dict(events),
+        'max_torque_step_Nm': max_torque_step(run.array('u')),
+        'filter_statuses': dict(statuses),
+    }
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     """Command line (see the module docstring)."""
     parser = argparse.ArgumentParser(
@@ -143,6 +171,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--config', type=Path, default=Path('config/paper_scenario.yaml'))
     parser.add_argument('--mode', choices=sorted(MODES), default='both')
     parser.add_argument('--duration', type=float, help="s (default: the scenario's)")
+    parser.add_argument(
+        '--plant',
+        choices=('mujoco', 'rigid'),
+        default='mujoco',
+        help='rigid: the same runs on our own plant (MuJoCo options unused)',
+    )
     defaults = MjcfOptions()
     parser.add_argument(
         '--solref',
@@ -197,6 +231,7 @@ def main(argv: list[str] | None = None) -> int:
         'config': str(args.config),
         'filter_overrides': args.set,
         'duration_s': duration,
+        'plant': args.plant,
         'mujoco': {
             'solref': list(options.solref),
             'solimp': list(options.solimp),
@@ -210,7 +245,11 @@ def main(argv: list[str] | None = None) -> int:
         },
     }
     for mode in MODES[args.mode]:
-        figures[mode] = run_on_mujoco(scenario, options, mode, duration)
+        figures[mode] = (
+            run_on_rigid(scenario, mode, duration)
+            if args.plant == 'rigid'
+            else run_on_mujoco(scenario, options, mode, duration)
+        )
     text = json.dumps(figures, indent=2)
     print(text)
     if args.json is not None:
