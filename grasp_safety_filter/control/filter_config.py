@@ -98,7 +98,7 @@ class SafetyFilterConfig:
     joint_limits_weight: float = 1e6
     fingertip_workspace_weight: float = 1e3
     object_workspace_weight: float = 1e3
-    torque_rate_weight: float = 1.0
+    torque_rate_weight: float = 1e3
     eps_abs: float = 1e-4
     eps_rel: float = 1e-4
     max_iter: int = 50

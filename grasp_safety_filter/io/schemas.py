@@ -690,7 +690,7 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'relaxation.torque_rate_weight',
         DOUBLE,
-        1.0,
+        1.0e3,
         'Penalty on the squared slack of the torque-rate rows when infeasible (at most '
         'every safety weight) [-]',
         min_value=0.0,
