@@ -163,7 +163,7 @@ def inside_rows(family, force):
 
 
 def in_mujoco_pyramid(force, mu):
-    """f a non-negative combination of the edges (+-mu, 0, 1), (0, +-mu, 1)."""
+    """Whether f is a non-negative combination of the edges (+-mu, 0, 1), (0, +-mu, 1)."""
     edges = np.array([[mu, 0, 1], [-mu, 0, 1], [0, mu, 1], [0, -mu, 1]], dtype=float).T
     _, residual = nnls(edges, force)
     return residual <= 1e-9

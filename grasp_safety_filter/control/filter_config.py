@@ -120,7 +120,8 @@ class SafetyFilterConfig:
             if self.torque_rate_enabled and self.torque_rate_weight > weight:
                 raise ParameterError(
                     f"'relaxation.torque_rate_weight': expected at most every safety weight "
-                    f"(the torque rate is relaxed first), got {self.torque_rate_weight!r} > "
+                    '(a safety row is never given up for the rate), got '
+                    f'{self.torque_rate_weight!r} > '
                     f"'{name}' = {weight!r}"
                 )
 
