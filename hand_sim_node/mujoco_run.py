@@ -15,6 +15,8 @@ creep of soft friction)::
         --solref 0.004 1.0
     python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
         --noslip-iterations 10
+    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode filtered \
+        --set torque_rate.enabled=true --set torque_rate.max_step=0.05
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import sys
 from typing import Any
 
 import numpy as np
+import yaml
 
 from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.control.nominal import NominalController
@@ -34,6 +37,7 @@ from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONF
 from hand_sim_node.closed_loop import LoopRun, run_closed_loop
 from hand_sim_node.mjcf import CONES, INTEGRATORS, MjcfOptions
 from hand_sim_node.mujoco_plant import ContactReport, MuJoCoPlant
+from hand_sim_node.plant import RigidPlant
 
 #: Times at which the slip distance so far is reported too, s.
 SLIP_CHECKPOINTS = (0.3, 1.0, 5.0)
@@ -90,8 +94,29 @@ def measure(run: LoopRun, reports: list[ContactReport], plant: MuJoCoPlant) -> d
         'joint_limits_passed_rad': passed,
         'object_position_end_m': run.final.p_object_in_palm.tolist(),
         'max_abs_torque_Nm': float(np.max(np.abs(run.array('u')))),
+        'max_torque_step_Nm': max_torque_step(run.array('u')),
         'filter_statuses': dict(statuses),
     }
+
+
+def max_torque_step(u: np.ndarray) -> float:
+    """Largest ``|u_k,j - u_k-1,j|`` over ticks k and joints j (u shape (ticks, m)), N·m."""
+    return float(np.max(np.abs(np.diff(u, axis=0)))) if len(u) > 1 else 0.0
+
+
+def parse_overrides(pairs: list[str]) -> dict[str, Any]:
+    """``["name=value", ...]`` as ``{name: value}``, each value read as YAML.
+
+    Raises:
+        ValueError: A pair without ``=``.
+    """
+    overrides: dict[str, Any] = {}
+    for pair in pairs:
+        name, sep, value = pair.partition('=')
+        if not sep or not name:
+            raise ValueError(f'--set {pair!r}: expected NAME=VALUE')
+        overrides[name.strip()] = yaml.safe_load(value)
+    return overrides
 
 
 def run_on_mujoco(
@@ -111,6 +136,33 @@ def run_on_mujoco(
     return measure(run, reports, plant)
 
 
+def run_on_rigid(scenario: Scenario, mode: str, duration: float) -> dict[str, Any]:
+    """Run on our rigid plant: steps violating each constraint family, statuses."""
+    plant = RigidPlant(scenario.model, scenario.sim_config)
+    events: Counter[str] = Counter()
+
+    def count(_plant: object) -> None:
+        if plant.last_report is not None:
+            events.update(event.family for event in plant.last_report.events)
+
+    run = run_closed_loop(
+        plant,
+        NominalController(scenario.nominal_config),
+        scenario.reference(plant.observe()),
+        scenario.safety_filter() if mode == 'filtered' else None,
+        duration,
+        after_step=count,
+    )
+    statuses = Counter(str(tick.status.value) for tick in run.ticks if tick.status is not None)
+    return {
+        'stop_reason': run.stop_reason,
+        't_end_s': run.final.t,
+        'violation_steps': dict(events),
+        'max_torque_step_Nm': max_torque_step(run.array('u')),
+        'filter_statuses': dict(statuses),
+    }
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     """Command line (see the module docstring)."""
     parser = argparse.ArgumentParser(
@@ -119,6 +171,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--config', type=Path, default=Path('config/paper_scenario.yaml'))
     parser.add_argument('--mode', choices=sorted(MODES), default='both')
     parser.add_argument('--duration', type=float, help="s (default: the scenario's)")
+    parser.add_argument(
+        '--plant',
+        choices=('mujoco', 'rigid'),
+        default='mujoco',
+        help='rigid: the same runs on our own plant (MuJoCo options unused)',
+    )
     defaults = MjcfOptions()
     parser.add_argument(
         '--solref',
@@ -139,6 +197,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--timestep', type=float, default=defaults.timestep, help='MuJoCo step, s')
     parser.add_argument('--integrator', choices=INTEGRATORS, default=defaults.integrator)
     parser.add_argument('--friction', type=float, help="plant mu (default: the model's)")
+    parser.add_argument(
+        '--set',
+        action='append',
+        default=[],
+        metavar='NAME=VALUE',
+        help='override a safety-filter parameter (repeatable), e.g. torque_rate.enabled=true',
+    )
     parser.add_argument('--json', type=Path, help='also write the figures here')
     return parser.parse_args(argv)
 
@@ -157,14 +222,16 @@ def main(argv: list[str] | None = None) -> int:
             timestep=args.timestep,
             integrator=args.integrator,
         )
-        scenario = Scenario.load(args.config)
-    except ConfigError as error:
+        scenario = Scenario.load(args.config, parse_overrides(args.set))
+    except (ConfigError, ValueError) as error:
         print(config_error_line('mujoco_run', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
     duration = args.duration or scenario.sim_config.duration
     figures = {
         'config': str(args.config),
+        'filter_overrides': args.set,
         'duration_s': duration,
+        'plant': args.plant,
         'mujoco': {
             'solref': list(options.solref),
             'solimp': list(options.solimp),
@@ -178,7 +245,11 @@ def main(argv: list[str] | None = None) -> int:
         },
     }
     for mode in MODES[args.mode]:
-        figures[mode] = run_on_mujoco(scenario, options, mode, duration)
+        figures[mode] = (
+            run_on_rigid(scenario, mode, duration)
+            if args.plant == 'rigid'
+            else run_on_mujoco(scenario, options, mode, duration)
+        )
     text = json.dumps(figures, indent=2)
     print(text)
     if args.json is not None:

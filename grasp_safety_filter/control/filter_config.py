@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from grasp_safety_filter.control.class_k import ClassKFunction
-from grasp_safety_filter.io.parameters import flatten_parameters
+from grasp_safety_filter.io.parameters import flatten_parameters, ParameterError
 from grasp_safety_filter.io.schemas import SAFETY_FILTER_QP_PARAMETERS
 
 #: Config field of each parameter.
@@ -15,6 +15,10 @@ _FIELDS: dict[str, str] = {
     'no_slip.enabled': 'no_slip_enabled',
     'no_slip.pyramid_faces': 'pyramid_faces',
     'no_slip.normal_force_margin': 'normal_force_margin',
+    'no_slip.friction_margin': 'friction_margin',
+    'no_slip.cone': 'cone',
+    'torque_rate.enabled': 'torque_rate_enabled',
+    'torque_rate.max_step': 'torque_rate_max_step',
     'joint_limits.enabled': 'joint_limits_enabled',
     'fingertip_workspace.enabled': 'fingertip_workspace_enabled',
     'object_workspace.enabled': 'object_workspace_enabled',
@@ -29,6 +33,7 @@ _FIELDS: dict[str, str] = {
     'relaxation.joint_limits_weight': 'joint_limits_weight',
     'relaxation.fingertip_workspace_weight': 'fingertip_workspace_weight',
     'relaxation.object_workspace_weight': 'object_workspace_weight',
+    'relaxation.torque_rate_weight': 'torque_rate_weight',
     'osqp.eps_abs': 'eps_abs',
     'osqp.eps_rel': 'eps_rel',
     'osqp.max_iter': 'max_iter',
@@ -46,6 +51,10 @@ class SafetyFilterConfig:
         no_slip_enabled: Enforce the friction pyramids.
         pyramid_faces: Pyramid faces l_s (>= 3).
         normal_force_margin: Pyramid margin eps, N (>= 0).
+        friction_margin: Relative friction margin m in [0, 0.9]: the rows use mu (1 - m).
+        cone: ``"inscribed"`` (l_s faces) or ``"diamond"`` (|f_x| + |f_y| <= mu f_n).
+        torque_rate_enabled: Bound the torque step per tick.
+        torque_rate_max_step: That bound, N·m per tick (> 0).
         joint_limits_enabled: Enforce the joint-limit barriers.
         fingertip_workspace_enabled: Enforce the fingertip-workspace barriers.
         object_workspace_enabled: Enforce the object-workspace barriers.
@@ -55,8 +64,10 @@ class SafetyFilterConfig:
         alpha1_kind, alpha1_gain: alpha_1 (``"cubic"`` or ``"linear"``, gain > 0).
         alpha2_kind, alpha2_gain: alpha_2 (same choices).
         no_slip_weight, joint_limits_weight, fingertip_workspace_weight,
-            object_workspace_weight: Slack weights of the relaxed QP (> 0), per (N·m)² of
-            torque-space violation (of W-distance violation with the inverse-inertia metric).
+            object_workspace_weight, torque_rate_weight: Slack weights of the relaxed QP
+            (> 0), per (N·m)² of torque-space violation (of W-distance violation with the
+            inverse-inertia metric).
+            The torque-rate weight is at most every safety weight.
         eps_abs, eps_rel: OSQP tolerances (> 0).
         max_iter: OSQP iteration limit (>= 1).
         polish: OSQP solution polishing.
@@ -69,6 +80,10 @@ class SafetyFilterConfig:
     no_slip_enabled: bool = True
     pyramid_faces: int = 8
     normal_force_margin: float = 0.01
+    friction_margin: float = 0.0
+    cone: str = 'inscribed'
+    torque_rate_enabled: bool = False
+    torque_rate_max_step: float = 0.2
     joint_limits_enabled: bool = True
     fingertip_workspace_enabled: bool = True
     object_workspace_enabled: bool = False
@@ -83,6 +98,7 @@ class SafetyFilterConfig:
     joint_limits_weight: float = 1e6
     fingertip_workspace_weight: float = 1e3
     object_workspace_weight: float = 1e3
+    torque_rate_weight: float = 1e3
     eps_abs: float = 1e-4
     eps_rel: float = 1e-4
     max_iter: int = 50
@@ -94,6 +110,20 @@ class SafetyFilterConfig:
         for spec in SAFETY_FILTER_QP_PARAMETERS:
             name = _FIELDS[spec.name]
             object.__setattr__(self, name, spec.validate(getattr(self, name)))
+        safety = {
+            'relaxation.no_slip_weight': self.no_slip_weight,
+            'relaxation.joint_limits_weight': self.joint_limits_weight,
+            'relaxation.fingertip_workspace_weight': self.fingertip_workspace_weight,
+            'relaxation.object_workspace_weight': self.object_workspace_weight,
+        }
+        for name, weight in safety.items():
+            if self.torque_rate_enabled and self.torque_rate_weight > weight:
+                raise ParameterError(
+                    f"'relaxation.torque_rate_weight': expected at most every safety weight "
+                    '(a safety row is never given up for the rate), got '
+                    f'{self.torque_rate_weight!r} > '
+                    f"'{name}' = {weight!r}"
+                )
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> SafetyFilterConfig:

@@ -35,6 +35,13 @@ instead, :mod:`~grasp_safety_filter.control.qp_metric`; the tick's M_h gives W.)
    families whose rows are violated or not finite are named (``relaxed_families``), and
    ``max_violation`` is inf when a row is not finite.
 
+Torque rate (``torque_rate.enabled``, off by default): rows ``|u_j - u_prev,j| <= du_max``
+with u_prev the u* of the previous tick (:class:`~grasp_safety_filter.control.constraints.
+TorqueRateBound`); vacuous on the first tick, after :meth:`SafetyFilter.reset` and after a
+fallback. They are rows like the others, relaxed with ``relaxation.torque_rate_weight`` (at
+most every safety weight, so a safety row is never given up for the rate); a tick where only
+they had to give is ``relaxed`` with ``relaxed_families == ("torque_rate",)``.
+
 Relaxation priorities (defaults): slack weights 1e6 on no-slip and joint-limit rows, 1e3 on
 fingertip-workspace rows. Slacks are normalised to torque-space distance (N·m; the
 W-distance with ``qp.metric: inverse_inertia``), so the weights read directly: giving up
@@ -60,6 +67,7 @@ from grasp_safety_filter.control.constraints import (
     FrictionPyramid,
     JointLimitBarrier,
     ObjectWorkspaceBarrier,
+    TorqueRateBound,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.control.filter_inputs import (
@@ -98,6 +106,7 @@ ACTIVE_TOLERANCE = 1e-6
 _NOT_CERTIFIED = frozenset(
     (FilterStatus.RELAXED, FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL)
 )
+_FALLBACK = frozenset((FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL))
 _RELAXED_USABLE = (SolutionStatus.OPTIMAL, SolutionStatus.INACCURATE)
 
 
@@ -108,7 +117,8 @@ class SafetyFilter:
         config: The configuration.
         joint_names, contact_names: Model joint and contact order.
         families: The enabled barrier families, in row order (no slip, joint limits,
-            fingertip workspace, object workspace).
+            fingertip workspace, object workspace, torque rate).
+        torque_rate: The torque-rate family (None unless ``torque_rate.enabled``).
         actuator_limits: The torque box (always enforced, never relaxed).
         row_names: Names of the barrier rows, in row order.
         hard_qp: The hard QP in OSQP's form, the rows' buffer (the last assembled data).
@@ -159,7 +169,12 @@ class SafetyFilter:
         # Validated by every family that uses them; built here so that a bad argument is
         # reported even when its family is switched off.
         no_slip = FrictionPyramid(
-            contact_names, mu, config.pyramid_faces, config.normal_force_margin
+            contact_names,
+            mu,
+            config.pyramid_faces,
+            config.normal_force_margin,
+            config.friction_margin,
+            config.cone,
         )
         self.contact_names = no_slip.contact_names
         joint_limits = JointLimitBarrier(
@@ -191,6 +206,10 @@ class SafetyFilter:
                     f'{object_workspace!r}'
                 )
             chosen.append((object_workspace, config.object_workspace_weight))
+        self.torque_rate: TorqueRateBound | None = None
+        if config.torque_rate_enabled:
+            self.torque_rate = TorqueRateBound(self.joint_names, config.torque_rate_max_step)
+            chosen.append((self.torque_rate, config.torque_rate_weight))
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
         self.row_names: tuple[str, ...] = tuple(n for f in self.families for n in f.names)
         k = len(self.row_names)
@@ -272,6 +291,8 @@ class SafetyFilter:
     def reset(self) -> None:
         """Forget the last accepted u* and the backend's warm starts (e.g. a new run)."""
         self._last_good_u = None
+        if self.torque_rate is not None:
+            self.torque_rate.forget()
         self.backend.reset()
 
     def constraint_rows(self, state: GraspState) -> ConstraintRows:
@@ -329,6 +350,16 @@ class SafetyFilter:
                 wrong number of joints or contacts, or a measured field is not finite where
                 the enabled families' rows are not; raised before any solver call.
         """
+        result = self._solve_tick(state, u_nom)
+        if self.torque_rate is not None:
+            if result.status in _FALLBACK:
+                self.torque_rate.forget()  # a fallback torque is no reference for the next
+            else:
+                self.torque_rate.remember(result.u)
+        return result
+
+    def _solve_tick(self, state: GraspState, u_nom: np.ndarray) -> FilterResult:
+        """Run steps 1-6 of the module docstring for one tick (see :meth:`solve`)."""
         u_nom, rows_finite = self.assemble(state, u_nom)
         if not rows_finite:
             # A finite state whose rows overflowed (absurd magnitudes): no QP can help.

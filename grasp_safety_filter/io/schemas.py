@@ -22,6 +22,11 @@ import math
 from pathlib import Path
 from typing import Any
 
+from grasp_safety_filter.control.constraints.friction_cone import (
+    FRICTION_CONES,
+    INSCRIBED,
+    MAX_FRICTION_MARGIN,
+)
 from grasp_safety_filter.control.qp_metric import QP_METRICS
 from grasp_safety_filter.io.parameters import (
     load_parameter_file,
@@ -542,6 +547,39 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         min_value=0.0,
     ),
     ParameterSpec(
+        'no_slip.friction_margin',
+        DOUBLE,
+        0.0,
+        'Relative friction margin m: the rows use mu (1 - m), a cone inside a plant whose '
+        'friction is at least (1 - m) mu [-]',
+        min_value=0.0,
+        max_value=MAX_FRICTION_MARGIN,
+    ),
+    ParameterSpec(
+        'no_slip.cone',
+        STRING,
+        INSCRIBED,
+        "Friction pyramid: inscribed (l_s faces inside the circular cone, the paper's) or "
+        "diamond (|f_x| + |f_y| <= mu f_n, also inside a pyramidal contact model's cone)",
+        choices=FRICTION_CONES,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'torque_rate.enabled',
+        BOOL,
+        False,
+        'Bound the step of every joint torque per tick, |u_k - u_k-1| <= max_step (not a '
+        'safety constraint: relaxed first)',
+    ),
+    ParameterSpec(
+        'torque_rate.max_step',
+        DOUBLE,
+        0.2,
+        'Largest change of a joint torque from one tick to the next [N m]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
         'joint_limits.enabled',
         BOOL,
         True,
@@ -648,6 +686,15 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         DOUBLE,
         1.0e3,
         'Penalty on the squared slack of the object-workspace rows when infeasible [-]',
+        min_value=0.0,
+        exclusive_min=True,
+    ),
+    ParameterSpec(
+        'relaxation.torque_rate_weight',
+        DOUBLE,
+        1.0e3,
+        'Penalty on the squared slack of the torque-rate rows when infeasible (at most '
+        'every safety weight) [-]',
         min_value=0.0,
         exclusive_min=True,
     ),

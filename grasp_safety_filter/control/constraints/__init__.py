@@ -7,6 +7,7 @@
 - :class:`ObjectWorkspaceBarrier` (``object_workspace``): rolling contact points on their
   object surface, a margin inside a box face's edges (ZCBF).
 - :class:`ActuatorLimits` (``actuator_limits``): the joint torque box.
+- :class:`TorqueRateBound` (``torque_rate``): a bounded torque step per tick (not safety).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from grasp_safety_filter.control.constraints.fingertip_workspace import (
 from grasp_safety_filter.control.constraints.friction_cone import FrictionPyramid
 from grasp_safety_filter.control.constraints.joint_limits import JointLimitBarrier
 from grasp_safety_filter.control.constraints.object_workspace import ObjectWorkspaceBarrier
+from grasp_safety_filter.control.constraints.torque_rate import TorqueRateBound
 from grasp_safety_filter.model.grasp_state import GraspState
 
 __all__ = [
@@ -40,6 +42,7 @@ __all__ = [
     'FrictionPyramid',
     'JointLimitBarrier',
     'ObjectWorkspaceBarrier',
+    'TorqueRateBound',
     'stack_constraints',
 ]
 

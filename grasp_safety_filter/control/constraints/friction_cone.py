@@ -17,6 +17,15 @@ from grasp_safety_filter.control.constraints.base import (
 )
 from grasp_safety_filter.model.grasp_state import GraspState
 
+#: The l_s-face pyramid inscribed in the circular cone (the paper's).
+INSCRIBED = 'inscribed'
+#: The 4-face pyramid ``|f_x| + |f_y| <= mu f_n`` (inside a pyramidal contact model's cone).
+DIAMOND = 'diamond'
+#: The admissible ``no_slip.cone`` values.
+FRICTION_CONES = (INSCRIBED, DIAMOND)
+#: The largest relative friction margin (``no_slip.friction_margin``).
+MAX_FRICTION_MARGIN = 0.9
+
 
 class FrictionPyramid:
     """Keep every contact force inside an l_s-face pyramid inscribed in its friction cone.
@@ -39,6 +48,20 @@ class FrictionPyramid:
     The margin per row is ``h_ij(u) = mu_i cos(pi / l_s) f_n,i - cos(th_j) f_x,i
     - sin(th_j) f_y,i`` (N, > 0 inside the pyramid); the row is ``h_ij(u) >= eps``.
     Row names: ``"no_slip/<contact>/face<j>"``.
+
+    Two options for a plant whose friction is not the model's:
+
+    - ``friction_margin`` m in [0, 0.9]: every row uses ``mu_i (1 - m)`` instead of mu_i (a
+      relative margin, so one value fits contacts of different mu): the pyramid sits inside
+      the cone of any plant whose friction is at least ``(1 - m)`` times the model's.
+    - ``cone="diamond"``: instead of the l_s faces, the four rows
+      ``s_x f_x,i + s_y f_y,i - mu_i f_n,i <= -eps`` for ``s_x, s_y`` in ``{+1, -1}``, i.e.
+      ``|f_x| + |f_y| <= mu_i f_n - eps``: the pyramid spanned by ``(+-mu, 0, 1)`` and
+      ``(0, +-mu, 1)``, which is a pyramidal contact model's own cone (MuJoCo's default
+      ``cone="pyramidal"``, condim 3). The inscribed l_s-face pyramid is inside the circular
+      cone but not inside that one (its vertex at ``th = pi / l_s`` has
+      ``|f_x| + |f_y| = mu f_n (cos(pi / l_s) + sin(pi / l_s)) > mu f_n``); the diamond is
+      inside both.
     """
 
     family = 'no_slip'
@@ -50,6 +73,8 @@ class FrictionPyramid:
         mu: float | Sequence[float] | np.ndarray,
         faces: int = 8,
         normal_force_margin: float = 0.0,
+        friction_margin: float = 0.0,
+        cone: str = INSCRIBED,
     ) -> None:
         """Build the pyramid faces of every contact.
 
@@ -58,6 +83,9 @@ class FrictionPyramid:
             mu: Friction coefficient, > 0: one for all contacts or one per contact.
             faces: Number of pyramid faces l_s, an integer >= 3.
             normal_force_margin: The margin eps >= 0, N.
+            friction_margin: The relative friction margin m in [0, 0.9]: rows use
+                ``mu_i (1 - m)``.
+            cone: :data:`INSCRIBED` (l_s faces) or :data:`DIAMOND` (4 rows, ``faces`` unused).
 
         Raises:
             ValueError: An argument is malformed; the message names it.
@@ -72,13 +100,29 @@ class FrictionPyramid:
             if not value > 0.0:
                 raise ValueError(f"'mu' of contact {contact!r}: expected > 0, got {value!r}")
         self.normal_force_margin = finite_scalar(normal_force_margin, 'normal_force_margin', 0.0)
-        theta = 2.0 * np.pi * np.arange(self.faces) / self.faces
-        # Face normals per contact, shape (n, l_s, 3): rows [cos th, sin th, -mu cos(pi/l_s)];
+        self.friction_margin = finite_scalar(friction_margin, 'friction_margin', 0.0)
+        if self.friction_margin > MAX_FRICTION_MARGIN:
+            raise ValueError(
+                f"'friction_margin': expected a number in [0, {MAX_FRICTION_MARGIN}], "
+                f'got {friction_margin!r}'
+            )
+        if cone not in FRICTION_CONES:
+            raise ValueError(f"'cone': expected one of {list(FRICTION_CONES)}, got {cone!r}")
+        self.cone = cone
+        mu_rows = self.mu * (1.0 - self.friction_margin)
+        if cone == DIAMOND:
+            self.faces = 4
+            tangential = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
+            apothem = mu_rows
+        else:
+            theta = 2.0 * np.pi * np.arange(self.faces) / self.faces
+            tangential = np.column_stack((np.cos(theta), np.sin(theta)))
+            apothem = mu_rows * math.cos(math.pi / self.faces)
+        # Face normals per contact, shape (n, faces, 3): rows [t_x, t_y, -apothem_i];
         # face j holds when  face_j . f <= -eps.
         face = np.empty((n, self.faces, 3))
-        face[:, :, 0] = np.cos(theta)
-        face[:, :, 1] = np.sin(theta)
-        face[:, :, 2] = -(self.mu * math.cos(math.pi / self.faces))[:, np.newaxis]
+        face[:, :, :2] = tangential
+        face[:, :, 2] = -apothem[:, np.newaxis]
         self._negative_faces = -face
         self.names = tuple(
             f'{self.family}/{contact}/face{j}'
