@@ -169,7 +169,7 @@ class GraspModel:
     # ----------------------------------------------------------------------------- loading
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any], base_dir: Path | str = '.') -> GraspModel:
-        """Build from validated ``model.*`` parameters (dotted names, see io/schemas.py).
+        """Build from validated ``model.*`` parameters (dotted names, see io/schemas/model.py).
 
         See :func:`grasp_safety_filter.model.grasp_parameters.grasp_model_from_parameters`.
         """

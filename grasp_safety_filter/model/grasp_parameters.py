@@ -1,6 +1,6 @@
 """A :class:`~grasp_safety_filter.model.grasp_model.GraspModel` from its ``model.*`` parameters.
 
-What each parameter becomes (io/schemas.py documents them):
+What each parameter becomes (io/schemas/model.py documents them):
 
 - ``model.urdf_file``, ``model.joint_names``, ``model.gravity``: the hand (Pinocchio);
 - ``model.fingertip_frames``: per contact, the fingertip sphere from the URDF's collision

@@ -1,0 +1,73 @@
+"""The parameters of the three nodes, as data.
+
+Sections:
+
+- ``MODEL_PARAMETERS``: the hand, the object and their contacts. Shared by all three nodes
+  and placed under ``/**`` in the parameter files, so that the simulator and the controllers
+  cannot disagree about the plant.
+- ``HAND_SIM_PARAMETERS``, ``NOMINAL_CONTROLLER_PARAMETERS``, ``SAFETY_FILTER_PARAMETERS``:
+  each node's own.
+
+``NODE_SCHEMAS[node]`` is the model section followed by the node's own. Defaults are the
+paper's Section IV scenario (``config/paper_scenario.yaml`` spells each one out, with the
+reason for every value the paper does not give). Checks that need only parameter values
+(e.g. ``a_min < a_max``) live here; checks against the URDF and the object geometry belong
+to the model.
+
+Modules: :mod:`.common`, :mod:`.model`, :mod:`.hand_sim`, :mod:`.nominal`,
+:mod:`.safety_filter`, :mod:`.nodes` (schemas, cross-parameter checks, loading) and
+:mod:`.docs` (README tables); this package re-exports their public names.
+"""
+
+from __future__ import annotations
+
+from grasp_safety_filter.io.schemas.common import (  # noqa: F401
+    BOOL,
+    CUBE_FACES,
+    DOUBLE,
+    DOUBLE_ARRAY,
+    EXPECTED_OUTCOMES,
+    FINGERTIP_WORKSPACE_A_MARGIN,
+    HALF_PI,
+    INTEGER,
+    MAX_OSQP_ITERATIONS,
+    MAX_PYRAMID_FACES,
+    NEAREST_FACE,
+    NO_OUTCOME,
+    PAPER_FINGER_JOINT_POSITIONS,
+    PAPER_JOINT_NAMES,
+    PAPER_OUTCOME,
+    REQUIRED_MODEL_PARAMETERS,
+    required_model_parameters,
+    STRING,
+    STRING_ARRAY,
+)
+from grasp_safety_filter.io.schemas.docs import (  # noqa: F401
+    parameter_table_markdown,
+)
+from grasp_safety_filter.io.schemas.hand_sim import (  # noqa: F401
+    HAND_SIM_PARAMETERS,
+)
+from grasp_safety_filter.io.schemas.model import (  # noqa: F401
+    MODEL_PARAMETERS,
+)
+from grasp_safety_filter.io.schemas.nodes import (  # noqa: F401
+    check_hand_sim_parameters,
+    check_model_parameters,
+    check_node_parameters,
+    HAND_SIM_NODE,
+    load_node_parameters,
+    NODE_SCHEMAS,
+    NOMINAL_CONTROLLER_NODE,
+    SAFETY_FILTER_NODE,
+)
+from grasp_safety_filter.io.schemas.nominal import (  # noqa: F401
+    GRASP_CHECK_GAP_TOLERANCE,
+    GRASP_CHECK_PARAMETERS,
+    NOMINAL_CONTROLLER_PARAMETERS,
+)
+from grasp_safety_filter.io.schemas.safety_filter import (  # noqa: F401
+    SAFETY_FILTER_INPUT_PARAMETERS,
+    SAFETY_FILTER_PARAMETERS,
+    SAFETY_FILTER_QP_PARAMETERS,
+)

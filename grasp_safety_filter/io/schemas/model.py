@@ -1,0 +1,208 @@
+"""``MODEL_PARAMETERS``: the hand, the object and their contacts, shared by all nodes (``/**``)."""
+
+from __future__ import annotations
+
+import math
+
+from grasp_safety_filter.io.parameters import (
+    ParameterSpec,
+)
+from grasp_safety_filter.io.schemas.common import (
+    CUBE_FACES,
+    DOUBLE,
+    DOUBLE_ARRAY,
+    FINGERTIP_WORKSPACE_A_MARGIN,
+    HALF_PI,
+    NEAREST_FACE,
+    PAPER_JOINT_NAMES,
+    STRING,
+    STRING_ARRAY,
+)
+
+
+def _required(description: str) -> str:
+    """Mark ``description`` required, before its ``[unit]`` if it ends with one."""
+    text, bracket, unit = description.rpartition(' [')
+    if bracket and description.endswith(']'):
+        return f'{text}; required (the default is never used) [{unit}'
+    return description + '; required (the default is never used)'
+
+
+MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec(
+        'model.urdf_file',
+        STRING,
+        'hand.urdf',
+        _required("Hand URDF; a relative path resolves against the parameter file's directory"),
+        read_only=True,
+        is_path=True,
+    ),
+    ParameterSpec(
+        'model.joint_names',
+        STRING_ARRAY,
+        PAPER_JOINT_NAMES,
+        _required('Actuated URDF joints, in the order of every joint vector and torque command'),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_frames',
+        STRING_ARRAY,
+        ['finger1_tip', 'finger2_tip', 'finger3_tip'],
+        _required(
+            'URDF frames of the fingertips, one per contact (z out of the tip); each fingertip is '
+            "the <collision><sphere> on its frame's link (or a link fixed to it): radius R_i, and "
+            "its centre the fingertip frame's origin"
+        ),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.contact_names',
+        STRING_ARRAY,
+        ['finger1', 'finger2', 'finger3'],
+        _required('Contact labels, one per fingertip frame (topics, diagnostics, figures)'),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_radius',
+        DOUBLE,
+        0.0,
+        'Deprecated check: 0 (default): each R_i from its collision sphere; > 0: every '
+        'fingertip collision sphere must have this radius [m]',
+        min_value=0.0,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object.shape',
+        STRING,
+        'cube',
+        _required('Shape of the grasped object (a box of three edge lengths, a cube, a sphere)'),
+        choices=('cube', 'box', 'sphere'),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object.mass',
+        DOUBLE,
+        0.11,
+        _required('Mass of the object [kg]'),
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object.size',
+        DOUBLE,
+        0.2604,
+        'Cube edge length or sphere diameter; required for a cube or a sphere [m]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object.edge_lengths',
+        DOUBLE_ARRAY,
+        [0.2604, 0.2604, 0.2604],
+        'Box edge lengths along the object frame O (x, y, z); required for a box [m]',
+        min_value=0.0,
+        exclusive_min=True,
+        length=3,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.contact_faces',
+        STRING_ARRAY,
+        [NEAREST_FACE],
+        "Box face (outward normal in the object frame O) of each contact, or 'nearest': the "
+        'face nearest the fingertip at the first state; a declared face must be that one; one '
+        'entry applies to every contact; ignored for a sphere',
+        choices=(*CUBE_FACES, NEAREST_FACE),
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.friction_coefficient',
+        DOUBLE,
+        0.9,
+        _required(
+            'Coulomb friction coefficient mu between fingertips and object: one for every '
+            'contact or a list of one per contact, in model.contact_names order [-]'
+        ),
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+        per_contact=True,
+    ),
+    ParameterSpec(
+        'model.gravity',
+        DOUBLE_ARRAY,
+        [0.0, 0.0, -9.81],
+        'Gravitational acceleration in the palm frame P (x, y, z) [m/s^2]',
+        length=3,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.palm_frame',
+        STRING,
+        '',
+        "Palm frame P: the URDF's root link when empty; the frame_id of /object/odom and "
+        '/object/reference (checked on receipt)',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.object_frame',
+        STRING,
+        'object',
+        'Object frame O: the child_frame_id of /object/odom (checked on receipt)',
+        read_only=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.a_min',
+        DOUBLE,
+        -HALF_PI + FINGERTIP_WORKSPACE_A_MARGIN,
+        _required(
+            'Lower bound of the fingertip contact coordinate a: one for every contact or a '
+            'list of one per contact [rad]'
+        ),
+        min_value=-HALF_PI,
+        max_value=HALF_PI,
+        read_only=True,
+        per_contact=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.a_max',
+        DOUBLE,
+        HALF_PI - FINGERTIP_WORKSPACE_A_MARGIN,
+        _required(
+            'Upper bound of the fingertip contact coordinate a: one for every contact or a '
+            'list of one per contact [rad]'
+        ),
+        min_value=-HALF_PI,
+        max_value=HALF_PI,
+        read_only=True,
+        per_contact=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.b_min',
+        DOUBLE,
+        -math.pi,
+        _required(
+            'Lower bound of the fingertip contact coordinate b: one for every contact or a '
+            'list of one per contact [rad]'
+        ),
+        min_value=-math.pi,
+        max_value=0.0,
+        read_only=True,
+        per_contact=True,
+    ),
+    ParameterSpec(
+        'model.fingertip_workspace.b_max',
+        DOUBLE,
+        0.0,
+        _required(
+            'Upper bound of the fingertip contact coordinate b: one for every contact or a '
+            'list of one per contact [rad]'
+        ),
+        min_value=-math.pi,
+        max_value=0.0,
+        read_only=True,
+        per_contact=True,
+    ),
+)
