@@ -696,9 +696,7 @@ def test_every_qp_status_is_a_tick_status_and_a_failed_one_is_an_error(params):
             assert report.level is not DiagnosticLevel.ERROR, status
 
 
-def test_filter_computes_margins_and_active_rows_only_on_ticks_that_send_them(
-    params, monkeypatch
-):
+def test_filter_computes_margins_and_active_rows_only_on_ticks_that_send_them(params, monkeypatch):
     calls = Counter()
     for writer in ('_write_margins', '_write_box'):
         original = getattr(ResultAssembler, writer)
@@ -1109,9 +1107,7 @@ def test_a_future_stamp_is_rejected_and_later_valid_ticks_go_on(params, topic, f
 
 @pytest.mark.parametrize('future', list(FUTURE_STAMPS))
 @pytest.mark.parametrize('topic', [topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL])
-def test_without_a_clock_a_future_first_stamp_does_not_block_the_first_tick(
-    params, topic, future
-):
+def test_without_a_clock_a_future_first_stamp_does_not_block_the_first_tick(params, topic, future):
     _, joints, odometry, effort_nominal = tick_inputs(params)
     safety_filter = make_filter(params)
     inputs = dict(

@@ -62,13 +62,10 @@ from grasp_safety_filter.control.constraints import (
     ActuatorLimits,
     ConstraintFamily,
     ConstraintRows,
-    FingertipWorkspaceBarrier,
-    FrictionPyramid,
-    JointLimitBarrier,
     ObjectWorkspaceBarrier,
-    TorqueRateBound,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+from grasp_safety_filter.control.filter_families import enabled_families
 from grasp_safety_filter.control.filter_inputs import (
     checked_torque,
     MEASURED_STATE_FIELDS,
@@ -159,50 +156,9 @@ class SafetyFilter:
         self.actuator_limits = ActuatorLimits(joint_names, u_min, u_max)
         self.joint_names = self.actuator_limits.joint_names
         m = len(self.joint_names)
-        # Validated by every family that uses them; built here so that a bad argument is
-        # reported even when its family is switched off.
-        no_slip = FrictionPyramid(
-            contact_names,
-            mu,
-            config.pyramid_faces,
-            config.normal_force_margin,
-            config.friction_margin,
-            config.cone,
+        chosen, self.contact_names, self.torque_rate = enabled_families(
+            config, self.joint_names, contact_names, q_min, q_max, mu, workspace, object_workspace
         )
-        self.contact_names = no_slip.contact_names
-        joint_limits = JointLimitBarrier(
-            self.joint_names, q_min, q_max, config.alpha1, config.alpha2
-        )
-        try:
-            a_min, a_max, b_min, b_max = workspace
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"'workspace': expected (a_min, a_max, b_min, b_max), got {workspace!r}"
-            ) from None
-        fingertip_workspace = FingertipWorkspaceBarrier(
-            self.contact_names, a_min, a_max, b_min, b_max, config.alpha1, config.alpha2
-        )
-        chosen: list[tuple[ConstraintFamily, float]] = []
-        if config.no_slip_enabled:
-            chosen.append((no_slip, config.no_slip_weight))
-        if config.joint_limits_enabled:
-            chosen.append((joint_limits, config.joint_limits_weight))
-        if config.fingertip_workspace_enabled:
-            chosen.append((fingertip_workspace, config.fingertip_workspace_weight))
-        if config.object_workspace_enabled:
-            if not isinstance(object_workspace, ObjectWorkspaceBarrier) or (
-                object_workspace.contact_names != self.contact_names
-            ):
-                raise ValueError(
-                    "'object_workspace': expected an ObjectWorkspaceBarrier of the contacts "
-                    f'{list(self.contact_names)} with object_workspace.enabled, got '
-                    f'{object_workspace!r}'
-                )
-            chosen.append((object_workspace, config.object_workspace_weight))
-        self.torque_rate: TorqueRateBound | None = None
-        if config.torque_rate_enabled:
-            self.torque_rate = TorqueRateBound(self.joint_names, config.torque_rate_max_step)
-            chosen.append((self.torque_rate, config.torque_rate_weight))
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
         self._results = ResultAssembler(self.families, self.actuator_limits, self.torque_rate)
         self.row_names = self._results.row_names
