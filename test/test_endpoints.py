@@ -17,6 +17,7 @@ from rosbags.typesys import get_typestore, Stores
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.reference import PaperReference, Pose, ReferenceSample
+from grasp_safety_filter.control.result_assembly import ResultAssembler
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
@@ -36,6 +37,7 @@ from grasp_safety_filter.io.schemas import load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.outgoing import Outgoing
+from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
 from grasp_safety_filter.nodes.safety_filter import (
     SafetyFilterEndpoint,
     WAITING_REPORT_PERIOD,
@@ -694,6 +696,37 @@ def test_every_qp_status_is_a_tick_status_and_a_failed_one_is_an_error(params):
             assert report.level is not DiagnosticLevel.ERROR, status
 
 
+def test_filter_computes_margins_and_active_rows_only_on_ticks_that_send_them(params, monkeypatch):
+    calls = Counter()
+    for writer in ('_write_margins', '_write_box'):
+        original = getattr(ResultAssembler, writer)
+
+        def counted(assembler, *args, original=original, writer=writer):
+            calls[writer] += 1
+            return original(assembler, *args)
+
+        monkeypatch.setattr(ResultAssembler, writer, counted)
+    _, joints, odometry, effort_nominal = tick_inputs(params)
+    safety_filter = make_filter(params)
+    safety_filter.rate.configure(
+        PublicationRateConfig(diagnostics_period=0.0095, margins_period=0.0045)
+    )
+    sent_per_tick = []
+    for i in range(20):
+        before = Counter(calls)
+        outgoing = next_tick(safety_filter, (joints, odometry, effort_nominal), i * 0.001)
+        sent = {o.topic for o in outgoing}
+        sent_per_tick.append(sent)
+        margins_read = bool(sent & {topics.MARGINS, topics.DIAGNOSTICS})
+        # margins: one margin writer call (it writes the box too); active rows: one box call
+        assert calls['_write_margins'] - before['_write_margins'] == margins_read, (i, sent)
+        expected_box = margins_read + (topics.DIAGNOSTICS in sent)
+        assert calls['_write_box'] - before['_write_box'] == expected_box, (i, sent)
+    assert {topics.EFFORT_COMMAND} in sent_per_tick  # ticks that send neither
+    assert {topics.EFFORT_COMMAND, topics.MARGINS} in sent_per_tick
+    assert any(topics.DIAGNOSTICS in sent for sent in sent_per_tick)
+
+
 # ----------------------------------------------------------------------------------------
 # The input watchdog (the steady clock is an argument)
 
@@ -1074,9 +1107,7 @@ def test_a_future_stamp_is_rejected_and_later_valid_ticks_go_on(params, topic, f
 
 @pytest.mark.parametrize('future', list(FUTURE_STAMPS))
 @pytest.mark.parametrize('topic', [topics.JOINT_STATES, topics.OBJECT_ODOM, topics.EFFORT_NOMINAL])
-def test_without_a_clock_a_future_first_stamp_does_not_block_the_first_tick(
-    params, topic, future
-):
+def test_without_a_clock_a_future_first_stamp_does_not_block_the_first_tick(params, topic, future):
     _, joints, odometry, effort_nominal = tick_inputs(params)
     safety_filter = make_filter(params)
     inputs = dict(

@@ -7,7 +7,7 @@ from enum import Enum
 
 import numpy as np
 
-from grasp_safety_filter.control.margins import Margins
+from grasp_safety_filter.control.margins import Margins, RowValues
 
 
 class FilterStatus(str, Enum):
@@ -46,7 +46,8 @@ class FilterResult:
             (joint limits, fingertip workspace), N (no slip, at the forces ``f_c(u*)``),
             N·m (actuator limits, at u*).
         active: Names of the rows with ``A u* - lower <= ACTIVE_TOLERANCE`` (violated rows
-            included) and of the actuator bounds u* touches.
+            included) and of the actuator bounds u* touches. ``margins`` and ``active``
+            are properties, computed the first time they are read, then kept.
         solve_time: Wall time spent in the QP backend (the hard problem, the relaxed one
             when needed), s; 0 when no QP was solved.
         iterations: The backend's solver iterations (both QPs when relaxed); 0 when it was
@@ -54,15 +55,25 @@ class FilterResult:
         active_set_steps: Add/drop steps of an exact active-set refinement after the
             solver (OSQP's backend; 0 when its guess was optimal).
         max_violation: ``max(0, max_r (lower_r - A_r u*))``, in the rows' own units.
+        row_values: What gives ``margins`` and ``active`` (on first read, then kept).
     """
 
     u: np.ndarray
     status: FilterStatus
     relaxed: bool
     relaxed_families: tuple[str, ...]
-    margins: Margins = field(repr=False)
-    active: tuple[str, ...]
     solve_time: float
     iterations: int
     active_set_steps: int
     max_violation: float
+    row_values: RowValues = field(repr=False, compare=False)
+
+    @property
+    def margins(self) -> Margins:
+        """Barrier value h per row name at u* (see the class docstring)."""
+        return self.row_values.margins
+
+    @property
+    def active(self) -> tuple[str, ...]:
+        """Names of the active rows at u* (see the class docstring)."""
+        return self.row_values.active

@@ -1,8 +1,12 @@
-"""Barrier values per row name, read like a dict without building one every tick."""
+"""Barrier values per row name, read like a dict without building one every tick.
+
+:class:`RowValues` holds what a filter step needs to give its margins and active rows,
+and computes them only when they are read.
+"""
 
 from __future__ import annotations
 
-from collections.abc import ItemsView, Iterator, Mapping, ValuesView
+from collections.abc import Callable, ItemsView, Iterator, Mapping, ValuesView
 
 import numpy as np
 
@@ -90,3 +94,75 @@ class _MarginValues(ValuesView[float]):
 
     def __iter__(self) -> Iterator[float]:
         return iter(self._mapping.array.tolist())
+
+
+class RowValues:
+    """One tick's margins and active rows at u*, computed on first read, then kept.
+
+    Holds the row residuals ``A u* - lower`` (already computed by the step) and two
+    writers: one of every barrier value h (families then actuator box), one of the box
+    margins alone. Nothing is evaluated until :attr:`margins` or :attr:`active` is read.
+    """
+
+    __slots__ = (
+        '_active',
+        '_index',
+        '_margins',
+        '_n_rows',
+        '_names',
+        '_slack',
+        '_tolerance',
+        '_write_box',
+        '_write_margins',
+    )
+
+    def __init__(
+        self,
+        names: tuple[str, ...],
+        index: Mapping[str, int],
+        n_rows: int,
+        slack: np.ndarray,
+        write_margins: Callable[[np.ndarray], None],
+        write_box: Callable[[np.ndarray], None],
+        tolerance: float,
+    ) -> None:
+        """Keep the step's residuals and the writers.
+
+        Args:
+            names: Row names: the barrier rows, then the actuator box's.
+            index: Position of each name.
+            n_rows: The number of barrier rows (before the box's).
+            slack: Shape (len(names),): the barrier rows' residuals ``A u* - lower`` first;
+                the box entries are written here when :attr:`active` is first read.
+            write_margins: Writes every row's h at u* into an array of shape (len(names),).
+            write_box: Writes the box margins at u* into an array of their shape.
+            tolerance: A row is active when its residual (box: margin) is at most this.
+        """
+        self._names = names
+        self._index = index
+        self._n_rows = n_rows
+        self._slack = slack
+        self._write_margins = write_margins
+        self._write_box = write_box
+        self._tolerance = tolerance
+        self._margins: Margins | None = None
+        self._active: tuple[str, ...] | None = None
+
+    @property
+    def margins(self) -> Margins:
+        """Barrier value h per row name at u* (computed on the first read)."""
+        if self._margins is None:
+            values = np.empty(len(self._names))
+            self._write_margins(values)
+            self._margins = Margins(self._names, values, self._index)
+        return self._margins
+
+    @property
+    def active(self) -> tuple[str, ...]:
+        """Names of the rows whose residual or box margin is at most the tolerance."""
+        if self._active is None:
+            slack = self._slack
+            self._write_box(slack[self._n_rows :])
+            picked = np.flatnonzero(slack <= self._tolerance).tolist()
+            self._active = tuple([self._names[i] for i in picked])
+        return self._active

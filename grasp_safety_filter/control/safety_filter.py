@@ -53,7 +53,6 @@ than letting a contact roll towards the fingertip's edge.
 from __future__ import annotations
 
 from collections.abc import Sequence
-import itertools
 import time
 from typing import Any
 
@@ -63,13 +62,10 @@ from grasp_safety_filter.control.constraints import (
     ActuatorLimits,
     ConstraintFamily,
     ConstraintRows,
-    FingertipWorkspaceBarrier,
-    FrictionPyramid,
-    JointLimitBarrier,
     ObjectWorkspaceBarrier,
-    TorqueRateBound,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+from grasp_safety_filter.control.filter_families import enabled_families
 from grasp_safety_filter.control.filter_inputs import (
     checked_torque,
     MEASURED_STATE_FIELDS,
@@ -86,6 +82,7 @@ from grasp_safety_filter.control.qp_solvers import (
     Solution,
     SolutionStatus,
 )
+from grasp_safety_filter.control.result_assembly import ACTIVE_TOLERANCE, ResultAssembler
 from grasp_safety_filter.model.grasp_state import GraspState
 
 __all__ = [
@@ -99,13 +96,6 @@ __all__ = [
     'SafetyFilterConfig',
 ]
 
-#: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
-#: when u is within it of the bound).
-ACTIVE_TOLERANCE = 1e-6
-
-_NOT_CERTIFIED = frozenset(
-    (FilterStatus.RELAXED, FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL)
-)
 _FALLBACK = frozenset((FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL))
 _RELAXED_USABLE = (SolutionStatus.OPTIMAL, SolutionStatus.INACCURATE)
 
@@ -166,57 +156,14 @@ class SafetyFilter:
         self.actuator_limits = ActuatorLimits(joint_names, u_min, u_max)
         self.joint_names = self.actuator_limits.joint_names
         m = len(self.joint_names)
-        # Validated by every family that uses them; built here so that a bad argument is
-        # reported even when its family is switched off.
-        no_slip = FrictionPyramid(
-            contact_names,
-            mu,
-            config.pyramid_faces,
-            config.normal_force_margin,
-            config.friction_margin,
-            config.cone,
+        chosen, self.contact_names, self.torque_rate = enabled_families(
+            config, self.joint_names, contact_names, q_min, q_max, mu, workspace, object_workspace
         )
-        self.contact_names = no_slip.contact_names
-        joint_limits = JointLimitBarrier(
-            self.joint_names, q_min, q_max, config.alpha1, config.alpha2
-        )
-        try:
-            a_min, a_max, b_min, b_max = workspace
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"'workspace': expected (a_min, a_max, b_min, b_max), got {workspace!r}"
-            ) from None
-        fingertip_workspace = FingertipWorkspaceBarrier(
-            self.contact_names, a_min, a_max, b_min, b_max, config.alpha1, config.alpha2
-        )
-        chosen: list[tuple[ConstraintFamily, float]] = []
-        if config.no_slip_enabled:
-            chosen.append((no_slip, config.no_slip_weight))
-        if config.joint_limits_enabled:
-            chosen.append((joint_limits, config.joint_limits_weight))
-        if config.fingertip_workspace_enabled:
-            chosen.append((fingertip_workspace, config.fingertip_workspace_weight))
-        if config.object_workspace_enabled:
-            if not isinstance(object_workspace, ObjectWorkspaceBarrier) or (
-                object_workspace.contact_names != self.contact_names
-            ):
-                raise ValueError(
-                    "'object_workspace': expected an ObjectWorkspaceBarrier of the contacts "
-                    f'{list(self.contact_names)} with object_workspace.enabled, got '
-                    f'{object_workspace!r}'
-                )
-            chosen.append((object_workspace, config.object_workspace_weight))
-        self.torque_rate: TorqueRateBound | None = None
-        if config.torque_rate_enabled:
-            self.torque_rate = TorqueRateBound(self.joint_names, config.torque_rate_max_step)
-            chosen.append((self.torque_rate, config.torque_rate_weight))
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
-        self.row_names: tuple[str, ...] = tuple(n for f in self.families for n in f.names)
+        self._results = ResultAssembler(self.families, self.actuator_limits, self.torque_rate)
+        self.row_names = self._results.row_names
         k = len(self.row_names)
         sizes = [len(family.names) for family in self.families]
-        ends = list(itertools.accumulate(sizes))
-        self._slices = [slice(end - size, end) for size, end in zip(sizes, ends, strict=True)]
-        self._row_family = np.repeat(np.arange(len(sizes), dtype=np.intp), sizes)
         weights = np.repeat(np.array([weight for _, weight in chosen], dtype=float), sizes)
 
         self._u_min = self.actuator_limits.lower
@@ -235,8 +182,6 @@ class SafetyFilter:
         )
         self.relaxed_problem = self.problem.with_slack(weights)
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
-        self._margin_names = (*self.row_names, *self.actuator_limits.names)
-        self._margin_index = {name: i for i, name in enumerate(self._margin_names)}
         self._last_good_u: np.ndarray | None = None
 
     @classmethod
@@ -304,10 +249,7 @@ class SafetyFilter:
 
     def margins(self, state: GraspState, u: np.ndarray) -> Margins:
         """Barrier values h per row name (families then actuator limits) at torque u."""
-        values = np.empty(len(self._margin_names))
-        with np.errstate(all='ignore'):
-            self._write_margins(state, np.asarray(u, dtype=float), values)
-        return Margins(self._margin_names, values, self._margin_index)
+        return self._results.margins(state, u)
 
     def assemble(self, state: GraspState, u_nom: np.ndarray) -> tuple[np.ndarray, bool]:
         """Write this tick's hard QP into :attr:`hard_qp`: what :meth:`solve` does first.
@@ -410,7 +352,7 @@ class SafetyFilter:
         A = self.problem.A
         lower = self.problem.lower
         with np.errstate(all='ignore'):
-            for family, rows in zip(self.families, self._slices, strict=True):
+            for family, rows in zip(self.families, self._results.slices, strict=True):
                 block = family.rows(state)
                 A[rows] = block.A
                 lower[rows] = block.lower
@@ -441,15 +383,6 @@ class SafetyFilter:
             status = FilterStatus.FALLBACK_NOMINAL
         return self._result(state, u, status, solve_time, iterations, active_set_steps)
 
-    def _write_margins(self, state: GraspState, u: np.ndarray, values: np.ndarray) -> None:
-        """Write every family's barrier values at u, then the box margins, into ``values``."""
-        for family, rows in zip(self.families, self._slices, strict=True):
-            values[rows] = family.values(state, u).h
-        # The box rows, joint by joint: u_j - u_min,j then u_max,j - u_j.
-        k = len(self.row_names)
-        np.subtract(u, self._u_min, out=values[k::2])
-        np.subtract(self._u_max, u, out=values[k + 1 :: 2])
-
     def _result(
         self,
         state: GraspState,
@@ -459,36 +392,8 @@ class SafetyFilter:
         iterations: int,
         active_set_steps: int = 0,
     ) -> FilterResult:
-        """Build the result for u*: margins, active rows, violated families."""
-        u.setflags(write=False)
-        k = len(self.row_names)
-        values = np.empty(len(self._margin_names))
-        # Residuals then box margins, side by side, for the active-row test.
-        slack = np.empty(len(self._margin_names))
-        with np.errstate(all='ignore'):
-            residual = np.subtract(self.problem.A @ u, self.problem.lower, out=slack[:k])
-            self._write_margins(state, u, values)
-        slack[k:] = values[k:]
-        relaxed_families: tuple[str, ...] = ()
-        worst = 0.0
-        # min() is NaN when a row is: NaN rows count as violated, as in the test below.
-        if k and not residual.min() >= -FEASIBILITY_TOLERANCE:
-            violated = ~(residual >= -FEASIBILITY_TOLERANCE)
-            relaxed_families = tuple(
-                self.families[i].family for i in np.unique(self._row_family[violated])
-            )
-            worst = float(np.max(-residual))
-        names = self._margin_names
-        active = tuple([names[i] for i in np.flatnonzero(slack <= ACTIVE_TOLERANCE).tolist()])
-        return FilterResult(
-            u=u,
-            status=status,
-            relaxed=status in _NOT_CERTIFIED,
-            relaxed_families=relaxed_families,
-            margins=Margins(names, values, self._margin_index),
-            active=active,
-            solve_time=solve_time,
-            iterations=iterations,
-            active_set_steps=active_set_steps,
-            max_violation=worst if worst == worst else float('inf'),  # NaN rows: unknown
+        """Return the result for u* on this tick's rows (margins and active rows when read)."""
+        rows = (self.problem.A, self.problem.lower)
+        return self._results.result(
+            state, u, status, rows, solve_time, iterations, active_set_steps
         )

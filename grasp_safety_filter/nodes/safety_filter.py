@@ -48,6 +48,7 @@ import numpy as np
 from grasp_safety_filter.control.hold_policy import HoldPolicy, InputPolicyConfig
 from grasp_safety_filter.control.safety_filter import (
     FilterResult,
+    Margins,
     SafetyFilter,
     SafetyFilterConfig,
 )
@@ -310,6 +311,7 @@ class SafetyFilterEndpoint:
         u_nom = inputs.nominal.effort
         state, model_time = self.inputs.state(stamp, inputs)
         start -= model_time  # the tick's time includes its model terms, whenever computed
+        disabled_margins: Margins | None = None  # filter off: the margins at u_nom
         try:
             if isinstance(state, Exception):
                 raise state
@@ -319,11 +321,13 @@ class SafetyFilterEndpoint:
                 filter_start = time.perf_counter()
                 result = self.filter.solve(state, u_nom)
                 filter_time = time.perf_counter() - filter_start
-                u, margins = result.u, result.margins
+                u = result.u
             else:
                 result = None
                 filter_time = 0.0
-                u, margins = u_nom, self.filter.margins(state, u_nom)
+                u = u_nom
+                # Computed here: a state the model rejects is rejected on this tick.
+                disabled_margins = self.filter.margins(state, u_nom)
         except (ValueError, np.linalg.LinAlgError) as error:
             return self._reject(
                 'state',
@@ -339,7 +343,10 @@ class SafetyFilterEndpoint:
         self.inputs.close(stamp)
         resumed_after = None if wall is None else self.input_watchdog.accepted(wall)
         outgoing = [stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u))]
+        # A result's margins and active rows are computed only when read: on the ticks
+        # that publish them.
         if self.rate.margins_due(stamp):
+            margins = disabled_margins if result is None else result.margins
             message = self.margin_stream.encode(self.msgs, t, margins.names, margins.array)
             outgoing.append(stamped(MARGINS, message))
         status = TickStatus.DISABLED if result is None else TickStatus.of(result.status)
@@ -351,6 +358,7 @@ class SafetyFilterEndpoint:
                 self.hold.diagnostic_values(now),
                 resumed_after,
             )
+            margins = disabled_margins if result is None else result.margins
             level, text, values = tick_status(result, margins, filter_time, tick_time, context)
             outgoing.append(self._status_message(t, level, text, values))
         self._last_outputs = outgoing

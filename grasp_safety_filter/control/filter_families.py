@@ -1,0 +1,85 @@
+"""The safety filter's barrier families: built from its configuration, the enabled ones chosen."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from grasp_safety_filter.control.constraints import (
+    ConstraintFamily,
+    FingertipWorkspaceBarrier,
+    FrictionPyramid,
+    JointLimitBarrier,
+    ObjectWorkspaceBarrier,
+    TorqueRateBound,
+)
+from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+
+
+def enabled_families(
+    config: SafetyFilterConfig,
+    joint_names: tuple[str, ...],
+    contact_names: Sequence[str],
+    q_min: Sequence[float] | np.ndarray,
+    q_max: Sequence[float] | np.ndarray,
+    mu: float | Sequence[float] | np.ndarray,
+    workspace: tuple[float, float, float, float],
+    object_workspace: ObjectWorkspaceBarrier | None,
+) -> tuple[list[tuple[ConstraintFamily, float]], tuple[str, ...], TorqueRateBound | None]:
+    """Build every family, validating its arguments, and keep the enabled ones.
+
+    The arguments are :class:`~grasp_safety_filter.control.safety_filter.SafetyFilter`'s
+    (``joint_names`` already validated by its actuator limits).
+
+    Returns:
+        The enabled families with their slack weights, in row order (no slip, joint
+        limits, fingertip workspace, object workspace, torque rate); the validated contact
+        names; the torque-rate family (None unless ``torque_rate.enabled``).
+
+    Raises:
+        ValueError: A malformed argument; the message names it.
+    """
+    # Validated by every family that uses them; built here so that a bad argument is
+    # reported even when its family is switched off.
+    no_slip = FrictionPyramid(
+        contact_names,
+        mu,
+        config.pyramid_faces,
+        config.normal_force_margin,
+        config.friction_margin,
+        config.cone,
+    )
+    contacts = no_slip.contact_names
+    joint_limits = JointLimitBarrier(joint_names, q_min, q_max, config.alpha1, config.alpha2)
+    try:
+        a_min, a_max, b_min, b_max = workspace
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"'workspace': expected (a_min, a_max, b_min, b_max), got {workspace!r}"
+        ) from None
+    fingertip_workspace = FingertipWorkspaceBarrier(
+        contacts, a_min, a_max, b_min, b_max, config.alpha1, config.alpha2
+    )
+    chosen: list[tuple[ConstraintFamily, float]] = []
+    if config.no_slip_enabled:
+        chosen.append((no_slip, config.no_slip_weight))
+    if config.joint_limits_enabled:
+        chosen.append((joint_limits, config.joint_limits_weight))
+    if config.fingertip_workspace_enabled:
+        chosen.append((fingertip_workspace, config.fingertip_workspace_weight))
+    if config.object_workspace_enabled:
+        if not isinstance(object_workspace, ObjectWorkspaceBarrier) or (
+            object_workspace.contact_names != contacts
+        ):
+            raise ValueError(
+                "'object_workspace': expected an ObjectWorkspaceBarrier of the contacts "
+                f'{list(contacts)} with object_workspace.enabled, got '
+                f'{object_workspace!r}'
+            )
+        chosen.append((object_workspace, config.object_workspace_weight))
+    torque_rate: TorqueRateBound | None = None
+    if config.torque_rate_enabled:
+        torque_rate = TorqueRateBound(joint_names, config.torque_rate_max_step)
+        chosen.append((torque_rate, config.torque_rate_weight))
+    return chosen, contacts, torque_rate
