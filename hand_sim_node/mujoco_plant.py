@@ -42,8 +42,8 @@ from hand_sim_node.mjcf import (
     MjcfOptions,
     OBJECT_BODY,
 )
-from hand_sim_node.plant import ContactReport, initial_state, Observation
-from hand_sim_node.simulator import NUMERICAL_FAILURE, SimState, StepReport
+from hand_sim_node.plant import ContactReport, Observation
+from hand_sim_node.simulator import initial_state, NUMERICAL_FAILURE, SimState, StepReport
 
 __all__ = ['OBJECT_DROPPED', 'ContactReport', 'MuJoCoPlant', 'MuJoCoUnavailableError']
 

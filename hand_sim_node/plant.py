@@ -30,7 +30,6 @@ from grasp_safety_filter.io.parameters import flatten_parameters
 from grasp_safety_filter.io.plant_schema import MUJOCO_PLANT, PLANTS, RIGID_PLANT
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
-from grasp_safety_filter.model.quaternion import rotation_matrix
 from hand_sim_node.config import SimConfig
 from hand_sim_node.events import EventLog
 from hand_sim_node.mjcf import MjcfOptions
@@ -141,25 +140,6 @@ class Plant(Protocol):
 
     def contact_report(self) -> ContactReport | None:
         """Return what the plant measures at the real contacts now; None: none (rigid)."""
-
-
-def initial_state(model: GraspModel, config: SimConfig) -> Observation:
-    """Return the configured initial grasp at rest, the joints projected onto exact contact.
-
-    The same state :meth:`Simulator.reset` starts from.
-    """
-    R_object_to_palm = rotation_matrix(config.initial_object_orientation)
-    q = model.project_to_contact(
-        config.initial_joint_positions, config.initial_object_position, R_object_to_palm
-    )
-    return SimState(
-        0.0,
-        q,
-        np.zeros(model.n_joints),
-        config.initial_object_position,
-        config.initial_object_orientation,
-        np.zeros(6),
-    )
 
 
 class RigidPlant:

@@ -158,6 +158,25 @@ def contact_velocity_residual(state: GraspState) -> np.ndarray:
     return state.J_h @ state.dq - state.G.T @ state.twist_object
 
 
+def initial_state(model: Any, config: SimConfig) -> SimState:
+    """Return the configured initial grasp at rest, the joints projected onto exact contact.
+
+    The state :meth:`Simulator.reset` and the plants start from.
+    """
+    R_object_to_palm = rotation_matrix(config.initial_object_orientation)
+    q = model.project_to_contact(
+        config.initial_joint_positions, config.initial_object_position, R_object_to_palm
+    )
+    return SimState(
+        0.0,
+        q,
+        np.zeros(model.n_joints),
+        config.initial_object_position,
+        config.initial_object_orientation,
+        np.zeros(6),
+    )
+
+
 class Simulator:
     """Fixed-step simulator of the grasp model under a joint torque held over each step.
 
@@ -193,19 +212,7 @@ class Simulator:
         contact manifold (every fingertip touching its face exactly), at rest.
         """
         if state is None:
-            config = self.config
-            R_object_to_palm = rotation_matrix(config.initial_object_orientation)
-            q = self.model.project_to_contact(
-                config.initial_joint_positions, config.initial_object_position, R_object_to_palm
-            )
-            state = SimState(
-                0.0,
-                q,
-                np.zeros(self._m),
-                config.initial_object_position,
-                config.initial_object_orientation,
-                np.zeros(6),
-            )
+            state = initial_state(self.model, self.config)
         self._t0 = state.t
         self._step_index = 0
         self._state = state
