@@ -59,10 +59,8 @@ def object_figure(run: RunData) -> Figure:
     panels[-1].set_xlabel('t [s]')
     summary = tracking.summary()
     if tracking.has_reference:
-        detail = (
-            'RMS error: position {:.3g} m, orientation {:.3g} rad'.format(
-                summary['position_error_m']['rms'], summary['orientation_error_rad']['rms']
-            )
+        detail = 'RMS error: position {:.3g} m, orientation {:.3g} rad'.format(
+            summary['position_error_m']['rms'], summary['orientation_error_rad']['rms']
         )
     else:
         detail = NO_REFERENCE

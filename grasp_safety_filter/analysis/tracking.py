@@ -169,3 +169,16 @@ class TrackingReader:
             position_error=np.linalg.norm(p[in_pose] - ref_p[in_ref], axis=1),
             orientation_error=rotation_angle(R[in_pose], ref_R[in_ref]),
         )
+
+
+def tracking_text(entry: dict[str, Any]) -> str:
+    """Return the report line of a summary's ``object_tracking`` entry."""
+    position, orientation = entry['position_error_m'], entry['orientation_error_rad']
+    if position is None or orientation is None:
+        return f'object tracking: {NO_REFERENCE}'
+    return (
+        'object tracking error (RMS / max / final): position '
+        f'{position["rms"]:.4g} / {position["max"]:.4g} / {position["final"]:.4g} m, '
+        f'orientation {orientation["rms"]:.4g} / {orientation["max"]:.4g} / '
+        f'{orientation["final"]:.4g} rad'
+    )
