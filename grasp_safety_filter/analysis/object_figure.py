@@ -8,6 +8,7 @@ tracking errors (:mod:`~grasp_safety_filter.analysis.tracking`); a bag without
 
 from __future__ import annotations
 
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from grasp_safety_filter.analysis.run_data import RunData
@@ -20,6 +21,9 @@ OBJECT_PANELS: tuple[tuple[str, str], ...] = (
     ('z', 'm'),
     ('yaw', 'rad'),
 )
+#: Smallest vertical span per unit: a coordinate that stays put (rounding noise of 1e-16 m)
+#: is drawn flat instead of magnified to fill the panel.
+MIN_SPAN = {'m': 1e-3, 'rad': 1e-2}
 
 
 def object_figure(run: RunData) -> Figure:
@@ -54,6 +58,7 @@ def object_figure(run: RunData) -> Figure:
                 label='reference',
             )
         axes.set_ylabel(f'{label} [{unit}]')
+        _at_least(axes, MIN_SPAN[unit])
         _stop_marker(axes, run)
     panels[0].legend(loc='best')
     panels[-1].set_xlabel('t [s]')
@@ -66,3 +71,11 @@ def object_figure(run: RunData) -> Figure:
         detail = NO_REFERENCE
     figure.suptitle(f'{run.mode}: object pose in the palm frame vs reference\n({detail})')
     return figure
+
+
+def _at_least(axes: Axes, span: float) -> None:
+    """Widen the panel's vertical range to ``span`` around its middle if it is narrower."""
+    low, high = axes.get_ylim()
+    if high - low < span:
+        middle = 0.5 * (low + high)
+        axes.set_ylim(middle - 0.5 * span, middle + 0.5 * span)
