@@ -25,7 +25,7 @@ FREQUENCY = 1.0
 
 
 def _matrix_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
-    """The textbook unit-quaternion rotation matrix (written out, not the package's)."""
+    """Return the textbook unit-quaternion rotation matrix (written out, not the package's)."""
     return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
