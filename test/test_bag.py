@@ -54,6 +54,10 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
         (topics.OBJECT_ODOM, m.odometry_to_msg(msgs, t, np.ones(3), np.eye(3), np.ones(6))),
         (topics.CONTACTS, m.contacts_to_msg(msgs, contacts, CONTACT_NAMES)),
         (topics.OBJECT_REFERENCE, m.reference_to_msg(msgs, t, [0.0], [reference])),
+        (
+            topics.OBJECT_REFERENCE_SAMPLE,
+            m.odometry_to_msg(msgs, t, np.zeros(3), np.eye(3), np.zeros(6)),
+        ),
         (topics.EFFORT_NOMINAL, m.effort_to_msg(msgs, t, JOINTS, rng.normal(size=9))),
         (topics.EFFORT_COMMAND, m.effort_to_msg(msgs, t, JOINTS, rng.normal(size=9))),
         (topics.MARGINS, m.margins_to_msg(msgs, t, ['a', 'b'], rng.normal(size=2))),

@@ -429,8 +429,13 @@ def test_nominal_controller_follows_a_topic_reference_and_reports_it_stale(param
     nominal.on_reference(through_cdr(m.reference_to_msg(MSGS, 0.0, [0.0], [target])))
     nominal.on_joint_states(joints)
     outgoing = nominal.on_odom(odometry)
-    assert [o.topic for o in outgoing] == [topics.EFFORT_NOMINAL]
+    assert [o.topic for o in outgoing] == [topics.EFFORT_NOMINAL, topics.OBJECT_REFERENCE_SAMPLE]
     u = m.effort_from_msg(through_cdr(outgoing[0].msg), sim.model.joint_names).effort
+    # The sample it tracked is published as it was received from the planner.
+    tracked = m.odometry_from_msg(through_cdr(outgoing[1].msg))
+    np.testing.assert_allclose(tracked.p_object_in_palm, target.p_object_in_palm, atol=1e-12)
+    np.testing.assert_allclose(tracked.R_object_to_palm, target.R_object_to_palm, atol=1e-12)
+    np.testing.assert_allclose(tracked.twist_object, target.twist_object, atol=1e-12)
     state = sim.simulator.grasp_state()
     sample = ReferenceSample.from_pose(
         Pose(target.p_object_in_palm, target.R_object_to_palm), target.twist_object
@@ -472,7 +477,7 @@ def tick_inputs(params):
     sim, joints, odometry = first_state_messages(params)
     nominal = make_nominal(params)
     nominal.on_joint_states(joints)
-    (effort_nominal,) = nominal.on_odom(odometry)
+    effort_nominal, _reference_sample = nominal.on_odom(odometry)
     return sim, joints, odometry, through_cdr(effort_nominal.msg)
 
 

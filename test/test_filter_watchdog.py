@@ -74,7 +74,7 @@ class TickSource:
         )
         state = {o.topic: o.msg for o in sim.start()}
         nominal.on_joint_states(state[topics.JOINT_STATES])
-        (effort,) = nominal.on_odom(state[topics.OBJECT_ODOM])
+        effort, _reference_sample = nominal.on_odom(state[topics.OBJECT_ODOM])
         self.model = model
         self.names = list(model.joint_names)
         self.joints = m.joint_state_from_msg(state[topics.JOINT_STATES], self.names)

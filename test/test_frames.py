@@ -67,7 +67,7 @@ def test_configured_frames_reach_the_odometry_and_are_accepted_downstream():
     assert odometry.child_frame_id == 'grasped_cube'
     nominal = make_nominal(params)
     assert nominal.on_joint_states(joints) == []
-    (effort_nominal,) = nominal.on_odom(odometry)
+    effort_nominal, _reference_sample = nominal.on_odom(odometry)
     assert effort_nominal.topic == topics.EFFORT_NOMINAL
     safety_filter = make_filter(params)
     assert safety_filter.on_joint_states(joints) == []

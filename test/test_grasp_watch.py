@@ -330,10 +330,10 @@ def test_the_nominal_controller_holds_gravity_and_waits_for_a_valid_grasp(params
     t1 = t0 + 0.25
     messages = good.messages(names, t1, U_NOM)
     nominal.on_joint_states(messages[topics.JOINT_STATES])
-    (effort,) = nominal.on_odom(messages[topics.OBJECT_ODOM])
+    effort, _reference_sample = nominal.on_odom(messages[topics.OBJECT_ODOM])
     fresh = make_nominal(params)
     fresh.on_joint_states(messages[topics.JOINT_STATES])
-    (expected,) = fresh.on_odom(messages[topics.OBJECT_ODOM])
+    expected, _reference_sample = fresh.on_odom(messages[topics.OBJECT_ODOM])
     np.testing.assert_array_equal(
         m.effort_from_msg(effort.msg, names).effort, m.effort_from_msg(expected.msg, names).effort
     )

@@ -20,12 +20,14 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 import numpy as np
 
+from grasp_safety_filter.analysis.object_figure import object_figure
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.files import write_file
 from grasp_safety_filter.model.fingers import all_joints, Finger
 
-#: The figures of a run, in :func:`plot_run`'s order (torques only with commands).
-FIGURE_FILES = ('contacts.png', 'joints.png', 'friction.png', 'torques.png')
+#: The figures of a run, in :func:`plot_run`'s order (torques only with commands, object
+#: only with ``/object/odom``).
+FIGURE_FILES = ('contacts.png', 'joints.png', 'friction.png', 'torques.png', 'object.png')
 INFEASIBLE = {'color': '0.85', 'zorder': 0}
 # Symmetric grasps give identical curves; line styles keep each one visible.
 LINE_STYLES = ('-', '--', ':', '-.')
@@ -256,6 +258,8 @@ def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = Non
     ]
     if run.t_command.size:
         paths.append(plot_torques(run, out_dir / 'torques.png', fingers))
+    if run.tracking is not None:
+        paths.append(_save(object_figure(run), out_dir / 'object.png'))
     return paths
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from grasp_safety_filter.analysis.tracking import tracking_text
 from grasp_safety_filter.analysis.verdict import (
     expected_verdict,
     ExpectedVerdict,
@@ -39,6 +40,8 @@ def print_summary(
         f'{k} {v:.4g}' if v is not None else f'{k} -inf' for k, v in summary['min_margin'].items()
     )
     print(f'  smallest margins: {margins}')
+    if 'object_tracking' in summary:
+        print(f'  {tracking_text(summary["object_tracking"])}')
     if 'filter' in summary:
         _print_filter(summary['filter'])
     print(f'  {verdict.text()}')

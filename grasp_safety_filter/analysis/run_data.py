@@ -28,6 +28,7 @@ import numpy as np
 from grasp_safety_filter.analysis.barriers import BarrierReader
 from grasp_safety_filter.analysis.columns import Column
 from grasp_safety_filter.analysis.filter_statuses import FilterStatuses, FilterStatusReader
+from grasp_safety_filter.analysis.tracking import ObjectTracking, TRACKING_TOPICS, TrackingReader
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import bag_topics, BagReadError, iter_bag
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
@@ -93,6 +94,8 @@ class RunData:
             None if not read.
         plant_events: The real contact events of a plant that measures them (MuJoCo): the
             last record the simulator published; None for the rigid plant.
+        tracking: The object pose against the reference the nominal controller tracked
+            (:mod:`~grasp_safety_filter.analysis.tracking`); None without ``/object/odom``.
     """
 
     scenario: dict[str, Any]
@@ -114,6 +117,7 @@ class RunData:
     barriers: dict[str, Any] | None = None
     xi_co: np.ndarray | None = None
     plant_events: PlantEvents | None = None
+    tracking: ObjectTracking | None = None
 
     @property
     def t_filter(self) -> np.ndarray:
@@ -214,6 +218,7 @@ ANALYSED_TOPICS = (
     topics.EFFORT_NOMINAL,
     topics.EFFORT_COMMAND,
     topics.DIAGNOSTICS,
+    *TRACKING_TOPICS,
 )
 
 
@@ -307,6 +312,7 @@ def _load_run(bag: Path) -> RunData:
     m = len(joint_names)
     series = _Series(m, len(contact_names))
     diagnostics = _Diagnostics(list(contact_names))
+    tracking = TrackingReader()
     barriers = None
     wanted = [name for name in ANALYSED_TOPICS if name != topics.SCENARIO]
     margins = recorded.get(topics.MARGINS)
@@ -330,6 +336,8 @@ def _load_run(bag: Path) -> RunData:
             series.efforts[topic].append(effort_from_msg(msg, joint_names, source=topic).effort)
         elif topic == topics.DIAGNOSTICS:
             diagnostics.add(msg)
+        elif topic in TRACKING_TOPICS:
+            tracking.add(topic, msg)
         elif barriers is not None:
             barriers.add(msg, topic)
     for topic, column in (
@@ -338,7 +346,9 @@ def _load_run(bag: Path) -> RunData:
     ):
         if not len(column):
             raise RunDataError(f'{bag}: no messages on {topic}; the analysis needs it')
-    return _assemble(bag, scenario, series, diagnostics, barriers)
+    run = _assemble(bag, scenario, series, diagnostics, barriers)
+    run.tracking = tracking.finish()
+    return run
 
 
 def _assemble(

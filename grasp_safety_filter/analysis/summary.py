@@ -20,7 +20,17 @@ Keys (later additions never rename one)::
      "barriers": {"messages", "unreadable", "min_h": {row family: h}},
      "plant",
      "contact_events": {"contact_lost": {contact: t}, "object_dropped",
-                        "slip_distance": {contact: m}}}
+                        "slip_distance": {contact: m}},
+     "object_tracking": {"reference", "samples",
+                         "position_error_m": {"rms", "max", "final"},
+                         "orientation_error_rad": {"rms", "max", "final"}}}
+
+``object_tracking`` compares the object pose (``/object/odom``) with the reference sample
+the nominal controller tracked at the same stamp (``/object/reference_sample``): position
+error norm and rotation angle between the orientations
+(:mod:`~grasp_safety_filter.analysis.tracking`); in a bag without that topic
+``reference`` is ``"no reference recorded"`` and the errors are null. Absent from a bag
+without ``/object/odom``.
 
 ``plant`` is ``"rigid"`` (our model) or the plant whose real contact events the simulator
 published (``"mujoco"``); only then is ``contact_events`` there: per contact when it was
@@ -254,6 +264,8 @@ def summarize(run: RunData) -> dict[str, Any]:
         }
     if run.mode == 'filtered':
         summary['filter'] = filter_summary(run)
+    if run.tracking is not None:
+        summary['object_tracking'] = run.tracking.summary()
     if run.barriers is not None:
         summary['barriers'] = {
             **run.barriers,

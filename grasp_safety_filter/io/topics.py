@@ -17,6 +17,8 @@ QoS choices:
   subscription matches every reliable publisher, volatile or transient local; requesting
   transient local would silently drop planners that publish volatile, the
   ``ros2 topic pub`` default.
+- ``/object/reference_sample``: the stream profile; it is recorded for the analysis
+  (object tracking error) and no node subscribes to it, so the lockstep never waits on it.
 - ``/diagnostics``: the ROS default profile (reliable, volatile, keep last 10), which
   ``diagnostic_aggregator`` and ``rqt_robot_monitor`` subscribe with.
 - ``/clock``: best effort, volatile, keep last 1, as rclcpp's ``ClockQoS`` and the
@@ -54,6 +56,7 @@ JOINT_STATES = '/hand/joint_states'
 OBJECT_ODOM = '/object/odom'
 CONTACTS = '/hand/contacts'
 OBJECT_REFERENCE = '/object/reference'
+OBJECT_REFERENCE_SAMPLE = '/object/reference_sample'
 EFFORT_NOMINAL = '/hand/effort_nominal'
 EFFORT_COMMAND = '/hand/effort_command'
 DIAGNOSTICS = '/diagnostics'
@@ -194,6 +197,15 @@ TOPICS: tuple[TopicSpec, ...] = (
         (PLANNER,),
         STREAM_QOS,
         "Desired object pose, twist and acceleration in the palm frame, joint 'object'.",
+    ),
+    TopicSpec(
+        OBJECT_REFERENCE_SAMPLE,
+        'nav_msgs/msg/Odometry',
+        (NOMINAL_CONTROLLER_NODE,),
+        STREAM_QOS,
+        'The reference sample the nominal controller tracked on its tick, stamped as the '
+        'tick: desired object pose in the palm frame, desired twist in the desired object '
+        'frame (for tracking error; nothing waits on it).',
     ),
     TopicSpec(
         EFFORT_NOMINAL,

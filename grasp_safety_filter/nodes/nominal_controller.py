@@ -7,6 +7,7 @@ same stamp t are in hand::
     /hand/joint_states (t) + /object/odom (t)
         ──▶ GraspModel.state ──▶ reference sample r(t) ──▶ NominalController.compute
         ──▶ /hand/effort_nominal stamped t (u_nom by joint name, N·m)
+        ──▶ /object/reference_sample stamped t (the r(t) it tracked, nav_msgs/Odometry)
 
 The reference is the paper's ``r(t)`` around the first object pose received
 (``reference.source: paper``), or the planner's ``/object/reference``
@@ -26,6 +27,12 @@ naming each failing contact or joint (``grasp.*`` values). The reference (paper:
 the object pose) and the null-space posture are taken at the first valid state. The change
 is logged once (:meth:`NominalControllerEndpoint.take_log`). Only the first state is
 checked: at run time, lost contacts are the safety filter's to report and hold.
+
+Each tick that computes ``u_nom`` from the reference also publishes the sample it used on
+``/object/reference_sample`` (desired pose in the palm frame, desired twist in the desired
+object frame, as ``/object/odom``), so a bag holds the object's pose and its reference at the
+same stamps (the analysis reports the tracking error). Gravity-compensation ticks before a
+valid grasp track nothing and publish none.
 
 An input that does not parse (non-finite values, wrong lengths, unknown or missing joint
 names, a non-unit quaternion, a wrong frame) yields a WARN status naming the problem and no
@@ -60,6 +67,7 @@ from grasp_safety_filter.io.messages import (
     nanoseconds_to_seconds,
     ObjectStateData,
     odometry_from_msg,
+    odometry_to_msg,
     reference_from_msg,
     ReferenceTrajectory,
     seconds_to_nanoseconds,
@@ -70,6 +78,7 @@ from grasp_safety_filter.io.topics import (
     JOINT_STATES,
     OBJECT_ODOM,
     OBJECT_REFERENCE,
+    OBJECT_REFERENCE_SAMPLE,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.grasp_watch import (
@@ -229,7 +238,8 @@ class NominalControllerEndpoint:
             return self._rejected(MessageError(f'u_nom is not finite: {output.u.tolist()}'), t)
         self.last_output = output
         outgoing = [
-            stamped(EFFORT_NOMINAL, effort_to_msg(self.msgs, t, self._joint_names, output.u))
+            stamped(EFFORT_NOMINAL, effort_to_msg(self.msgs, t, self._joint_names, output.u)),
+            stamped(OBJECT_REFERENCE_SAMPLE, self._reference_msg(t, sample)),
         ]
         if output.reference_stale:
             outgoing.append(self._stale_reference_status(t))
@@ -252,6 +262,19 @@ class NominalControllerEndpoint:
             # A point is as fresh as the time it became active.
             self.reference.update(sample, trajectory.t + float(trajectory.time_from_start[k]))
         return self.reference.sample(t)
+
+    def _reference_msg(self, t: float, sample: ReferenceSample) -> Any:
+        """Return the tracked sample as ``nav_msgs/Odometry``, framed as ``/object/odom``."""
+        pose = sample.pose
+        return odometry_to_msg(
+            self.msgs,
+            t,
+            pose.p_in_palm,
+            pose.R_to_palm,
+            sample.twist,
+            frame_id=self.model.palm_frame,
+            child_frame_id=self.model.object_frame,
+        )
 
     def _stale_reference_status(self, t: float) -> Outgoing:
         reference = self.reference

@@ -5,7 +5,9 @@ config/paper_scenario.yaml -p use_sim_time:=true``.
 
 Subscribes to ``/hand/joint_states``, ``/object/odom`` and, with ``reference.source:
 topic``, ``/object/reference`` (a planner's ``trajectory_msgs/MultiDOFJointTrajectory`` of
-the joint ``object``, palm frame); publishes ``/hand/effort_nominal`` and ``/diagnostics``.
+the joint ``object``, palm frame); publishes ``/hand/effort_nominal``,
+``/object/reference_sample`` (each tick's reference sample, for the analysis) and
+``/diagnostics``.
 Everything else is
 :class:`grasp_safety_filter.nodes.nominal_controller.NominalControllerEndpoint`.
 
@@ -30,6 +32,7 @@ from grasp_safety_filter.io.topics import (
     JOINT_STATES,
     OBJECT_ODOM,
     OBJECT_REFERENCE,
+    OBJECT_REFERENCE_SAMPLE,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
@@ -43,7 +46,9 @@ class NominalControllerNode(EndpointNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(
-            NOMINAL_CONTROLLER_NODE, publishes=(EFFORT_NOMINAL, DIAGNOSTICS), **kwargs
+            NOMINAL_CONTROLLER_NODE,
+            publishes=(EFFORT_NOMINAL, OBJECT_REFERENCE_SAMPLE, DIAGNOSTICS),
+            **kwargs,
         )
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         config = NominalConfig.from_parameters(self.parameters)
