@@ -8,6 +8,7 @@ import numpy as np
 
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
+    box_rows,
     check_limits_ordered,
     ConstraintRows,
     finite_vector,
@@ -60,12 +61,8 @@ class ActuatorLimits:
             for joint in self.joint_names
             for side in ('lower', 'upper')
         )
-        A = np.zeros((2 * m, m))
-        A[0::2] = np.eye(m)
-        A[1::2] = -np.eye(m)
-        A.setflags(write=False)
-        self._A = A
-        self._lower_rows = np.column_stack((self.lower, -self.upper)).ravel()
+        self._A, self._lower_rows = box_rows(self.lower, self.upper)
+        self._A.setflags(write=False)
         self._lower_rows.setflags(write=False)
 
     def rows(self, state: GraspState | None = None) -> ConstraintRows:

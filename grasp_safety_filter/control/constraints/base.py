@@ -55,6 +55,31 @@ class BarrierValues(NamedTuple):
     names: tuple[str, ...]
 
 
+def box_rows(u_min: np.ndarray, u_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Return a box as rows ``B u >= c``: ``u_j >= u_min,j``, ``-u_j >= -u_max,j`` per joint.
+
+    Joint-major: joint j's lower row at 2 j, its upper row at 2 j + 1. ``B`` depends only on
+    the number of joints (:func:`box_matrix`), ``c`` on the bounds (:func:`box_lower`).
+    """
+    return box_matrix(u_min.shape[0]), box_lower(u_min, u_max)
+
+
+def box_matrix(m: int) -> np.ndarray:
+    """Return ``B`` of :func:`box_rows` for m joints, shape (2 m, m): ``e_j`` and ``-e_j``."""
+    B = np.zeros((2 * m, m))
+    B[0::2] = np.eye(m)
+    B[1::2] = -np.eye(m)
+    return B
+
+
+def box_lower(u_min: np.ndarray, u_max: np.ndarray) -> np.ndarray:
+    """Return ``c`` of :func:`box_rows`, shape (2 m,): ``u_min,j`` and ``-u_max,j`` interleaved."""
+    c = np.empty(2 * u_min.shape[0])
+    c[0::2] = u_min
+    c[1::2] = -u_max
+    return c
+
+
 @runtime_checkable
 class ConstraintFamily(Protocol):
     """What the safety filter needs from a constraint family.

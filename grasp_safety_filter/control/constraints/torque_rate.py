@@ -8,6 +8,8 @@ import numpy as np
 
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
+    box_lower,
+    box_matrix,
     ConstraintRows,
     finite_scalar,
     finite_vector,
@@ -54,11 +56,8 @@ class TorqueRateBound:
             for joint in self.joint_names
             for side in ('decrease', 'increase')
         )
-        A = np.zeros((2 * m, m))
-        A[0::2] = np.eye(m)
-        A[1::2] = -np.eye(m)
-        A.setflags(write=False)
-        self._A = A
+        self._A = box_matrix(m)
+        self._A.setflags(write=False)
         self._vacuous = ConstraintRows(np.zeros((2 * m, m)), np.zeros(2 * m), self.names)
         self.previous: np.ndarray | None = None
 
@@ -74,9 +73,7 @@ class TorqueRateBound:
         """Rows ``u_j >= u_prev,j - du_max`` and ``-u_j >= -u_prev,j - du_max``."""
         if self.previous is None:
             return self._vacuous
-        lower = np.column_stack(
-            (self.previous - self.max_step, -self.previous - self.max_step)
-        ).ravel()
+        lower = box_lower(self.previous - self.max_step, self.previous + self.max_step)
         return ConstraintRows(self._A, lower, self.names)
 
     def values(self, state: GraspState | None, u: np.ndarray) -> BarrierValues:

@@ -40,6 +40,7 @@ from typing import NamedTuple
 import numpy as np
 
 # The relaxed problem's slack normalisation, one definition for every form of it.
+from grasp_safety_filter.control.constraints.base import box_rows
 from grasp_safety_filter.control.qp import ROW_NORM_FLOOR
 from grasp_safety_filter.control.qp_metric import (
     metric_matrix,
@@ -63,18 +64,6 @@ class SolutionStatus(str, Enum):
     """A finite ``u`` the backend could not prove optimal (a solver's last iterate)."""
     FAILED = 'failed'
     """No usable answer: iteration limit, numerical trouble or a non-finite result."""
-
-
-def box_rows(u_min: np.ndarray, u_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Return the box as rows ``B u >= c``: ``u_j >= u_min,j``, ``-u_j >= -u_max,j`` per joint."""
-    m = u_min.shape[0]
-    B = np.zeros((2 * m, m))
-    B[0::2] = np.eye(m)
-    B[1::2] = -np.eye(m)
-    c = np.empty(2 * m)
-    c[0::2] = u_min
-    c[1::2] = -u_max
-    return B, c
 
 
 @dataclass(frozen=True, eq=False)
