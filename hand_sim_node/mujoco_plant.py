@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.errors import ConfigError
-from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.model.grasp_model import GraspModel, state_of
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.config import SimConfig
 from hand_sim_node.events import EventLog, EventMonitor
@@ -189,10 +189,7 @@ class MuJoCoPlant:
     def grasp_state(self) -> GraspState:
         """Our model's terms at MuJoCo's current state (computed once per state)."""
         if self._grasp_state is None:
-            s = self._observation
-            self._grasp_state = self.model.state(
-                s.t, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object
-            )
+            self._grasp_state = state_of(self.model, self._observation)
         return self._grasp_state
 
     def contacts(self) -> ContactReport:

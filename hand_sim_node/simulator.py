@@ -40,6 +40,7 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.model.grasp_model import state_of
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.quaternion import (
     from_rotation_matrix,
@@ -244,10 +245,7 @@ class Simulator:
     def grasp_state(self) -> GraspState:
         """Model terms of the current state (computed once per state)."""
         if self._grasp_state is None:
-            s = self._state
-            self._grasp_state = self.model.state(
-                s.t, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object
-            )
+            self._grasp_state = state_of(self.model, self._state)
         return self._grasp_state
 
     # -------------------------------------------------------------------------- dynamics

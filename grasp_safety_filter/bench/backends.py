@@ -22,6 +22,7 @@ from grasp_safety_filter.bench.recorded_run import Scenario, Tick
 from grasp_safety_filter.bench.replay import CERTIFIED, statistics
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import FilterStatus, SafetyFilter
+from grasp_safety_filter.model.grasp_model import state_of
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,14 +73,7 @@ def replay_backends(
         for j in np.roll(np.arange(k), -(i % k)):
             c0 = cpu_clock()
             t0 = clock()
-            state = model.state(
-                tick.t,
-                tick.q,
-                tick.dq,
-                tick.p_object_in_palm,
-                tick.R_object_to_palm,
-                tick.twist_object,
-            )
+            state = state_of(model, tick)
             result = filters[j].solve(state, tick.u_nom)
             t1 = clock()
             c1 = cpu_clock()

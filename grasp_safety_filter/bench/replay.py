@@ -16,6 +16,7 @@ from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
 )
+from grasp_safety_filter.model.grasp_model import state_of
 
 #: Timed pieces of a tick, in table order: JSON key and label.
 COMPONENTS: dict[str, str] = {
@@ -133,14 +134,7 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
         # (~2 us a read here) is read outside the wall-clock interval it brackets.
         c0 = cpu_clock()
         t0 = clock()
-        state = model.state(
-            tick.t,
-            tick.q,
-            tick.dq,
-            tick.p_object_in_palm,
-            tick.R_object_to_palm,
-            tick.twist_object,
-        )
+        state = state_of(model, tick)
         t1 = clock()
         c1 = cpu_clock()
         result = safety_filter.solve(state, tick.u_nom)

@@ -457,3 +457,13 @@ class GraspModel:
             xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
             xi_co_rate_terms=partial(self._contact_stack.object_rate_terms, geometry, rates),
         )
+
+
+def state_of(model: Any, sample: Any) -> GraspState:
+    """Return ``model.state`` at a sample of the plant (a simulator state, a recorded tick).
+
+    ``sample`` has ``t``, ``q``, ``dq``, ``p_object_in_palm``, ``R_object_to_palm`` and
+    ``twist_object``; ``model`` is a :class:`GraspModel` (or anything with its ``state``).
+    """
+    s = sample
+    return model.state(s.t, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
