@@ -25,6 +25,7 @@ of the package works, and asking for this plant raises :class:`MuJoCoUnavailable
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from types import ModuleType
 from typing import Any
 
@@ -271,6 +272,22 @@ class MuJoCoPlant:
         return self._observation
 
     # -------------------------------------------------------------------------- contacts
+    def _fingertip_contacts(self) -> Iterator[tuple[int, Any, np.ndarray]]:
+        """Each active MuJoCo contact of a fingertip with the object, at the current state.
+
+        Yields ``(i, contact, wrench)``: the fingertip's contact index, MuJoCo's contact, and
+        its force and torque in MuJoCo's contact frame (one buffer, rewritten per contact).
+        """
+        mj, data = self.mj_model, self.mj_data
+        wrench = np.zeros(6)
+        for c in range(data.ncon):
+            contact = data.contact[c]
+            i = self._pair(contact)
+            if i is None or contact.efc_address < 0:
+                continue
+            self._mujoco.mj_contactForce(mj, data, c, wrench)
+            yield i, contact, wrench
+
     def _pair(self, contact: Any) -> int | None:
         """Return the index of the fingertip of a MuJoCo contact with the object, or None."""
         geoms = {int(contact.geom1), int(contact.geom2)}
@@ -287,15 +304,8 @@ class MuJoCoPlant:
         ``state.R_contact_to_palm`` (z along the fingertip normal into the object), summed
         over MuJoCo's contacts of the pair; 0 without one.
         """
-        mujoco, mj, data = self._mujoco, self.mj_model, self.mj_data
         force_in_palm = np.zeros((self.model.n_contacts, 3))
-        wrench = np.zeros(6)
-        for c in range(data.ncon):
-            contact = data.contact[c]
-            i = self._pair(contact)
-            if i is None or contact.efc_address < 0:
-                continue
-            mujoco.mj_contactForce(mj, data, c, wrench)
+        for i, contact, wrench in self._fingertip_contacts():
             # The force of geom1 on geom2, in the contact frame whose rows are its axes
             # (the first the normal from geom1 to geom2).
             on_geom2 = np.asarray(contact.frame).reshape(3, 3).T @ wrench[:3]
@@ -314,17 +324,11 @@ class MuJoCoPlant:
         normal = np.zeros(n)
         tangential = np.zeros(n)
         slip_speed = np.zeros(n)
-        wrench = np.zeros(6)
         for i, geom in enumerate(self.fingertip_geoms):
             distance[i] = mujoco.mj_geomDistance(
                 mj, data, int(geom), self.object_geom, self.distance_limit, None
             )
-        for c in range(data.ncon):
-            contact = data.contact[c]
-            i = self._pair(contact)
-            if i is None or contact.efc_address < 0:
-                continue
-            mujoco.mj_contactForce(mj, data, c, wrench)
+        for i, contact, wrench in self._fingertip_contacts():
             normal[i] += wrench[0]
             tangential[i] += float(np.hypot(wrench[1], wrench[2]))
             # Relative velocity of the fingertip's material point and the object's at the
