@@ -37,6 +37,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+from grasp_safety_filter.io.diagnostic_keys import Key
 from grasp_safety_filter.io.messages import (
     bounded_text,
     byte_value,
@@ -229,6 +230,8 @@ class EndpointNode(Node):
 
     def _log_statuses(self, msg: Any) -> None:
         for status in msg.status:
+            if any(item.key == Key.GRASP_VALID for item in status.values):
+                continue  # the grasp check's: its changes are logged once (log_lines)
             level = byte_value(status.level)
             text = f'{status.name}: {status.message}'
             if level == DiagnosticLevel.ERROR:

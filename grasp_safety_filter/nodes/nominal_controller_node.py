@@ -24,7 +24,6 @@ from collections.abc import Mapping
 from typing import Any
 
 from grasp_safety_filter.control.nominal import NominalConfig
-from grasp_safety_filter.io.diagnostic_keys import Key
 from grasp_safety_filter.io.schemas import NOMINAL_CONTROLLER_NODE
 from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
@@ -67,12 +66,6 @@ class NominalControllerNode(EndpointNode):
         """Publish a tick's answer; log the grasp check's changes (once each)."""
         self.publish(outgoing)
         self.log_lines(self.endpoint.take_log())
-
-    def _log_statuses(self, msg: Any) -> None:
-        """Log WARN and ERROR statuses, except the grasp check's (logged once by answer)."""
-        if any(Key.GRASP_VALID in {item.key for item in status.values} for status in msg.status):
-            return
-        super()._log_statuses(msg)
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
         """Apply new gains, paper reference shape, topic reference timeout or gap tolerance."""

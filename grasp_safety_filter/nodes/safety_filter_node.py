@@ -47,7 +47,6 @@ from rclpy.clock import Clock, ClockType
 
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
-from grasp_safety_filter.io.diagnostic_keys import GRASP_STATUSES, Key
 from grasp_safety_filter.io.schemas import SAFETY_FILTER_NODE
 from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
@@ -123,14 +122,6 @@ class SafetyFilterNode(EndpointNode):
         """Publish a tick's answer; log the grasp check's changes (once each)."""
         self.publish(outgoing)
         self.log_lines(self.endpoint.take_log())
-
-    def _log_statuses(self, msg: Any) -> None:
-        """Log WARN and ERROR statuses, except the grasp check's (logged once by answer)."""
-        for status in msg.status:
-            values = {item.key: item.value for item in status.values}
-            if values.get(Key.STATUS) in {grasp.value for grasp in GRASP_STATUSES}:
-                return
-        super()._log_statuses(msg)
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
         """Rebuild the filter, update the hold policy or switch the filter on or off (logged)."""
