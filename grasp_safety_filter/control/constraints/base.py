@@ -55,6 +55,22 @@ class BarrierValues(NamedTuple):
     names: tuple[str, ...]
 
 
+def planar_box(lower: np.ndarray, upper: np.ndarray) -> dict[str, np.ndarray]:
+    """:class:`BoxBarrier`'s ``index``, ``sign`` and ``bound`` for one 2-D box per contact.
+
+    ``lower`` and ``upper`` have shape (n, 2): contact i's coordinates ``(x_i, y_i)`` (at
+    ``2 i`` and ``2 i + 1`` of the flattened coordinates) stay in its box. Four rows per
+    contact, contact-major: ``x_min, x_max, y_min, y_max``.
+    """
+    n = lower.shape[0]
+    first = 2 * np.arange(n)
+    return {
+        'index': np.column_stack((first, first, first + 1, first + 1)).ravel(),
+        'sign': np.tile([1.0, -1.0, 1.0, -1.0], n),
+        'bound': np.column_stack((lower[:, 0], upper[:, 0], lower[:, 1], upper[:, 1])).ravel(),
+    }
+
+
 def box_rows(u_min: np.ndarray, u_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return a box as rows ``B u >= c``: ``u_j >= u_min,j``, ``-u_j >= -u_max,j`` per joint.
 

@@ -12,6 +12,7 @@ from grasp_safety_filter.control.constraints.base import (
     BoxBarrier,
     check_rows,
     finite_vector,
+    planar_box,
     validate_names,
 )
 from grasp_safety_filter.model.affine import AffineMap
@@ -101,11 +102,11 @@ class FingertipWorkspaceBarrier(BoxBarrier):
             for row in WORKSPACE_ROWS
         )
         # xi_cf flattened contact-major: a_i at 2 i, b_i at 2 i + 1.
-        first = 2 * np.arange(n)
         super().__init__(
-            index=np.column_stack((first, first, first + 1, first + 1)).ravel(),
-            sign=np.tile([1.0, -1.0, 1.0, -1.0], n),
-            bound=np.column_stack((self.a_min, self.a_max, self.b_min, self.b_max)).ravel(),
+            **planar_box(
+                np.column_stack((self.a_min, self.b_min)),
+                np.column_stack((self.a_max, self.b_max)),
+            ),
             names=names,
             alpha1=alpha1 if alpha1 is not None else ClassKFunction(),
             alpha2=alpha2 if alpha2 is not None else ClassKFunction(),

@@ -13,6 +13,7 @@ from grasp_safety_filter.control.constraints.base import (
     BoxBarrier,
     check_rows,
     finite_scalar,
+    planar_box,
     validate_names,
 )
 from grasp_safety_filter.model.affine import AffineMap
@@ -169,14 +170,8 @@ class ObjectWorkspaceBarrier(BoxBarrier):
             for contact, rows in zip(self.contact_names, labels, strict=True)
             for row in rows
         )
-        # xi_co flattened contact-major: x_i at 2 i, y_i at 2 i + 1.
-        first = 2 * np.arange(n)
         super().__init__(
-            index=np.column_stack((first, first, first + 1, first + 1)).ravel(),
-            sign=np.tile([1.0, -1.0, 1.0, -1.0], n),
-            bound=np.column_stack(
-                (self.lower[:, 0], self.upper[:, 0], self.lower[:, 1], self.upper[:, 1])
-            ).ravel(),
+            **planar_box(self.lower, self.upper),
             names=names,
             alpha1=alpha1 if alpha1 is not None else ClassKFunction(),
             alpha2=alpha2 if alpha2 is not None else ClassKFunction(),
