@@ -1,4 +1,4 @@
-"""Console entry points of ``grasp-demo`` and ``grasp-analyze``: signals handled at once.
+"""Console entry points of ``grasp-demo``, ``grasp-analyze``, ``grasp-record``: signals at once.
 
 A tool spends its first second importing numpy, Pinocchio, rosbags and matplotlib. A
 SIGINT in that time would end it with a ``KeyboardInterrupt`` traceback and a SIGTERM
@@ -49,3 +49,17 @@ def demo(argv: list[str] | None = None) -> int:
 def analyze(argv: list[str] | None = None) -> int:
     """Run ``grasp-analyze`` (:func:`grasp_safety_filter.cli.analyze_main`)."""
     return _run('grasp-analyze', 'analyze_main', argv)
+
+
+def record(argv: list[str] | None = None) -> int:
+    """Run ``grasp-record``: stopped while it starts, it exits 0 with nothing recorded.
+
+    SIGINT and SIGTERM are how a recording ends, so they end it with status 0 at any time.
+    """
+    with interrupt_on_signals():
+        try:
+            from grasp_safety_filter.nodes.recorder_node import main
+
+            return main(argv)
+        except KeyboardInterrupt:
+            return 0

@@ -30,3 +30,33 @@ def test_an_interrupt_raised_inside_a_finaliser_reaches_the_program(signum, caps
                 time.sleep(0.001)
     assert interrupt.value.signum == signum
     assert 'Exception ignored' not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_an_interrupt_is_held_off_an_import_and_raised_once_it_is_done(
+    signum, tmp_path, monkeypatch
+):
+    """An extension initialising itself may turn an exception raised in it into ImportError.
+
+    The module below does what numpy's C core does when interrupted while it imports
+    ``datetime``; the interrupt must reach the program after the import, not inside it.
+    """
+    name = f'imports_while_signalled_{signum.name.lower()}'
+    (tmp_path / f'{name}.py').write_text(
+        'import signal, time\n'
+        'try:\n'
+        f'    signal.raise_signal({int(signum)})\n'
+        '    time.sleep(0.2)\n'
+        'except BaseException as error:\n'
+        '    raise ImportError("the C-extensions failed to import") from error\n'
+        'COMPLETE = True\n'
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with interrupt_on_signals():
+        with pytest.raises(SignalInterrupt) as interrupt:
+            __import__(name)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                time.sleep(0.001)
+    assert interrupt.value.signum == signum
+    assert __import__(name).COMPLETE

@@ -284,33 +284,45 @@ def test_live_parameters_apply_and_read_only_ones_are_refused(ros_context):
             node.destroy_node()
 
 
-def test_a_signal_whose_exit_an_import_swallowed_still_ends_the_node(tmp_path, monkeypatch):
-    """An extension's initialisation may drop the SystemExit the handler raised in it."""
+#: How an extension module initialising itself may treat an exception raised inside it.
+IMPORT_HANDLING = {
+    'propagated': '    os.kill(os.getpid(), signal.SIGINT)\n    time.sleep(0.5)\n',
+    'dropped': (
+        'try:\n    os.kill(os.getpid(), signal.SIGINT)\n    time.sleep(0.5)\n'
+        'except BaseException:\n    pass\n'
+    ),
+    # numpy's C core, interrupted while it imports datetime, reports an ImportError
+    'converted': (
+        'try:\n    os.kill(os.getpid(), signal.SIGINT)\n    time.sleep(0.5)\n'
+        'except BaseException as error:\n    raise ImportError("C-extensions failed") from error\n'
+    ),
+}
+
+
+@pytest.mark.parametrize('handling', list(IMPORT_HANDLING))
+def test_a_signal_while_the_node_module_imports_ends_the_node_quietly(
+    tmp_path, monkeypatch, handling
+):
+    """A signal during the import ends the process with 0 once it is done, never runs main."""
     import signal
 
     from grasp_safety_filter.nodes import entry_points
 
-    module = tmp_path / 'swallowing_node.py'
-    module.write_text(
-        'import os, signal, time\n'
-        'try:  # as an extension module initialising itself may: the exception is dropped\n'
-        '    os.kill(os.getpid(), signal.SIGINT)\n'
-        '    time.sleep(0.5)\n'
-        'except BaseException:\n'
-        '    pass\n'
-        'STARTED = []\n'
-        'def main(args):\n'
-        '    STARTED.append(args)\n'
+    name = f'interrupted_{handling}_node'
+    body = IMPORT_HANDLING[handling]
+    if handling == 'propagated':
+        body = 'if True:\n' + body
+    (tmp_path / f'{name}.py').write_text(
+        f'import os, signal, time\n{body}STARTED = []\ndef main(args):\n    STARTED.append(args)\n'
     )
     monkeypatch.syspath_prepend(str(tmp_path))
-    monkeypatch.setitem(entry_points.NODE_MODULES, 'swallowing_node', 'swallowing_node')
-    monkeypatch.setattr(entry_points, '_received', [], raising=False)
+    monkeypatch.setitem(entry_points.NODE_MODULES, name, name)
     previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         with pytest.raises(SystemExit) as stop:
-            entry_points.run_node('swallowing_node', ['swallowing_node'])
+            entry_points.run_node(name, [name])
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
     assert stop.value.code == 0
-    assert sys.modules['swallowing_node'].STARTED == []
+    assert sys.modules[name].STARTED == []

@@ -1,4 +1,4 @@
-"""SIGINT and SIGTERM as one exception, raised where the program can take it.
+"""SIGINT and SIGTERM as one exception raised where the program can take it, or as a request.
 
 Python turns SIGINT into ``KeyboardInterrupt`` wherever the program happens to be, possibly
 halfway through appending a record to a bag; SIGTERM ends the process without any clean-up.
@@ -12,6 +12,14 @@ An exception that a signal handler raises while Python runs a weak-reference cal
 traceback and goes on, and the interrupt would be lost. While the handlers are installed,
 such an interrupt is not printed but delivered again (the same signal, raised anew from
 another thread), so it lands in the program's own code.
+
+Nor is it raised while the main thread is importing a module: an extension module that
+runs Python code while it initialises (numpy imports ``datetime``) turns an exception
+raised there into an ``ImportError``. The signal is delivered again a little later, until
+the import is done.
+
+A long-running node takes no exception at all: :class:`TerminationRequests` records the
+signal and its loop ends at the next turn.
 
 This module imports nothing heavy: a console script can install the handlers before it
 imports numpy, Pinocchio or rosbags.
@@ -31,6 +39,14 @@ from typing import Any
 
 REDELIVERY_DELAY = 1e-3
 """Delay before an interrupt that could not be raised is sent again, s."""
+
+IMPORT_REDELIVERY_DELAY = 10e-3
+"""Delay before an interrupt held off an import is sent again, s."""
+
+#: Code of Python's import system: a frame of these on the stack means an import is running.
+_IMPORT_SYSTEM = frozenset(
+    {'<frozen importlib._bootstrap>', '<frozen importlib._bootstrap_external>'}
+)
 
 
 class SignalInterrupt(KeyboardInterrupt):
@@ -68,18 +84,53 @@ def _in_main_thread() -> bool:
     return threading.current_thread() is threading.main_thread()
 
 
+def importing(frame: FrameType | None) -> bool:
+    """Whether ``frame`` or one of its callers is Python's import system at work."""
+    while frame is not None:
+        if frame.f_code.co_filename in _IMPORT_SYSTEM:
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _handle_signal(signum: int, frame: FrameType | None) -> None:
     if _InterruptState.critical_depth > 0:
         # Inside a write or close: interrupt once the block is done.
         _InterruptState.pending = signum
         return
+    if importing(frame) and _Redelivery.queue is not None:
+        _Redelivery.queue.put((signum, IMPORT_REDELIVERY_DELAY))
+        return
     raise SignalInterrupt(signum)
+
+
+class TerminationRequests:
+    """A signal handler that records SIGINT and SIGTERM instead of raising.
+
+    Python's default SIGINT handler raises KeyboardInterrupt wherever the main thread is,
+    e.g. inside ``destroy_node`` or an extension module's initialisation; rclpy's own
+    handlers shut the context down from another thread, under a callback that may still be
+    taking a message. Recording the request, and letting the program look at it where it
+    can stop, leaves no such moment.
+    """
+
+    def __init__(self) -> None:
+        self.received: list[int] = []
+
+    def __call__(self, signum: int, frame: FrameType | None) -> None:
+        """Record ``signum`` (the signal handler's signature)."""
+        self.received.append(signum)
+
+    @property
+    def requested(self) -> bool:
+        """Whether SIGINT or SIGTERM arrived."""
+        return bool(self.received)
 
 
 class _Redelivery:
     """A daemon thread that sends the process a signal again, when asked to."""
 
-    queue: SimpleQueue[int] | None = None
+    queue: SimpleQueue[tuple[int, float]] | None = None
 
     @classmethod
     def start(cls) -> None:
@@ -91,8 +142,8 @@ class _Redelivery:
     def _run(cls) -> None:
         assert cls.queue is not None
         while True:
-            signum = cls.queue.get()
-            time.sleep(REDELIVERY_DELAY)  # let the main thread leave the hook first
+            signum, delay = cls.queue.get()
+            time.sleep(delay)  # let the main thread leave the hook, or the import, first
             signal.raise_signal(signum)
 
 
@@ -109,7 +160,7 @@ def _redeliver_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__)
     signum = unraisable.exc_value.signum
     while True:
         try:
-            _Redelivery.queue.put(signum)
+            _Redelivery.queue.put((signum, REDELIVERY_DELAY))
             return  # no call after the put: the handler cannot run between here and the caller
         except SignalInterrupt as again:
             signum = again.signum

@@ -25,7 +25,6 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 import signal
 import sys
-from types import FrameType
 from typing import Any
 
 import rclpy
@@ -38,6 +37,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.diagnostic_keys import Key
+from grasp_safety_filter.io.interrupts import TerminationRequests
 from grasp_safety_filter.io.messages import (
     bounded_text,
     byte_value,
@@ -304,27 +304,6 @@ def _start_up_parameters(
     return name, given
 
 
-class _TerminationRequests:
-    """A signal handler that records SIGINT and SIGTERM instead of raising.
-
-    Python's default SIGINT handler raises KeyboardInterrupt wherever the main thread is,
-    e.g. inside ``destroy_node``; rclpy's own handlers shut the context down from another
-    thread, under a callback that may still be taking a message. Recording the request
-    and letting the spin loop end leaves no such moment.
-    """
-
-    def __init__(self) -> None:
-        self.received: list[int] = []
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        self.received.append(signum)
-
-    @property
-    def requested(self) -> bool:
-        """Whether SIGINT or SIGTERM arrived."""
-        return bool(self.received)
-
-
 def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) -> None:
     """Initialise rclpy, spin one node until shutdown, SIGINT or SIGTERM, and clean up (Jazzy).
 
@@ -342,7 +321,11 @@ def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) 
             the node refuses its parameters (one of :data:`STARTUP_ERRORS`).
     """
     arguments = list(sys.argv if args is None else args)
-    termination = _TerminationRequests()
+    # The console entry point records the signals from the process's first instant.
+    installed = signal.getsignal(signal.SIGINT)
+    termination = (
+        installed if isinstance(installed, TerminationRequests) else TerminationRequests()
+    )
     for signum in TERMINATION_SIGNALS:
         signal.signal(signum, termination)
     context = rclpy.get_default_context()

@@ -10,11 +10,9 @@ as it does later. This module imports nothing heavy itself.
 from __future__ import annotations
 
 import importlib
-import os
 import signal
-import sys
-from types import FrameType
-from typing import Any
+
+from grasp_safety_filter.io.interrupts import TerminationRequests
 
 #: Console script name -> the module whose ``main(args)`` runs that node.
 NODE_MODULES: dict[str, str] = {
@@ -24,41 +22,21 @@ NODE_MODULES: dict[str, str] = {
 }
 
 
-#: Signals received while the node's module was imported (see :func:`run_node`).
-_received: list[int] = []
-
-
-def _exit_quietly(signum: int, frame: FrameType | None) -> None:
-    _received.append(signum)
-    raise SystemExit(0)
-
-
-def _exit_if_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__) -> None:
-    """``sys.unraisablehook``: the quiet exit raised where it cannot propagate still exits.
-
-    A signal handled inside a weakref callback or a ``__del__`` (the import system has both)
-    raises there, and Python would print "Exception ignored" and go on importing.
-    """
-    if isinstance(unraisable.exc_value, SystemExit) and _received:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(0)
-    default(unraisable)
-
-
 def run_node(name: str, args: list[str] | None = None) -> None:
-    """Import the node's module with SIGINT and SIGTERM ending the process quietly, run it.
+    """Import the node's module with SIGINT and SIGTERM recorded, not raised; run it.
 
-    The handler raises ``SystemExit`` wherever the import is. An extension module's
-    initialisation may run Python code and drop the exception it raised, so the request is
-    also recorded and honoured once the import is done; one raised where Python can only
-    report it (a weakref callback) ends the process at once, before anything is started.
+    An exception raised by a signal handler in the middle of an import can be turned into
+    an ``ImportError`` (an extension module initialising itself runs Python code), or be
+    dropped where Python can only report it (a weakref callback of the import system). So
+    the signals are only recorded: a request that came during the import ends the process
+    quietly once the import is done, before anything is started; a later one is seen by
+    :func:`~grasp_safety_filter.nodes.base_node.spin_node`, which keeps the same record.
     """
-    sys.unraisablehook = _exit_if_swallowed
+    termination = TerminationRequests()
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, _exit_quietly)
+        signal.signal(signum, termination)
     module = importlib.import_module(NODE_MODULES[name])
-    if _received:
+    if termination.requested:
         raise SystemExit(0)
     module.main(args)
 

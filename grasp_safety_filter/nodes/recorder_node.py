@@ -22,17 +22,19 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from contextlib import ExitStack
 from pathlib import Path
 import sys
 import time
 
 import rclpy
+from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder
-from grasp_safety_filter.io.interrupts import interrupt_on_signals
+from grasp_safety_filter.io.interrupts import deferred_interrupts, interrupt_on_signals
 from grasp_safety_filter.io.messages import rclpy_message_class
 from grasp_safety_filter.nodes.base_node import make_executor
 
@@ -53,41 +55,63 @@ def _writer(recorder: BagRecorder, topic: str) -> Callable[[bytes], None]:
     return write
 
 
+def _subscribe_all(node: Node, recorder: BagRecorder) -> None:
+    """Subscribe to every table topic with its offered QoS and a deep history, raw."""
+    for spec in topics.TOPICS:
+        offered = spec.qos.to_rclpy()
+        qos = QoSProfile(
+            depth=READER_DEPTH,
+            reliability=offered.reliability,
+            durability=offered.durability,
+        )
+        node.create_subscription(
+            rclpy_message_class(spec.msgtype),
+            spec.name,
+            _writer(recorder, spec.name),
+            qos,
+            raw=True,
+        )
+
+
 def record(bag: Path, node_name: str = RECORDER_NODE_NAME, storage: str = 'mcap') -> int:
-    """Record every table topic to ``bag`` until SIGINT or SIGTERM; return the exit code."""
-    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node(node_name)
-    executor = make_executor(node.context)
-    executor.add_node(node)
-    try:
-        with interrupt_on_signals(), BagRecorder(bag, storage) as recorder:
-            for spec in topics.TOPICS:
-                offered = spec.qos.to_rclpy()
-                qos = QoSProfile(
-                    depth=READER_DEPTH,
-                    reliability=offered.reliability,
-                    durability=offered.durability,
-                )
-                node.create_subscription(
-                    rclpy_message_class(spec.msgtype),
-                    spec.name,
-                    _writer(recorder, spec.name),
-                    qos,
-                    raw=True,
-                )
-            node.get_logger().info(f'recording {len(topics.TOPICS)} topics to {bag}')
-            try:
-                while rclpy.ok():
-                    executor.spin_once(timeout_sec=SPIN_PERIOD)
-            except KeyboardInterrupt:
-                pass
-            counts = {topic: n for topic, n in recorder.counts.items() if n}
-            node.get_logger().info(f'closing {bag}: {counts}')
-    finally:
-        executor.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown()
+    """Record every table topic to ``bag`` until SIGINT or SIGTERM; return the exit code.
+
+    Signals are held off while the node, the bag and the subscriptions are made (rclpy
+    imports each message type's support then) and while everything is closed; one that
+    came during set-up stops the recording as soon as it is made. The bag is always closed.
+    """
+    with interrupt_on_signals():
+        try:
+            _record(bag, node_name, storage)
+        except KeyboardInterrupt:
+            pass
     return 0
+
+
+def _record(bag: Path, node_name: str, storage: str) -> None:
+    resources = ExitStack()  # closed in reverse: the bag first, rclpy last
+    try:
+        with deferred_interrupts():
+            rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+            resources.callback(rclpy.try_shutdown)
+            node = rclpy.create_node(node_name)
+            resources.callback(node.destroy_node)
+            executor = make_executor(node.context)
+            resources.callback(executor.shutdown)
+            executor.add_node(node)
+            recorder = resources.enter_context(BagRecorder(bag, storage))
+            _subscribe_all(node, recorder)
+        node.get_logger().info(f'recording {len(topics.TOPICS)} topics to {bag}')
+        try:
+            while rclpy.ok():
+                executor.spin_once(timeout_sec=SPIN_PERIOD)
+        except KeyboardInterrupt:
+            pass
+        counts = {topic: n for topic, n in recorder.counts.items() if n}
+        node.get_logger().info(f'closing {bag}: {counts}')
+    finally:
+        with deferred_interrupts(raise_pending=False):
+            resources.close()
 
 
 def main(args: list[str] | None = None) -> int:
