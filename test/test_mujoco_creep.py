@@ -8,6 +8,7 @@ Newton–Euler on both sides and by the limit in which MuJoCo's contacts become 
 """
 
 from dataclasses import replace
+import json
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,8 @@ import pytest
 
 from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.control.nominal import NominalController
-from hand_sim_node import mujoco_creep
+from grasp_safety_filter.errors import EXIT_CONFIG_ERROR
+from hand_sim_node import mujoco_compare, mujoco_creep
 from hand_sim_node.closed_loop import run_closed_loop
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.mujoco_compare import compare, summary
@@ -121,3 +123,31 @@ def test_a_squeeze_that_loads_the_faces_does_not_slow_the_creep(scenario):
     ratio_hard = np.array(hard['friction_force_N'][:2]) / np.array(hard['normal_force_N'][:2])
     assert np.all(ratio_hard < ratio)
     assert np.all(np.array(hard['slip_speed_mm_s'][:2]) > np.array(base['slip_speed_mm_s'][:2]))
+
+
+def test_creep_command_prints_the_table_of_every_setting(tmp_path, capsys):
+    out = tmp_path / 'creep.json'
+    argv = ['--config', str(CONFIG), '--duration', '0.1', '--window', '0.05', '--json', str(out)]
+    assert mujoco_creep.main(argv) == 0
+    rows = json.loads(out.read_text())
+    assert [row['setting'] for row in rows] == [setting[0] for setting in mujoco_creep.SETTINGS]
+    table = capsys.readouterr().out.splitlines()
+    assert len(table) == 2 + len(rows) and table[2].startswith('| default contacts |')
+    # The bound is reported exactly where the law applies: without the no-slip solver.
+    for row, (_, options, _, _) in zip(rows, mujoco_creep.SETTINGS, strict=True):
+        assert ('run_slip_lower_bound_mm' in row) == ('noslip_iterations' not in options)
+
+
+def test_compare_command_writes_statistics_and_figure(tmp_path, capsys):
+    figure, out = tmp_path / 'compare.png', tmp_path / 'compare.json'
+    argv = ['--config', str(CONFIG), '--duration', '0.02', '--figure', str(figure)]
+    assert mujoco_compare.main([*argv, '--json', str(out)]) == 0
+    figures = json.loads(out.read_text())
+    assert json.loads(capsys.readouterr().out) == figures
+    assert figures['stop_reason'] == 'duration' and figures['mode'] == 'filtered'
+    for name in ('force_N', 'linear_acceleration_m_s2', 'angular_acceleration_rad_s2'):
+        stats = figures[name]['error']
+        assert 0.0 <= stats['median'] <= stats['p99'] <= stats['max']
+    assert figure.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert mujoco_compare.main([*argv, '--solref', '0', '1']) == EXIT_CONFIG_ERROR
+    assert capsys.readouterr().err.startswith('mujoco_compare: mujoco.solref')
