@@ -175,6 +175,9 @@ class MuJoCoPlant:
         self._slip_distance = np.zeros(self.model.n_contacts)
         #: The last step's report (None before the first step).
         self.last_report: StepReport | None = None
+        #: MuJoCo's object acceleration ``(a_o, alpha_o)`` (palm coordinates, m/s², rad/s²)
+        #: at the last step's start state under its torque (NaN before the first step).
+        self.last_object_acceleration = np.full(6, np.nan)
         #: Constraint margins and events of every step since the reset.
         self.log = EventLog()
         mujoco.mj_forward(self.mj_model, data)
@@ -241,8 +244,10 @@ class MuJoCoPlant:
         for substep in range(self.n_substeps):
             mujoco.mj_step(mj, data)
             if substep == 0:
-                # mj_step leaves the contacts and forces of the state it started from.
+                # mj_step leaves the contacts, forces and accelerations of the state it
+                # started from.
                 force = self._contact_forces(state0)
+                self.last_object_acceleration = self._object_acceleration(state0)
             # Contacts and forces at the new state.
             mujoco.mj_forward(mj, data)
             self._substep_index += 1
@@ -272,7 +277,7 @@ class MuJoCoPlant:
         return self._observation
 
     # -------------------------------------------------------------------------- contacts
-    def _fingertip_contacts(self) -> Iterator[tuple[int, Any, np.ndarray]]:
+    def fingertip_contacts(self) -> Iterator[tuple[int, Any, np.ndarray]]:
         """Each active MuJoCo contact of a fingertip with the object, at the current state.
 
         Yields ``(i, contact, wrench)``: the fingertip's contact index, MuJoCo's contact, and
@@ -305,12 +310,22 @@ class MuJoCoPlant:
         over MuJoCo's contacts of the pair; 0 without one.
         """
         force_in_palm = np.zeros((self.model.n_contacts, 3))
-        for i, contact, wrench in self._fingertip_contacts():
+        for i, contact, wrench in self.fingertip_contacts():
             # The force of geom1 on geom2, in the contact frame whose rows are its axes
             # (the first the normal from geom1 to geom2).
             on_geom2 = np.asarray(contact.frame).reshape(3, 3).T @ wrench[:3]
             force_in_palm[i] += on_geom2 if int(contact.geom2) == self.object_geom else -on_geom2
         return np.einsum('nji,nj->ni', state.R_contact_to_palm, force_in_palm).ravel()
+
+    def _object_acceleration(self, state: GraspState) -> np.ndarray:
+        """Return the object's acceleration, MuJoCo's ``qacc``, in palm coordinates, (6,).
+
+        The free joint's angular acceleration is in the body frame; in the palm frame it is
+        ``R_object_to_palm`` times it (``d/dt (R w_b) = R (w_b_dot + w_b × w_b)``).
+        """
+        d = self.object_dof
+        qacc = self.mj_data.qacc
+        return np.concatenate((qacc[d : d + 3], state.R_object_to_palm @ qacc[d + 3 : d + 6]))
 
     def _measure_contacts(self, dt: float) -> ContactReport:
         """Measure every fingertip's contact at the current (forwarded) state.
@@ -328,7 +343,7 @@ class MuJoCoPlant:
             distance[i] = mujoco.mj_geomDistance(
                 mj, data, int(geom), self.object_geom, self.distance_limit, None
             )
-        for i, contact, wrench in self._fingertip_contacts():
+        for i, contact, wrench in self.fingertip_contacts():
             normal[i] += wrench[0]
             tangential[i] += float(np.hypot(wrench[1], wrench[2]))
             # Relative velocity of the fingertip's material point and the object's at the

@@ -17,6 +17,8 @@ creep of soft friction)::
         --noslip-iterations 10
     python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode filtered \
         --set torque_rate.enabled=true --set torque_rate.max_step=0.05
+    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode filtered \
+        --noslip-iterations 10 --set no_slip.cone=diamond --set no_slip.friction_margin=0.3
 """
 
 from __future__ import annotations

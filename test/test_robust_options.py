@@ -60,12 +60,55 @@ def test_torque_rate_rows_hold_exactly_when_every_step_is_within_the_bound(max_s
     assert np.all(family.rows().A == 0.0) and np.all(family.rows().lower == 0.0)
 
 
+class TimedState:
+    """The one field the torque-rate rows read with a rate bound: the state's time."""
+
+    def __init__(self, t):
+        self.t = t
+
+
+@pytest.mark.parametrize(('max_step', 'max_rate'), [(0.2, 50.0), (0.01, 50.0), (3.0, 0.5)])
+def test_torque_rate_per_second_bounds_the_step_by_the_elapsed_time(max_step, max_rate):
+    """|u - u_prev| <= min(max_step, max_rate (t - t_prev)), written out; time back: none."""
+    family = TorqueRateBound(('j0', 'j1'), max_step, max_rate)
+    rng = np.random.default_rng(int(10 * max_rate))
+    limited = {'rate': 0, 'step': 0}
+    for _ in range(400):
+        u_prev, t_prev = rng.normal(size=2), rng.uniform(0.0, 10.0)
+        family.remember(u_prev, t_prev)
+        elapsed = rng.choice([0.0, 1e-3, 2e-3, 0.05, 1.0]) * rng.uniform(0.5, 1.5)
+        bound = min(max_step, max_rate * elapsed)
+        limited['rate' if max_rate * elapsed < max_step else 'step'] += 1
+        u = u_prev + rng.uniform(-2.0, 2.0, size=2) * max(bound, 1e-3)
+        rows = family.rows(TimedState(t_prev + elapsed))
+        inside = np.all(np.abs(u - u_prev) <= bound)
+        assert (rows.residual(u).min() >= -1e-12) == inside
+        np.testing.assert_allclose(
+            rows.residual(u).reshape(2, 2),
+            np.column_stack((bound + (u - u_prev), bound - (u - u_prev))),
+            atol=1e-12,
+        )
+        assert np.all(family.rows(TimedState(t_prev - 1e-3)).A == 0.0)  # time went back
+    assert min(limited.values()) > 0 or max_rate * 1.5 < max_step
+    with pytest.raises(ValueError, match='max_rate'):
+        family.rows(None)
+    with pytest.raises(ValueError, match='t_previous'):
+        family.remember(np.zeros(2))
+
+
 @pytest.mark.parametrize(
-    ('max_step', 'match'), [(0.0, 'max_step'), (-1.0, 'max_step'), (float('nan'), 'max_step')]
+    ('kwargs', 'match'),
+    [
+        ({'max_step': 0.0}, 'max_step'),
+        ({'max_step': -1.0}, 'max_step'),
+        ({'max_step': float('nan')}, 'max_step'),
+        ({'max_step': 0.2, 'max_rate': -1.0}, 'max_rate'),
+        ({'max_step': 0.2, 'max_rate': float('inf')}, 'max_rate'),
+    ],
 )
-def test_torque_rate_refuses_a_bad_bound(max_step, match):
+def test_torque_rate_refuses_a_bad_bound(kwargs, match):
     with pytest.raises(ValueError, match=match):
-        TorqueRateBound(('j0',), max_step)
+        TorqueRateBound(('j0',), **kwargs)
 
 
 def test_torque_rate_weight_above_a_safety_weight_is_refused():
@@ -136,16 +179,23 @@ def largest_step_on_our_plant(scenario, overrides, duration=1.5):
     return mujoco_run.max_torque_step(run.array('u')), statuses
 
 
-def test_closed_loop_torque_step_per_tick_is_bounded(scenario):
+@pytest.mark.parametrize(
+    'bound',
+    [
+        {'torque_rate_max_step': 0.004},
+        # 4 N·m/s over the 1 ms control period, max_step far looser.
+        {'torque_rate_max_step': 1.0, 'torque_rate_max_rate': 4.0},
+    ],
+)
+def test_closed_loop_torque_step_per_tick_is_bounded(scenario, bound):
     """The paper's run on our plant: without the bound u* jumps; with it, never more."""
     free, _ = largest_step_on_our_plant(scenario, {})
-    bound = 0.004
-    assert free > 2 * bound  # the check below could fail
-    bounded, statuses = largest_step_on_our_plant(
-        scenario, {'torque_rate_enabled': True, 'torque_rate_max_step': bound}
-    )
+    assert scenario.sim_config.time_step == 1e-3
+    bound_per_tick = 0.004
+    assert free > 2 * bound_per_tick  # the check below could fail
+    bounded, statuses = largest_step_on_our_plant(scenario, {'torque_rate_enabled': True, **bound})
     assert not any(status.value.startswith('fallback') for status in statuses)
-    assert bounded <= bound + 1e-6, bounded
+    assert bounded <= bound_per_tick + 1e-6, bounded
 
 
 # -- friction margin and cone shape --------------------------------------------------------

@@ -550,6 +550,7 @@ def test_parameter_names_and_defaults():
         'no_slip.cone',
         'torque_rate.enabled',
         'torque_rate.max_step',
+        'torque_rate.max_rate',
         'joint_limits.enabled',
         'fingertip_workspace.enabled',
         'object_workspace.enabled',

@@ -19,6 +19,7 @@ _FIELDS: dict[str, str] = {
     'no_slip.cone': 'cone',
     'torque_rate.enabled': 'torque_rate_enabled',
     'torque_rate.max_step': 'torque_rate_max_step',
+    'torque_rate.max_rate': 'torque_rate_max_rate',
     'joint_limits.enabled': 'joint_limits_enabled',
     'fingertip_workspace.enabled': 'fingertip_workspace_enabled',
     'object_workspace.enabled': 'object_workspace_enabled',
@@ -55,6 +56,8 @@ class SafetyFilterConfig:
         cone: ``"inscribed"`` (l_s faces) or ``"diamond"`` (|f_x| + |f_y| <= mu f_n).
         torque_rate_enabled: Bound the torque step per tick.
         torque_rate_max_step: That bound, N·m per tick (> 0).
+        torque_rate_max_rate: The bound per second, N·m/s (>= 0; 0: none): per tick the
+            tighter of ``max_step`` and ``max_rate`` times the time since the last tick.
         joint_limits_enabled: Enforce the joint-limit barriers.
         fingertip_workspace_enabled: Enforce the fingertip-workspace barriers.
         object_workspace_enabled: Enforce the object-workspace barriers.
@@ -84,6 +87,7 @@ class SafetyFilterConfig:
     cone: str = 'inscribed'
     torque_rate_enabled: bool = False
     torque_rate_max_step: float = 0.2
+    torque_rate_max_rate: float = 0.0
     joint_limits_enabled: bool = True
     fingertip_workspace_enabled: bool = True
     object_workspace_enabled: bool = False

@@ -80,6 +80,8 @@ def enabled_families(
         chosen.append((object_workspace, config.object_workspace_weight))
     torque_rate: TorqueRateBound | None = None
     if config.torque_rate_enabled:
-        torque_rate = TorqueRateBound(joint_names, config.torque_rate_max_step)
+        torque_rate = TorqueRateBound(
+            joint_names, config.torque_rate_max_step, config.torque_rate_max_rate
+        )
         chosen.append((torque_rate, config.torque_rate_weight))
     return chosen, contacts, torque_rate

@@ -297,7 +297,7 @@ class SafetyFilter:
             if result.status in _FALLBACK:
                 self.torque_rate.forget()  # a fallback torque is no reference for the next
             else:
-                self.torque_rate.remember(result.u)
+                self.torque_rate.remember(result.u, state.t)
         return result
 
     def _solve_tick(self, state: GraspState, u_nom: np.ndarray) -> FilterResult:

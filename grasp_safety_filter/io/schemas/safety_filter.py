@@ -81,6 +81,14 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         exclusive_min=True,
     ),
     ParameterSpec(
+        'torque_rate.max_rate',
+        DOUBLE,
+        0.0,
+        'Largest rate of change of a joint torque, times the time since the last tick; '
+        'the tighter of it and max_step applies (0: none, max_step alone) [N m/s]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
         'joint_limits.enabled',
         BOOL,
         True,

@@ -1,0 +1,214 @@
+r"""Our model against MuJoCo at the torques of a run: ``python -m hand_sim_node.mujoco_compare``.
+
+Runs the scenario's nominal or filtered closed loop on MuJoCo and, at every tick, compares
+what our rigid model predicts at MuJoCo's state under the torque applied there (the contact
+forces ``f_c(u)`` and the object acceleration ``x_o_ddot(u)``, the affine maps the filter's
+rows are built from) with what MuJoCo computed for the same state and torque (its contact
+forces in our contact frames and its object acceleration, of the step's first MuJoCo step).
+Prints the median / p99 / max of the errors (per-contact force error norm, N; object
+linear, m/s², and angular, rad/s², acceleration error norm) and of their scale, and writes a
+figure (``--figure``): the normal forces of both over time, and the error norms.
+
+Example (the paper's filtered run, default contacts; then stiff ones)::
+
+    python -m hand_sim_node.mujoco_compare --mode filtered --figure /tmp/compare.png
+    python -m hand_sim_node.mujoco_compare --mode filtered --solref 0.004 1.0 \
+        --solimp 0.99 0.99 0.001 0.5 2 --cone elliptic --figure /tmp/compare-stiff.png
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+import json
+from pathlib import Path
+import sys
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.bench.recorded_run import Scenario
+from grasp_safety_filter.control.nominal import NominalController
+from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+from hand_sim_node.closed_loop import run_closed_loop
+from hand_sim_node.mjcf import CONES, MjcfOptions
+from hand_sim_node.mujoco_plant import MuJoCoPlant
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Model and MuJoCo side by side, one row per tick.
+
+    Attributes:
+        t: Tick times, (k,), s.
+        force_model: Our model's contact forces ``f_c(u)``, (k, n, 3), N, contact frames.
+        force_mujoco: MuJoCo's, (k, n, 3), N, the same frames.
+        acceleration_model: Our model's ``x_o_ddot(u) = (a_o, alpha_o)``, (k, 6), palm frame.
+        acceleration_mujoco: MuJoCo's, (k, 6).
+    """
+
+    t: np.ndarray
+    force_model: np.ndarray
+    force_mujoco: np.ndarray
+    acceleration_model: np.ndarray
+    acceleration_mujoco: np.ndarray
+
+    def errors(self) -> dict[str, np.ndarray]:
+        """Error norms per tick: per contact force (k, n), N; linear and angular, (k,)."""
+        difference = self.acceleration_model - self.acceleration_mujoco
+        return {
+            'force_N': np.linalg.norm(self.force_model - self.force_mujoco, axis=2),
+            'linear_acceleration_m_s2': np.linalg.norm(difference[:, :3], axis=1),
+            'angular_acceleration_rad_s2': np.linalg.norm(difference[:, 3:], axis=1),
+        }
+
+    def scales(self) -> dict[str, np.ndarray]:
+        """Return MuJoCo's magnitudes of the same quantities, to read the errors against."""
+        return {
+            'force_N': np.linalg.norm(self.force_mujoco, axis=2),
+            'linear_acceleration_m_s2': np.linalg.norm(self.acceleration_mujoco[:, :3], axis=1),
+            'angular_acceleration_rad_s2': np.linalg.norm(self.acceleration_mujoco[:, 3:], axis=1),
+        }
+
+
+def compare(
+    scenario: Scenario, options: MjcfOptions, mode: str, duration: float
+) -> tuple[Comparison, str]:
+    """Run ``mode`` (``"nominal"`` or ``"filtered"``) on MuJoCo.
+
+    Returns:
+        The comparison of every tick, and the run's stop reason.
+    """
+    plant = MuJoCoPlant(scenario.model, scenario.sim_config, options)
+    rows: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def record(_plant: object) -> None:
+        report = plant.last_report
+        assert report is not None
+        state, u = report.grasp_state, report.effort
+        rows.append(
+            (
+                state.t,
+                state.contact_force(u),
+                report.contact_force,
+                state.object_acceleration(u),
+                plant.last_object_acceleration,
+            )
+        )
+
+    run = run_closed_loop(
+        plant,
+        NominalController(scenario.nominal_config),
+        scenario.reference(plant.observe()),
+        scenario.safety_filter() if mode == 'filtered' else None,
+        duration,
+        after_step=record,
+    )
+    n = scenario.model.n_contacts
+    t, f_model, f_mujoco, a_model, a_mujoco = (
+        np.array(column) for column in zip(*rows, strict=True)
+    )
+    return (
+        Comparison(t, f_model.reshape(-1, n, 3), f_mujoco.reshape(-1, n, 3), a_model, a_mujoco),
+        run.stop_reason,
+    )
+
+
+def statistics(values: np.ndarray) -> dict[str, float]:
+    """Median, 99th percentile and maximum over every entry."""
+    flat = np.asarray(values, dtype=float).ravel()
+    return {
+        'median': float(np.median(flat)),
+        'p99': float(np.percentile(flat, 99)),
+        'max': float(np.max(flat)),
+    }
+
+
+def summary(comparison: Comparison) -> dict[str, Any]:
+    """Return the errors' and scales' statistics (the force over every contact and tick)."""
+    scales = comparison.scales()
+    return {
+        name: {'error': statistics(error), 'mujoco': statistics(scales[name])}
+        for name, error in comparison.errors().items()
+    }
+
+
+def draw(comparison: Comparison, contact_names: list[str], path: Path) -> None:
+    """Draw the normal forces of both over time (a panel per contact), then the errors."""
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    n = len(contact_names)
+    figure, axes = plt.subplots(n + 1, 1, figsize=(8, 2.2 * (n + 1)), sharex=True)
+    t = comparison.t
+    for i, name in enumerate(contact_names):
+        axes[i].plot(t, comparison.force_mujoco[:, i, 2], label='MuJoCo f_n')
+        axes[i].plot(t, comparison.force_model[:, i, 2], '--', label='model f_n(u)')
+        axes[i].set_ylabel(f'{name}, N')
+        axes[i].legend(loc='upper right', fontsize='small')
+    errors = comparison.errors()
+    for i, name in enumerate(contact_names):
+        axes[n].semilogy(t, errors['force_N'][:, i], label=f'|Δf| {name}, N')
+    axes[n].semilogy(t, errors['linear_acceleration_m_s2'], 'k', label='|Δa_o|, m/s²')
+    axes[n].set_xlabel('t, s')
+    axes[n].legend(loc='upper right', fontsize='small')
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Compare, print the statistics as JSON, optionally draw the figure."""
+    parser = argparse.ArgumentParser(
+        prog='python -m hand_sim_node.mujoco_compare', description=__doc__.splitlines()[0]
+    )
+    defaults = MjcfOptions()
+    parser.add_argument('--config', type=Path, default=Path('config/paper_scenario.yaml'))
+    parser.add_argument('--mode', choices=('nominal', 'filtered'), default='filtered')
+    parser.add_argument('--duration', type=float, help="s (default: the scenario's)")
+    parser.add_argument('--solref', type=float, nargs=2, default=defaults.solref)
+    parser.add_argument('--solimp', type=float, nargs=5, default=defaults.solimp)
+    parser.add_argument('--cone', choices=CONES, default=defaults.cone)
+    parser.add_argument('--noslip-iterations', type=int, default=defaults.noslip_iterations)
+    parser.add_argument('--figure', type=Path, help='write the figure here (PNG)')
+    parser.add_argument('--json', type=Path, help='also write the statistics here')
+    args = parser.parse_args(argv)
+    try:
+        options = MjcfOptions(
+            solref=tuple(args.solref),
+            solimp=tuple(args.solimp),
+            cone=args.cone,
+            noslip_iterations=args.noslip_iterations,
+        )
+        scenario = Scenario.load(args.config)
+    except (ConfigError, ValueError) as error:
+        print(config_error_line('mujoco_compare', error), file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+    comparison, stop_reason = compare(
+        scenario, options, args.mode, args.duration or scenario.sim_config.duration
+    )
+    figures = {
+        'mode': args.mode,
+        'stop_reason': stop_reason,
+        't_end_s': float(comparison.t[-1]),
+        'mujoco': {
+            'solref': list(options.solref),
+            'solimp': list(options.solimp),
+            'cone': options.cone,
+            'noslip_iterations': options.noslip_iterations,
+        },
+        **summary(comparison),
+    }
+    text = json.dumps(figures, indent=2)
+    print(text)
+    if args.json is not None:
+        args.json.write_text(text + '\n')
+    if args.figure is not None:
+        draw(comparison, scenario.model.contact_names, args.figure)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
