@@ -3,16 +3,23 @@
 A tool spends its first second importing numpy, Pinocchio, rosbags and matplotlib. A
 SIGINT in that time would end it with a ``KeyboardInterrupt`` traceback and a SIGTERM
 without a word; through these entry points both are a :class:`SignalInterrupt` from the
-first instant, and the tool exits with status 130 and one line. This module imports
-nothing heavy before the handlers are in place.
+first instant, and the tool exits with status 130 and one line. ``grasp-record``, which
+signals stop by design, only records them and exits 0. This module imports nothing heavy
+before the handlers are in place.
 """
 
 from __future__ import annotations
 
+import signal
 import sys
 from typing import Any
 
-from grasp_safety_filter.io.interrupts import interrupt_on_signals, signal_name
+from grasp_safety_filter.io.interrupts import (
+    interrupt_on_signals,
+    signal_name,
+    TERMINATION_SIGNALS,
+    TerminationRequests,
+)
 
 INTERRUPTED = 130
 """Exit status of a tool stopped by SIGINT or SIGTERM (128 + SIGINT, as a shell reports)."""
@@ -52,14 +59,17 @@ def analyze(argv: list[str] | None = None) -> int:
 
 
 def record(argv: list[str] | None = None) -> int:
-    """Run ``grasp-record``: stopped while it starts, it exits 0 with nothing recorded.
+    """Run ``grasp-record``: SIGINT and SIGTERM end it with status 0 at any time.
 
-    SIGINT and SIGTERM are how a recording ends, so they end it with status 0 at any time.
+    They are how a recording ends, so from the first instant they are only recorded (see
+    :func:`grasp_safety_filter.nodes.recorder_node.record`): one that came while the
+    recorder imported rclpy ends it before it starts.
     """
-    with interrupt_on_signals():
-        try:
-            from grasp_safety_filter.nodes.recorder_node import main
+    termination = TerminationRequests()
+    for signum in TERMINATION_SIGNALS:
+        signal.signal(signum, termination)
+    from grasp_safety_filter.nodes.recorder_node import main
 
-            return main(argv)
-        except KeyboardInterrupt:
-            return 0
+    if termination.requested:
+        return 0
+    return main(argv)

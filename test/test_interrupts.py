@@ -60,3 +60,28 @@ def test_an_interrupt_is_held_off_an_import_and_raised_once_it_is_done(
                 time.sleep(0.001)
     assert interrupt.value.signum == signum
     assert __import__(name).COMPLETE
+
+
+def test_a_signal_held_off_an_import_at_the_end_of_the_block_is_raised_as_it_ends(
+    tmp_path, monkeypatch
+):
+    """The signal is sent again after a delay: the block may be over by then.
+
+    Left to the restored handlers it would end the process (SIGTERM) or raise anywhere
+    (SIGINT); it is raised as the block ends instead, and never reaches them.
+    """
+    (tmp_path / 'signalled_at_the_end.py').write_text(
+        'import signal\nsignal.raise_signal(signal.SIGTERM)\n'
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    received: list[int] = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
+    try:
+        with pytest.raises(SignalInterrupt) as interrupt:
+            with interrupt_on_signals():
+                __import__('signalled_at_the_end')  # the block ends at once
+        time.sleep(0.1)  # past the re-sending delay
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert interrupt.value.signum == signal.SIGTERM
+    assert received == []

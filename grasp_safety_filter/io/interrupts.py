@@ -72,12 +72,30 @@ def signal_name(error: KeyboardInterrupt) -> str:
     return 'SIGINT'
 
 
+#: The signals this package takes over: how a user or a launcher stops a process
+#: (``ros2 launch`` sends SIGINT, then SIGTERM).
+TERMINATION_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
 class _InterruptState:
-    """Signal bookkeeping of the main thread (handlers run there)."""
+    """Signal bookkeeping of the main thread (handlers run there).
+
+    Attributes:
+        installed: Nesting depth of :func:`interrupt_on_signals`.
+        critical_depth: Nesting depth of :func:`critical_section`.
+        pending: A signal deferred by a critical section.
+        held: A signal being sent again (held off an import, or lost in a finaliser); raised
+            on leaving the outermost block if it has not been by then.
+        closing: The outermost block is restoring the previous handlers: a signal is held.
+        lock: Orders the re-sending thread against ``closing``.
+    """
 
     installed = 0
     critical_depth = 0
     pending: int | None = None
+    held: int | None = None
+    closing = False
+    lock = threading.Lock()
 
 
 def _in_main_thread() -> bool:
@@ -94,13 +112,18 @@ def importing(frame: FrameType | None) -> bool:
 
 
 def _handle_signal(signum: int, frame: FrameType | None) -> None:
+    if _InterruptState.closing:
+        _InterruptState.held = signum
+        return
     if _InterruptState.critical_depth > 0:
         # Inside a write or close: interrupt once the block is done.
-        _InterruptState.pending = signum
+        _InterruptState.pending, _InterruptState.held = signum, None
         return
     if importing(frame) and _Redelivery.queue is not None:
+        _InterruptState.held = signum
         _Redelivery.queue.put((signum, IMPORT_REDELIVERY_DELAY))
         return
+    _InterruptState.held = None
     raise SignalInterrupt(signum)
 
 
@@ -144,7 +167,10 @@ class _Redelivery:
         while True:
             signum, delay = cls.queue.get()
             time.sleep(delay)  # let the main thread leave the hook, or the import, first
-            signal.raise_signal(signum)
+            with _InterruptState.lock:
+                # Never onto the handlers the block restores: its exit raises it instead.
+                if _InterruptState.installed > 0 and not _InterruptState.closing:
+                    signal.raise_signal(signum)
 
 
 def _redeliver_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__) -> None:
@@ -160,6 +186,7 @@ def _redeliver_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__)
     signum = unraisable.exc_value.signum
     while True:
         try:
+            _InterruptState.held = signum
             _Redelivery.queue.put((signum, REDELIVERY_DELAY))
             return  # no call after the put: the handler cannot run between here and the caller
         except SignalInterrupt as again:
@@ -168,16 +195,19 @@ def _redeliver_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__)
 
 @contextmanager
 def interrupt_on_signals(
-    signals: Sequence[signal.Signals] = (signal.SIGINT, signal.SIGTERM),
+    signals: Sequence[signal.Signals] = TERMINATION_SIGNALS,
 ) -> Iterator[None]:
     """Turn ``signals`` into :class:`SignalInterrupt`, deferred out of critical sections.
 
     Installs the handlers (and the hook that re-delivers an interrupt Python could not
-    raise) on entry and restores the previous ones on exit. Must be entered from the main
-    thread (Python delivers signals there only).
+    raise) on entry and restores the previous ones on exit. A signal still being sent again
+    then (it came during an import just before the block ended) is raised as the block
+    ends, not left to the restored handlers. Must be entered from the main thread (Python
+    delivers signals there only).
 
     Raises:
         RuntimeError: Entered from another thread.
+        SignalInterrupt: On leaving the outermost block, for a signal held until then.
 
     """
     if not _in_main_thread():
@@ -187,15 +217,28 @@ def interrupt_on_signals(
     previous_hook = sys.unraisablehook
     sys.unraisablehook = _redeliver_swallowed
     _InterruptState.installed += 1
+    outermost = _InterruptState.installed == 1
+    completed = False
+    held = None
     try:
         yield
+        completed = True
     finally:
-        _InterruptState.installed -= 1
-        sys.unraisablehook = previous_hook
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-        if _InterruptState.installed == 0:
-            _InterruptState.pending = None
+        if outermost:
+            with _InterruptState.lock:
+                _InterruptState.closing = True
+        try:
+            sys.unraisablehook = previous_hook
+            for s, handler in previous.items():
+                signal.signal(s, handler)  # runs a signal already on its way: held
+        finally:
+            _InterruptState.installed -= 1
+            if outermost:
+                held, _InterruptState.held = _InterruptState.held, None
+                _InterruptState.pending = None
+                _InterruptState.closing = False
+    if completed and held is not None:
+        raise SignalInterrupt(held)
 
 
 @contextmanager

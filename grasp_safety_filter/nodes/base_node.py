@@ -37,7 +37,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.diagnostic_keys import Key
-from grasp_safety_filter.io.interrupts import TerminationRequests
+from grasp_safety_filter.io.interrupts import TERMINATION_SIGNALS, TerminationRequests
 from grasp_safety_filter.io.messages import (
     bounded_text,
     byte_value,
@@ -85,9 +85,6 @@ SIGNAL_CHECK_PERIOD = 0.1
 
 #: Shortest interval between two ERROR logs of failing subscription callbacks, s.
 CALLBACK_ERROR_LOG_PERIOD = 1.0
-
-#: Signals that end a node.
-TERMINATION_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 class EndpointNode(Node):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 import signal
 
-from grasp_safety_filter.io.interrupts import TerminationRequests
+from grasp_safety_filter.io.interrupts import TERMINATION_SIGNALS, TerminationRequests
 
 #: Console script name -> the module whose ``main(args)`` runs that node.
 NODE_MODULES: dict[str, str] = {
@@ -33,7 +33,7 @@ def run_node(name: str, args: list[str] | None = None) -> None:
     :func:`~grasp_safety_filter.nodes.base_node.spin_node`, which keeps the same record.
     """
     termination = TerminationRequests()
-    for signum in (signal.SIGINT, signal.SIGTERM):
+    for signum in TERMINATION_SIGNALS:
         signal.signal(signum, termination)
     module = importlib.import_module(NODE_MODULES[name])
     if termination.requested:

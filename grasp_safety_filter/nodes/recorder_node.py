@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
-from contextlib import ExitStack
 from pathlib import Path
+import signal
 import sys
 import time
 
@@ -34,7 +34,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder
-from grasp_safety_filter.io.interrupts import deferred_interrupts, interrupt_on_signals
+from grasp_safety_filter.io.interrupts import TERMINATION_SIGNALS, TerminationRequests
 from grasp_safety_filter.io.messages import rclpy_message_class
 from grasp_safety_filter.nodes.base_node import make_executor
 
@@ -76,42 +76,34 @@ def _subscribe_all(node: Node, recorder: BagRecorder) -> None:
 def record(bag: Path, node_name: str = RECORDER_NODE_NAME, storage: str = 'mcap') -> int:
     """Record every table topic to ``bag`` until SIGINT or SIGTERM; return the exit code.
 
-    Signals are held off while the node, the bag and the subscriptions are made (rclpy
-    imports each message type's support then) and while everything is closed; one that
-    came during set-up stops the recording as soon as it is made. The bag is always closed.
+    The signals are recorded, never raised (as in the nodes): the loop ends at its next
+    turn, and nothing is cut short, neither the set-up (rclpy imports each message type's
+    support while subscribing) nor a write nor the closing of the bag. A signal during
+    the set-up ends the recording as soon as it is made; a second one changes nothing.
     """
-    with interrupt_on_signals():
-        try:
-            _record(bag, node_name, storage)
-        except KeyboardInterrupt:
-            pass
-    return 0
-
-
-def _record(bag: Path, node_name: str, storage: str) -> None:
-    resources = ExitStack()  # closed in reverse: the bag first, rclpy last
+    installed = signal.getsignal(signal.SIGINT)
+    termination = (
+        installed if isinstance(installed, TerminationRequests) else TerminationRequests()
+    )
+    for signum in TERMINATION_SIGNALS:
+        signal.signal(signum, termination)
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(node_name)
+    executor = make_executor(node.context)
+    executor.add_node(node)
     try:
-        with deferred_interrupts():
-            rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
-            resources.callback(rclpy.try_shutdown)
-            node = rclpy.create_node(node_name)
-            resources.callback(node.destroy_node)
-            executor = make_executor(node.context)
-            resources.callback(executor.shutdown)
-            executor.add_node(node)
-            recorder = resources.enter_context(BagRecorder(bag, storage))
+        with BagRecorder(bag, storage) as recorder:
             _subscribe_all(node, recorder)
-        node.get_logger().info(f'recording {len(topics.TOPICS)} topics to {bag}')
-        try:
-            while rclpy.ok():
+            node.get_logger().info(f'recording {len(topics.TOPICS)} topics to {bag}')
+            while rclpy.ok() and not termination.requested:
                 executor.spin_once(timeout_sec=SPIN_PERIOD)
-        except KeyboardInterrupt:
-            pass
-        counts = {topic: n for topic, n in recorder.counts.items() if n}
-        node.get_logger().info(f'closing {bag}: {counts}')
+            counts = {topic: n for topic, n in recorder.counts.items() if n}
+            node.get_logger().info(f'closing {bag}: {counts}')
     finally:
-        with deferred_interrupts(raise_pending=False):
-            resources.close()
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
 
 
 def main(args: list[str] | None = None) -> int:
