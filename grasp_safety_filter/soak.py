@@ -11,7 +11,7 @@
    time, and the same on the first quarter of the run (a bag of its own), so that the
    analysis's memory growth with the run's length can be read off.
 
-Nothing here asserts a figure: they are for reading (and for the issue tracker).
+Nothing here asserts a figure: they are for reading.
 """
 
 from __future__ import annotations

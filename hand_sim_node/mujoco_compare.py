@@ -92,7 +92,7 @@ def compare(
                 state.contact_force(u),
                 report.contact_force,
                 state.object_acceleration(u),
-                plant.last_object_acceleration,
+                plant.last_object_acceleration_in_palm,
             )
         )
 

@@ -7,27 +7,30 @@ normal and friction force, MuJoCo's impedance ``d``, the measured slip speed, th
 creep law below predicts, and the slip the law forces on the scenario's whole run.
 
 The law. MuJoCo's soft constraints (no no-slip solver) satisfy on every active row
-``J a - a_ref = -R f`` with ``a_ref = -B J v - K d r``: ``R = (1 - d)/d · A_ii`` (``A_ii``
-MuJoCo's diagonal estimate of the row's inverse inertia, ``d`` its impedance, between
-``solimp``'s ``dmin`` and ``dmax``), ``B = 2 / (dmax · timeconst)``. A friction row has no
-position term, so along a tangent ``t`` of a contact
+``J a - a_ref = -R f`` with ``a_ref = -B J v - K d r`` and ``B = 2 / (dmax · timeconst)``.
+A contact's regulariser is ``R0 = (1 - d)/d · A``: ``d`` its impedance (between
+``solimp``'s ``dmin`` and ``dmax``), ``A`` MuJoCo's approximate inverse inertia of the two
+bodies (from ``body_invweight0``, a constant of the model). Its friction rows get
 
-- elliptic cone: ``J_t a + B v_t = -R_t f_t``;
-- pyramidal cone, edge rows ``J_n ± μ J_t`` with forces ``f_±`` (``f_t = μ (f_+ - f_-)``):
-  subtracting the two rows, ``2 μ (J_t a + B v_t) = -(R_+ f_+ - R_- f_-)``.
+- elliptic cone: ``R_t = R0 / impratio``, and along a tangent ``t``
+  ``J_t a + B v_t = -R_t f_t`` (a friction row has no position term);
+- pyramidal cone: edge rows ``J_n ± μ J_t`` with forces ``f_±`` (``f_t = μ (f_+ - f_-)``)
+  and one shared ``R = 2 μ² (1 + μ²) R0 / impratio``; subtracting the two rows cancels
+  their position terms: ``2 μ (J_t a + B v_t) = -R (f_+ - f_-)``.
 
 On a held grasp the relative tangential acceleration ``J_t a`` averages to zero, so the
 contact slides at the *creep velocity* ``v_t = -R_t f_t / B`` (elliptic) or
-``-(R_+ f_+ - R_- f_-) / (2 μ B) ≈ -R f_t / (2 μ² B)`` (pyramidal), whatever the friction
-margin ``|f_t| / (μ f_n)``: a speed proportional to the friction force, with the coefficient
-``c = R / B`` (elliptic) or ``R / (2 μ² B)`` (pyramidal), m/s per N. A controller sets only
-the forces: ``c`` falls with ``d`` at most from ``(1 - dmin)/dmin`` to ``(1 - dmax)/dmax``
-(a deeper squeeze; a factor 0.47 with MuJoCo's default ``solimp``), and a grasp whose contact
+``-R (f_+ - f_-) / (2 μ B) = -R f_t / (2 μ² B)`` (pyramidal), whatever the friction margin
+``|f_t| / (μ f_n)``: ``v_t = -c f_t`` with ``c = (1 - d)/d · A / (impratio · B)``, times
+``1 + μ²`` on the pyramidal cone, m/s per N. A controller sets only the forces and, through
+the penetration, ``d``: ``c`` falls at most from ``(1 - dmin)/dmin`` to ``(1 - dmax)/dmax``
+(a deeper squeeze; a factor 0.47 with MuJoCo's default ``solimp``). A grasp whose contact
 normals are horizontal (the paper's: box faces ±x, +y) carries the object's weight ``m g``
 by friction alone, ``Σ_i |f_t,i| ≥ m g``. So over a hold of ``T`` seconds the contacts slip
 at least ``Σ_i s_i ≥ c_min m g T`` in total (``c_min``: the smallest coefficient, at
-``dmax``), whatever the filter does. MuJoCo's no-slip solver (``noslip_iterations`` > 0)
-recomputes the friction forces without ``R``: no creep, and no law to check.
+``dmax``), whatever the filter does; with a normal that is not horizontal the bound is not
+reported. MuJoCo's no-slip solver (``noslip_iterations`` > 0) recomputes the friction
+forces without ``R``: no creep, and no law to check.
 """
 
 from __future__ import annotations
@@ -83,6 +86,10 @@ def contact_creep(plant: MuJoCoPlant) -> ContactCreep:
     normal, impedance, coefficient = np.full(n, np.nan), np.full(n, np.nan), np.full(n, np.nan)
     force, slip, creep = np.full((n, 2), np.nan), np.full((n, 2), np.nan), np.full((n, 2), np.nan)
     for i, contact, _ in plant.fingertip_contacts():
+        if contact.dim != 3:
+            raise ConfigError(
+                f'mujoco.condim: the creep law is measured on condim 3 contacts, got {contact.dim}'
+            )
         a, mu = contact.efc_address, float(contact.friction[0])
         if pyramidal:
             f, R = data.efc_force[a : a + 4], data.efc_R[a : a + 4]
@@ -116,6 +123,11 @@ def hold(
     """
     nominal = replace(scenario.nominal_config, amplitude=(0.0,) * 6)
     plant = MuJoCoPlant(scenario.model, scenario.sim_config, options)
+    start = plant.grasp_state()
+    weight = float(np.linalg.norm(start.w_e[:3]))
+    # The bound needs friction to carry the whole weight: every normal of the grasp horizontal.
+    normal_in_palm = start.R_contact_to_palm[:, :, 2]
+    horizontal = bool(np.all(np.abs(normal_in_palm @ start.w_e[:3]) <= 1e-9 * weight))
     samples: list[ContactCreep] = []
     run = run_closed_loop(
         plant,
@@ -133,7 +145,7 @@ def hold(
     dmax = options.solimp[1]
     # c ∝ (1 - d)/d: its smallest value, at d = dmax.
     c_min = float(np.min(coefficient * ((1 - dmax) / dmax) / ((1 - impedance) / impedance)))
-    weight = float(np.linalg.norm(plant.grasp_state().w_e[:3]))
+
     speed = np.linalg.norm(slip, axis=1)
     figures = {
         'ended': run.stop_reason,
@@ -152,7 +164,9 @@ def hold(
         key: np.round(value, 4).tolist() for key, value in figures.items() if key != 'ended'
     }
     out['ended'] = run.stop_reason
-    if options.noslip_iterations == 0:
+    out['run_duration_s'] = scenario.sim_config.duration
+    out['noslip'] = options.noslip_iterations > 0
+    if options.noslip_iterations == 0 and horizontal:
         out['run_slip_lower_bound_mm'] = round(
             1e3 * c_min * weight * scenario.sim_config.duration, 1
         )
@@ -202,7 +216,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
 
     lines = [
         '| setting | f_n, N | \\|f_t\\|, N | d | slip speed, mm/s | law, mm/s | c, mm/s per N '
-        '| 15 s bound on Σ slip, mm |',
+        f'| {rows[0]["run_duration_s"]:g} s bound on Σ slip, mm |' if rows else '|',
         '| --- | --- | --- | --- | --- | --- | --- | --- |',
     ]
     for row in rows:
@@ -210,7 +224,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
             f'| {row["setting"]} | {triple(row["normal_force_N"], 2)} '
             f'| {triple(row["friction_force_N"], 2)} | {triple(row["impedance"], 3)} '
             f'| {triple(row["slip_speed_mm_s"], 2)} '
-            f'| {triple(row["law_speed_mm_s"], 2) if "run_slip_lower_bound_mm" in row else "–"} '
+            f'| {"–" if row["noslip"] else triple(row["law_speed_mm_s"], 2)} '
             f'| {triple(row["coefficient_mm_s_per_N"], 1)} '
             f'| {row.get("run_slip_lower_bound_mm", "–")} |'
         )

@@ -177,7 +177,7 @@ class MuJoCoPlant:
         self.last_report: StepReport | None = None
         #: MuJoCo's object acceleration ``(a_o, alpha_o)`` (palm coordinates, m/s², rad/s²)
         #: at the last step's start state under its torque (NaN before the first step).
-        self.last_object_acceleration = np.full(6, np.nan)
+        self.last_object_acceleration_in_palm = np.full(6, np.nan)
         #: Constraint margins and events of every step since the reset.
         self.log = EventLog()
         mujoco.mj_forward(self.mj_model, data)
@@ -247,7 +247,7 @@ class MuJoCoPlant:
                 # mj_step leaves the contacts, forces and accelerations of the state it
                 # started from.
                 force = self._contact_forces(state0)
-                self.last_object_acceleration = self._object_acceleration(state0)
+                self.last_object_acceleration_in_palm = self._object_acceleration(state0)
             # Contacts and forces at the new state.
             mujoco.mj_forward(mj, data)
             self._substep_index += 1

@@ -38,7 +38,7 @@ REPO = Path(__file__).resolve().parent.parent
 CONFIG = REPO / 'config' / 'paper_scenario.yaml'
 DT_NS = 1_000_000
 LOSS_BOUND_NS = 100_000_000
-"""Most a kill may cost: 0.1 s of stamps before the child's last tick (issue 9, item 12)."""
+"""Most a kill may cost: 0.1 s of stamps before the child's last tick."""
 SYNTHETIC_TICKS = 2000
 RUNNER_DURATION = 0.25
 KILLS = 3

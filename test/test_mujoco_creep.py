@@ -20,7 +20,7 @@ from grasp_safety_filter.errors import EXIT_CONFIG_ERROR
 from hand_sim_node import mujoco_compare, mujoco_creep
 from hand_sim_node.closed_loop import run_closed_loop
 from hand_sim_node.mjcf import MjcfOptions
-from hand_sim_node.mujoco_compare import compare, summary
+from hand_sim_node.mujoco_compare import compare
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
@@ -70,7 +70,7 @@ def test_both_accelerations_are_newton_euler_of_their_own_forces(paper):
         report = plant.last_report
         state, u = report.grasp_state, report.effort
         ours = newton_euler(state, report.contact_force)
-        mujoco = plant.last_object_acceleration
+        mujoco = plant.last_object_acceleration_in_palm
         np.testing.assert_allclose(mujoco[:3], ours[:3], rtol=0, atol=1e-9)
         # MuJoCo applies each force inside the penetration, ours on the fingertip surface:
         # the moments differ by at most |δ_i| |f_i| per contact.
@@ -108,10 +108,6 @@ def test_at_rest_mujoco_forces_approach_ours_as_its_contacts_stiffen(paper, d):
         assert relative < 10 * ratio
     else:
         assert 0.5 * ratio < relative < 2 * ratio
-    stats = summary(comparison)
-    assert stats['force_N']['error']['max'] == pytest.approx(
-        np.max(np.linalg.norm(comparison.force_model - comparison.force_mujoco, axis=2))
-    )
 
 
 def test_a_squeeze_that_loads_the_faces_does_not_slow_the_creep(scenario):

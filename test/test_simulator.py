@@ -569,7 +569,7 @@ def test_energy_of_the_unactuated_hand_is_conserved_to_integrator_accuracy(model
     # u = 0, gravity, no damping, 2 s, ode3. The hand collapses under gravity with the object
     # rolling on the fingertips (the plant's contact is bilateral; separation is only
     # flagged); joint speeds reach ~60 rad/s and J_h comes close to singular (condition
-    # number ~500), so at 1 ms the drift is ~3e-4 of E(0), above the 1e-4. The test
+    # number ~500), so at 1 ms the drift is ~3e-4 of E(0), above a 1e-4 tolerance. The test
     # shows that the drift is the integrator's (third order: halving the step divides it by
     # ~8, so rolling contact does no work) and meets 1e-4 at 0.5 ms. The stabilisation is
     # off: it vanishes on the exact solution and would only add its own integration error.
