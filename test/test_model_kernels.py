@@ -17,6 +17,7 @@ import pinocchio as pin
 import pytest
 from random_hands import random_hand
 
+from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_model import GraspModel
 
 PAPER_CASES = {
@@ -93,3 +94,19 @@ def test_a_rotated_object_with_an_anisotropic_inertia_matches():
     turned = pin.exp3(np.array([0.1, -0.2, 0.05])) @ c.R_object
     spun = Configuration(c.q, c.dq, c.p_object, turned, c.twist_object)
     _check(model, [spun], 'box turned')
+
+
+def test_a_singular_B_ho_raises_as_numpy_solve_does():
+    """No inertia anywhere: B_ho = 0, which the start-up check reports as singular."""
+    n, m = 3, 9
+    zeros = np.zeros
+    arguments = (
+        zeros((n, 6, m)), zeros((n, 6)), zeros((n, 6)), zeros((n, 3)), zeros((m, m)), zeros(m),
+        zeros(3), zeros(6), zeros((6, 6)), zeros(6), zeros(6), zeros((n, 3)),
+        np.tile(np.eye(3), (n, 1, 1)), zeros((n, 2, 3)), zeros((n, 2)), zeros((n, 2)),
+        zeros((n, 3)),
+    )
+    with pytest.raises(np.linalg.LinAlgError, match='Singular matrix'):
+        contact_dynamics(*arguments)
+    with pytest.raises(np.linalg.LinAlgError, match='Singular matrix'):
+        np.linalg.solve(zeros((3 * n, 3 * n)), zeros((3 * n, m + 1)))

@@ -41,6 +41,46 @@ def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
 
 
 @kernel
+def _solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A^-1 B`` by Gaussian elimination with partial pivoting (as LAPACK's dgesv).
+
+    Raises:
+        numpy.linalg.LinAlgError: A pivot is exactly zero (A is singular), as numpy's solve.
+    """
+    k = A.shape[0]
+    LU = A.copy()
+    X = B.copy()
+    columns = X.shape[1]
+    for j in range(k):
+        pivot = j
+        largest = abs(LU[j, j])
+        for r in range(j + 1, k):
+            if abs(LU[r, j]) > largest:
+                largest = abs(LU[r, j])
+                pivot = r
+        if largest == 0.0:
+            raise np.linalg.LinAlgError('Singular matrix')
+        if pivot != j:
+            for c in range(k):
+                LU[j, c], LU[pivot, c] = LU[pivot, c], LU[j, c]
+            for c in range(columns):
+                X[j, c], X[pivot, c] = X[pivot, c], X[j, c]
+        for r in range(j + 1, k):
+            factor = LU[r, j] / LU[j, j]
+            for c in range(j + 1, k):
+                LU[r, c] -= factor * LU[j, c]
+            for c in range(columns):
+                X[r, c] -= factor * X[j, c]
+    for j in range(k - 1, -1, -1):
+        for c in range(columns):
+            total = X[j, c]
+            for r in range(j + 1, k):
+                total -= LU[j, r] * X[r, c]
+            X[j, c] = total / LU[j, j]
+    return X
+
+
+@kernel
 def contact_dynamics(
     J_fingertip: np.ndarray,
     twist_fingertip: np.ndarray,
@@ -88,6 +128,9 @@ def contact_dynamics(
         ``J_h`` (3n, m), ``G`` (6, 3n), ``J_h_dot dq`` (3n,), ``G_dot^T x_o_dot`` (3n,),
         ``B_ho`` (3n, 3n), and ``[matrix | offset]`` of ``f_c`` (3n, m + 1), ``ddq``
         (m, m + 1), ``x_o_ddot`` (6, m + 1) and ``xi_cf_ddot`` (2n, m + 1, contact-major).
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular (the contact forces are not determined).
     """
     n = J_fingertip.shape[0]
     m = J_fingertip.shape[2]
@@ -224,7 +267,7 @@ def contact_dynamics(
         for j in range(6):
             total += G[j, r] * x_ddot_free[j]
         force_rhs[r, m] += Jh_dot_dq[r] - G_dot_T_twist[r] - total
-    force = np.linalg.solve(B_ho, force_rhs)
+    force = _solve(B_ho, force_rhs)
     # ddq = M_h^-1 (u - h) - M_h^-1 J_h^T f_c;  x_o_ddot = M_o^-1 G f_c + x_ddot_free.
     for r in range(m):
         for c in range(m + 1):

@@ -339,7 +339,8 @@ class GraspModel:
         geometry = self._contact_stack.geometry(p_f, R_pf, p_o, R_o)
         R_pc = geometry.R_contact_to_palm
         w_relative = hand.twist_fingertip[:, 3:] - twist_o[3:]
-        w_relative_in_contact = (w_relative[:, None, :] @ R_pc)[:, 0, :]
+        # Rows w_rel,i^T R_pc,i = (R_cp,i w_rel,i)^T.
+        w_relative_in_contact = (w_relative[:, None, :] @ R_pc).reshape(-1, 3)
         rates = self._contact_stack.rolling_rates(geometry, w_relative_in_contact)
 
         # ---- object
