@@ -1,10 +1,10 @@
-"""How the model's per-tick kernels are compiled: numba, ahead of the first tick's use, cached.
+"""How the model's per-tick kernels are compiled: by numba, on first use, cached on disk.
 
 A tick's model terms are a few hundred float operations on arrays of 3 to 60 elements; as
 numpy calls, nearly all of their cost is the calls' own overhead. The kernels are plain
 loops compiled by numba with ``cache=True``: the machine code is written next to the module
-(``__pycache__``) the first time a process compiles it, and later processes load it in
-milliseconds instead of compiling again.
+(``__pycache__``) the first time a process compiles it (seconds), and later processes load
+it (a fraction of a second) instead of compiling again.
 
 Where the package directory cannot be written (an installed, read-only package), numba
 writes its cache to the user's cache directory; where neither can be written, to a
@@ -31,25 +31,24 @@ def _writable(directory: Path) -> bool:
     return True
 
 
-def _cache_fallback() -> None:
-    """Point numba's cache at a temporary directory if its own choices are read-only.
+def fallback_cache_directory() -> str | None:
+    """Return a temporary cache directory if numba's own choices are read-only, else None.
 
-    numba caches next to the source (``__pycache__``), else in the user's cache directory
-    (``$XDG_CACHE_HOME`` or ``~/.cache``); with neither writable it refuses to decorate.
+    numba caches in ``config.CACHE_DIR`` (``NUMBA_CACHE_DIR``) when set, else next to the
+    source (``__pycache__``), else in the user's cache directory (``$XDG_CACHE_HOME`` or
+    ``~/.cache``); with none writable it refuses to decorate a cached function.
     """
     if numba.config.CACHE_DIR:
-        return
+        return None
     if _writable(Path(__file__).resolve().parent / '__pycache__'):
-        return
+        return None
     user_cache = Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'numba'
     if _writable(user_cache):
-        return
-    numba.config.CACHE_DIR = str(
-        Path(tempfile.gettempdir()) / f'grasp_safety_filter-numba-{os.getuid()}'
-    )
+        return None
+    return str(Path(tempfile.gettempdir()) / f'grasp_safety_filter-numba-{os.getuid()}')
 
 
-_cache_fallback()
+numba.config.CACHE_DIR = fallback_cache_directory() or numba.config.CACHE_DIR
 
 #: The kernels' decorator: no Python objects, cached machine code, numpy's float semantics
 #: (division by zero gives inf or NaN, as in the numpy code, instead of raising).
