@@ -10,6 +10,8 @@ hands (3–5 fingers, box or sphere objects, joint orders unlike the URDF's).
 
 from __future__ import annotations
 
+import dataclasses
+
 from grasp_states import Configuration, paper_model, random_configuration
 import numpy as np
 from numpy_model_terms import numpy_model_terms
@@ -19,6 +21,7 @@ from random_hands import random_hand
 
 from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.model.rolling import contact_stack, ContactStack, SphereOnPlaneStack
 
 PAPER_CASES = {
     'cube': {},
@@ -110,3 +113,33 @@ def test_a_singular_B_ho_raises_as_numpy_solve_does():
         contact_dynamics(*arguments)
     with pytest.raises(np.linalg.LinAlgError, match='Singular matrix'):
         np.linalg.solve(zeros((3 * n, 3 * n)), zeros((3 * n, m + 1)))
+
+
+def test_the_fused_sphere_on_plane_kinematics_match_the_general_stack():
+    """SphereOnPlaneStack.kinematics (one kernel) against ContactStack's numpy formulas."""
+    model = paper_model()
+    rng = np.random.default_rng(2)
+    fused, general = contact_stack(model.contacts), ContactStack(model.contacts)
+    assert isinstance(fused, SphereOnPlaneStack)
+    for _ in range(4):
+        c = random_configuration(model, rng)
+        hand = model.hand.terms(c.q, c.dq)
+        arguments = (
+            hand.p_fingertip_in_palm,
+            hand.R_fingertip_to_palm,
+            hand.twist_fingertip,
+            c.p_object,
+            c.R_object,
+            c.twist_object,
+        )
+        for ours, theirs in zip(
+            fused.kinematics(*arguments), general.kinematics(*arguments), strict=True
+        ):
+            for field in dataclasses.fields(theirs):
+                np.testing.assert_allclose(
+                    getattr(ours, field.name),
+                    getattr(theirs, field.name),
+                    rtol=0.0,
+                    atol=1e-12,
+                    err_msg=field.name,
+                )

@@ -336,12 +336,10 @@ class GraspModel:
         p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
 
         # ---- contact geometry and rolling rates, (n, ...) arrays.
-        geometry = self._contact_stack.geometry(p_f, R_pf, p_o, R_o)
+        geometry, rates = self._contact_stack.kinematics(
+            p_f, R_pf, hand.twist_fingertip, p_o, R_o, twist_o
+        )
         R_pc = geometry.R_contact_to_palm
-        w_relative = hand.twist_fingertip[:, 3:] - twist_o[3:]
-        # Rows w_rel,i^T R_pc,i = (R_cp,i w_rel,i)^T.
-        w_relative_in_contact = (w_relative[:, None, :] @ R_pc).reshape(-1, 3)
-        rates = self._contact_stack.rolling_rates(geometry, w_relative_in_contact)
 
         # ---- object
         M_o = self.object.inertia_matrix(R_o)

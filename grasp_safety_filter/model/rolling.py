@@ -27,6 +27,7 @@ import numpy as np
 from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.rolling_kernels import (
     fingertip_contact_frames,
+    sphere_on_plane_contacts,
     sphere_on_plane_geometry,
     sphere_on_plane_rates,
 )
@@ -312,6 +313,35 @@ class ContactStack:
             R_contact_to_fingertip=R_contact_to_fingertip,
         )
 
+    def kinematics(
+        self,
+        p_fingertip_in_palm: np.ndarray,
+        R_fingertip_to_palm: np.ndarray,
+        twist_fingertip: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+        twist_object: np.ndarray,
+    ) -> tuple[StackedContactGeometry, StackedRollingRates]:
+        """:meth:`geometry` and the :meth:`rolling_rates` of the hand and object's motion.
+
+        The relative rotation in each contact frame is ``R_cp,i (w_f,i - w_o)``.
+
+        Args:
+            p_fingertip_in_palm: Fingertip sphere centres, (n, 3), m.
+            R_fingertip_to_palm: Fingertip orientations, (n, 3, 3).
+            twist_fingertip: Fingertip twists ``(v_f, w_f)``, (n, 6), palm frame.
+            p_object_in_palm: Object centre of mass, (3,), m.
+            R_object_to_palm: Object orientation, (3, 3).
+            twist_object: Object twist ``(v_o, w_o)``, (6,), palm frame.
+        """
+        geometry = self.geometry(
+            p_fingertip_in_palm, R_fingertip_to_palm, p_object_in_palm, R_object_to_palm
+        )
+        w_relative = twist_fingertip[:, 3:] - twist_object[3:]
+        # Rows w_rel,i^T R_pc,i = (R_cp,i w_rel,i)^T.
+        w_in_contact = (w_relative[:, None, :] @ geometry.R_contact_to_palm).reshape(-1, 3)
+        return geometry, self.rolling_rates(geometry, w_in_contact)
+
     def rolling_rates(
         self, geometry: StackedContactGeometry, w_relative_in_contact: np.ndarray
     ) -> StackedRollingRates:
@@ -445,6 +475,29 @@ class SphereOnPlaneStack(ContactStack):
                 self._radius,
             )
         )
+
+    def kinematics(
+        self,
+        p_fingertip_in_palm: np.ndarray,
+        R_fingertip_to_palm: np.ndarray,
+        twist_fingertip: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+        twist_object: np.ndarray,
+    ) -> tuple[StackedContactGeometry, StackedRollingRates]:
+        """:meth:`ContactStack.kinematics` in one compiled pass."""
+        arrays = sphere_on_plane_contacts(
+            p_fingertip_in_palm,
+            R_fingertip_to_palm,
+            twist_fingertip,
+            p_object_in_palm,
+            R_object_to_palm,
+            twist_object,
+            self._plane_origin,
+            self._plane_frame,
+            self._radius,
+        )
+        return StackedContactGeometry(*arrays[:7]), StackedRollingRates(*arrays[7:])
 
     def rolling_rates(
         self, geometry: StackedContactGeometry, w_relative_in_contact: np.ndarray

@@ -199,3 +199,54 @@ def sphere_on_plane_rates(
         sliding[i, 0], sliding[i, 1] = sliding_x, sliding_y
         Omega[i, 0], Omega[i, 1], Omega[i, 2] = -w_x, -w_y, -tan_a * w_x
     return xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega
+
+
+@kernel
+def sphere_on_plane_contacts(
+    p_fingertip_in_palm: np.ndarray,
+    R_fingertip_to_palm: np.ndarray,
+    twist_fingertip: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    plane_origin: np.ndarray,
+    plane_frame: np.ndarray,
+    radius: np.ndarray,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+]:
+    """:func:`sphere_on_plane_geometry`, then :func:`sphere_on_plane_rates` of the motion.
+
+    The relative rotation in each contact frame is ``w = R_pc^T (w_f - w_o)``, with the
+    angular velocities ``w_f = twist_fingertip[:, 3:]`` (n, 3) and ``w_o = twist_object[3:]``
+    (palm frame, rad/s).
+
+    Returns:
+        The seven arrays of :func:`sphere_on_plane_geometry`, then the seven of
+        :func:`sphere_on_plane_rates`.
+    """
+    xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc = sphere_on_plane_geometry(
+        p_fingertip_in_palm,
+        R_fingertip_to_palm,
+        p_object_in_palm,
+        R_object_to_palm,
+        plane_origin,
+        plane_frame,
+        radius,
+    )
+    n = xi_cf.shape[0]
+    w = np.empty((n, 3))
+    for i in range(n):
+        w_x = twist_fingertip[i, 3] - twist_object[3]
+        w_y = twist_fingertip[i, 4] - twist_object[4]
+        w_z = twist_fingertip[i, 5] - twist_object[5]
+        for c in range(3):
+            w[i, c] = R_pc[i, 0, c] * w_x + R_pc[i, 1, c] * w_y + R_pc[i, 2, c] * w_z
+    xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega = sphere_on_plane_rates(
+        xi_cf, psi, w, radius
+    )
+    return (
+        xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc,
+        xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega,
+    )
