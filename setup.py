@@ -22,6 +22,9 @@ setup(
         'osqp>=1.0',
         'daqp>=0.11',  # the qp.solver=daqp backend: a warm-started daqp.Model
         'scipy>=1.8',  # sparse matrices for OSQP, LU/QR in the active-set step
+        # The model's per-tick kernels (grasp_safety_filter/model/compiled.py); tested with
+        # numba 0.68.1 on numpy 2.4.
+        'numba>=0.68',
         'pin>=3.0',
         'rosbags>=0.10',
         'pyyaml>=6.0',

@@ -34,7 +34,7 @@ from grasp_safety_filter.control.safety_filter import (
 )
 
 #: Distribution packages whose versions the report lists.
-VERSIONED_PACKAGES = ('numpy', 'scipy', 'osqp', 'cvxpy', 'qpsolvers', 'daqp', 'clarabel')
+VERSIONED_PACKAGES = ('numpy', 'numba', 'scipy', 'osqp', 'cvxpy', 'qpsolvers', 'daqp', 'clarabel')
 
 
 # --------------------------------------------------------------------------------------------

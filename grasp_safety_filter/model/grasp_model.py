@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
-from grasp_safety_filter.model.arrays import cross, matvec, skew
+from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
@@ -322,9 +322,9 @@ class GraspModel:
 
         All contacts are evaluated together (arrays with a leading contact axis), and the
         torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
-        so that each formula is one numpy call whatever the number of contacts.
+        in one compiled pass (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`).
         """
-        n, m = self.n_contacts, self.n_joints
+        m = self.n_joints
         q = np.array(q, dtype=float)
         dq = np.array(dq, dtype=float)
         p_o = np.array(p_object_in_palm, dtype=float)
@@ -332,86 +332,41 @@ class GraspModel:
         if self._contacts is None:
             self.bind_contacts(q, p_o, R_o)
         twist_o = np.array(twist_object, dtype=float)
-        v_o, w_o = twist_o[:3], twist_o[3:]
         hand = self.hand.terms(q, dq)
         p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
-        v_f, w_f = hand.twist_fingertip[:, :3], hand.twist_fingertip[:, 3:]
-        a_f0, alpha_f0 = hand.J_fingertip_dot_dq[:, :3], hand.J_fingertip_dot_dq[:, 3:]
-        J_w = J_s[:, 3:]
 
         # ---- contact geometry and rolling rates, (n, ...) arrays.
-        geometry = self._contact_stack.geometry(p_f, R_pf, p_o, R_o)
+        geometry, rates = self._contact_stack.kinematics(
+            p_f, R_pf, hand.twist_fingertip, p_o, R_o, twist_o
+        )
         R_pc = geometry.R_contact_to_palm
-        R_cp = R_pc.transpose(0, 2, 1)
-        w_relative = w_f - w_o
-        w_relative_in_contact = matvec(R_cp, w_relative)
-        rates = self._contact_stack.rolling_rates(geometry, w_relative_in_contact)
-
-        # ---- J_h,i = R_cp,i [I, -(p_fc,i)×] J_s,i  and  G_i = [R_pc,i; (p_oc,i)× R_pc,i].
-        p_c = geometry.p_contact_in_palm
-        p_fc = p_c - p_f
-        p_oc = p_c - p_o
-        skew_fc, skew_oc = skew(p_fc), skew(p_oc)
-        J_h = (R_cp @ (J_s[:, :3] - skew_fc @ J_w)).reshape(3 * n, m)
-        # (n, 6, 3) blocks G_i, laid side by side: G[r, 3i + c] = G_i[r, c].
-        G = np.concatenate((R_pc, skew_oc @ R_pc), axis=1).transpose(1, 0, 2).reshape(6, 3 * n)
-
-        # ---- Total time derivatives along the rolling motion. The contact point slides over
-        # the fingertip (sliding velocity along rho1, rho2) and the contact frame turns at
-        # w_c = w_f + R_pc Omega, so R_pc_dot = (w_c×) R_pc and R_cp_dot x = -R_cp (w_c × x):
-        #   J_h_dot dq = R_cp (a_f0 + alpha_f0 × p_fc + w_f × (p_c_dot - v_f) - w_c × v_cf)
-        #   G_dot^T x_o_dot = R_cp (w_o × (p_c_dot - v_o) - w_c × v_co)
-        # with v_cf = v_f + w_f × p_fc and v_co = v_o + w_o × p_oc the velocities of the
-        # finger's and the object's material points at the contact.
-        skew_contact = skew(w_f + matvec(R_pc, rates.frame_angular_velocity))
-        v_cf = v_f - matvec(skew_fc, w_f)
-        v_co = v_o - skew_oc @ w_o
-        p_c_dot = v_cf + matvec(R_pc[:, :, :2], rates.sliding_velocity)
-        Jh_dot_dq = matvec(
-            R_cp,
-            a_f0
-            - matvec(skew_fc, alpha_f0)
-            + cross(w_f, p_c_dot - v_f)
-            - matvec(skew_contact, v_cf),
-        ).reshape(3 * n)
-        G_dot_T_twist = matvec(
-            R_cp, cross(w_o, p_c_dot - v_o) - matvec(skew_contact, v_co)
-        ).reshape(3 * n)
 
         # ---- object
         M_o = self.object.inertia_matrix(R_o)
-        M_o_inv = self.object.inverse_inertia_matrix(R_o)
         C_o_twist = self.object.bias_wrench(R_o, twist_o)
         w_e = self.object.external_wrench()
-        # Object acceleration from gravity and the bias wrench alone: M_o^-1 (w_e - C_o x_o_dot).
-        x_ddot_free = M_o_inv @ (w_e - C_o_twist)
 
-        # ---- Torque-affine terms, as (k, m + 1) matrices [matrix | offset] acting on (u, 1).
-        M_h_inv = hand.M_h_inverse
-        # Joint acceleration without contact forces: M_h^-1 (u - h) = M_h^-1 [I | -h] (u, 1).
-        torque = self._unit_torque.copy()
-        torque[:, m] = -hand.h_bias
-        ddq_free = M_h_inv @ torque
-        # B_ho f_c = J_h M_h^-1 (u - h) + J_h_dot dq - G_dot^T x_o_dot
-        #            - G^T M_o^-1 (w_e - C_o x_o_dot)
-        M_h_inv_J_hT = M_h_inv @ J_h.T
-        M_o_inv_G = M_o_inv @ G
-        B_ho = J_h @ M_h_inv_J_hT + G.T @ M_o_inv_G
-        force_rhs = J_h @ ddq_free
-        force_rhs[:, m] += Jh_dot_dq - G_dot_T_twist - G.T @ x_ddot_free
-        force = np.linalg.solve(B_ho, force_rhs)
-        # ddq = M_h^-1 (u - h - J_h^T f_c),  x_o_ddot = M_o^-1 (G f_c + w_e - C_o x_o_dot).
-        ddq = ddq_free - M_h_inv_J_hT @ force
-        x_ddot = M_o_inv_G @ force
-        x_ddot[:, m] += x_ddot_free
-        # xi_cf_ddot = H_cf_dot w + H_cf (R_cp_dot (w_f - w_o) + R_cp (alpha_f - alpha_o))
-        #            = H_cf_dot w + H_cf R_cp (alpha_f - alpha_o - w_c × (w_f - w_o)),
-        # with alpha_f = J_w ddq + alpha_f0 per contact.
-        alpha_relative = J_w @ ddq - x_ddot[3:]
-        alpha_relative[:, :, m] += alpha_f0 - matvec(skew_contact, w_relative)
-        xi_ddot = (rates.H_cf @ R_cp) @ alpha_relative
-        xi_ddot[:, :, m] += rates.H_cf_dot_w
-        xi_ddot = xi_ddot.reshape(2 * n, m + 1)
+        # ---- J_h, G, their rates along the rolling motion and the torque-affine terms
+        # (module docstring; the formulas in dynamics_kernel).
+        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot = contact_dynamics(
+            J_s,
+            hand.twist_fingertip,
+            hand.J_fingertip_dot_dq,
+            p_f,
+            hand.M_h_inverse,
+            hand.h_bias,
+            p_o,
+            twist_o,
+            self.object.inverse_inertia_matrix(R_o),
+            C_o_twist,
+            w_e,
+            geometry.p_contact_in_palm,
+            R_pc,
+            rates.H_cf,
+            rates.H_cf_dot_w,
+            rates.sliding_velocity,
+            rates.frame_angular_velocity,
+        )
 
         arrays = {
             'q': q,
@@ -429,7 +384,7 @@ class GraspModel:
             'xi_co_dot': rates.xi_co_dot,
             'psi_dot': rates.psi_dot,
             'penetration': geometry.penetration,
-            'p_contact_in_palm': p_c,
+            'p_contact_in_palm': geometry.p_contact_in_palm,
             'R_contact_to_palm': R_pc,
             'M_h': hand.M_h,
             'h_bias': hand.h_bias,

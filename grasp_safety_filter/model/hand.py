@@ -198,8 +198,9 @@ class HandModel:
             M_h=M,
             h_bias=self._from_pin(data.nle.copy()),
             gravity_torque=self._from_pin(data.g.copy()),
-            p_fingertip_in_palm=placements[:, :3, 3],
-            R_fingertip_to_palm=placements[:, :3, :3],
+            # Contiguous copies: the compiled kernels take one memory layout.
+            p_fingertip_in_palm=np.ascontiguousarray(placements[:, :3, 3]),
+            R_fingertip_to_palm=np.ascontiguousarray(placements[:, :3, :3]),
             J_fingertip=J,
             # The frame twists are J_s dq (the same as Pinocchio's frame velocities).
             twist_fingertip=J @ dq,

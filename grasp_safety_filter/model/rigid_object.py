@@ -77,37 +77,47 @@ class RigidObject:
         return matrix
 
     def inertia_matrix(self, R_object_to_palm: np.ndarray) -> np.ndarray:
-        """``M_o``, (6, 6) (a shared read-only array if the inertia is isotropic)."""
+        """``M_o``, (6, 6), read-only (a shared array if the inertia is isotropic)."""
         if self.isotropic:
             return self._M_o
-        return self._block_diagonal(
-            self.mass, R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
+        return read_only(
+            self._block_diagonal(
+                self.mass, R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
+            )
         )
 
     def inverse_inertia_matrix(self, R_object_to_palm: np.ndarray) -> np.ndarray:
-        """``M_o^-1 = blkdiag(I3 / m, R I_body^-1 R^T)``, (6, 6) (shared if isotropic)."""
+        """``M_o^-1 = blkdiag(I3 / m, R I_body^-1 R^T)``, (6, 6), read-only (shared if isotropic).
+
+        Read-only either way, so that the compiled model kernels see one array type.
+        """
         if self.isotropic:
             return self._M_o_inv
-        return self._block_diagonal(
-            1.0 / self.mass, R_object_to_palm @ self.inverse_inertia_in_body @ R_object_to_palm.T
+        return read_only(
+            self._block_diagonal(
+                1.0 / self.mass,
+                R_object_to_palm @ self.inverse_inertia_in_body @ R_object_to_palm.T,
+            )
         )
 
     def bias_wrench(self, R_object_to_palm: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """``C_o x_o_dot = (0, w × I w)``, (6,) (shared read-only zeros if isotropic)."""
+        """``C_o x_o_dot = (0, w × I w)``, (6,), read-only (shared zeros if isotropic)."""
         if self.isotropic:
             return self._zero_wrench
         w = twist[3:]
         Iw = R_object_to_palm @ (self.inertia_in_body @ (R_object_to_palm.T @ w))
         # The cross product written out: np.cross costs ~15 µs of axis handling per call.
-        return np.array(
-            [
-                0.0,
-                0.0,
-                0.0,
-                w[1] * Iw[2] - w[2] * Iw[1],
-                w[2] * Iw[0] - w[0] * Iw[2],
-                w[0] * Iw[1] - w[1] * Iw[0],
-            ]
+        return read_only(
+            np.array(
+                [
+                    0.0,
+                    0.0,
+                    0.0,
+                    w[1] * Iw[2] - w[2] * Iw[1],
+                    w[2] * Iw[0] - w[0] * Iw[2],
+                    w[0] * Iw[1] - w[1] * Iw[0],
+                ]
+            )
         )
 
     def external_wrench(self) -> np.ndarray:

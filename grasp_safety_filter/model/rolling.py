@@ -21,11 +21,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-import math
 
 import numpy as np
 
 from grasp_safety_filter.model.arrays import matvec
+from grasp_safety_filter.model.rolling_kernels import (
+    fingertip_contact_frames,
+    sphere_on_plane_contacts,
+    sphere_on_plane_geometry,
+    sphere_on_plane_rates,
+)
 from grasp_safety_filter.model.surface_stacks import FlatStack, SphereStack, stack_surfaces
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface, Surface
 
@@ -204,40 +209,6 @@ def _inverse_2x2(A: np.ndarray) -> np.ndarray:
     return np.array([[d, -b], [-c, a]]).transpose(2, 0, 1) / (a * d - b * c)[:, None, None]
 
 
-def _fingertip_contact_frames(
-    R_object_contact_to_fingertip: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Find where spherical fingertips touch the object surfaces.
-
-    From the object surfaces' Gauss frames at the contacts, in the fingertip frames
-    (k, 3, 3), as in :meth:`ContactPair.geometry`: the fingertip normal is the opposite of
-    the object's, ``xi_cf`` is its inverse Gauss map
-    (:meth:`SphereSurface.coordinates_of_normal`), the contact frame is the sphere's Gauss
-    frame there (:meth:`SphereSurface.frame`), and ``psi = atan2(-x_c · y_o, x_c · x_o)``.
-
-    Evaluated per contact in plain floats: for a few contacts, ~50 ns per float operation
-    beats ~1 µs per numpy call on arrays of three elements.
-
-    Returns:
-        ``xi_cf`` (k, 2), ``psi`` (k,) and ``R_contact_to_fingertip`` (k, 3, 3).
-    """
-    coordinates, angles, frames = [], [], []
-    for x_object, y_object, n_object in R_object_contact_to_fingertip.transpose(0, 2, 1).tolist():
-        a = math.asin(min(max(-n_object[1], -1.0), 1.0))
-        b = math.atan2(n_object[2], n_object[0])
-        sa, ca, sb, cb = math.sin(a), math.cos(a), math.sin(b), math.cos(b)
-        rho1 = (sa * cb, ca, sa * sb)
-        coordinates.append((a, b))
-        angles.append(math.atan2(-_dot(rho1, y_object), _dot(rho1, x_object)))
-        # Rows of the Gauss frame [rho1, rho2, n]: rho2 = (sb, 0, -cb), n = (-ca cb, sa, -ca sb).
-        frames.append(((rho1[0], sb, -ca * cb), (ca, 0.0, sa), (rho1[2], -cb, -ca * sb)))
-    return np.array(coordinates), np.array(angles), np.array(frames)
-
-
-def _dot(u: Sequence[float], v: Sequence[float]) -> float:
-    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
-
-
 @dataclass(frozen=True)
 class StackedContactGeometry:
     """:class:`ContactGeometry` of n contacts, each field stacked along a leading axis.
@@ -324,7 +295,7 @@ class ContactStack:
         p_centre_in_object = (p_fingertip_in_palm - p_object_in_palm) @ R_object_to_palm
         xi_co, distance = self.object_surfaces.closest_point(p_centre_in_object)
         R_object_contact_to_palm = R_object_to_palm @ self.object_surfaces.frame(xi_co)
-        xi_cf, psi, R_contact_to_fingertip = _fingertip_contact_frames(
+        xi_cf, psi, R_contact_to_fingertip = fingertip_contact_frames(
             R_fingertip_to_palm.transpose(0, 2, 1) @ R_object_contact_to_palm
         )
         R_contact_to_palm = R_fingertip_to_palm @ R_contact_to_fingertip
@@ -341,6 +312,35 @@ class ContactStack:
             R_contact_to_palm=R_contact_to_palm,
             R_contact_to_fingertip=R_contact_to_fingertip,
         )
+
+    def kinematics(
+        self,
+        p_fingertip_in_palm: np.ndarray,
+        R_fingertip_to_palm: np.ndarray,
+        twist_fingertip: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+        twist_object: np.ndarray,
+    ) -> tuple[StackedContactGeometry, StackedRollingRates]:
+        """:meth:`geometry` and the :meth:`rolling_rates` of the hand and object's motion.
+
+        The relative rotation in each contact frame is ``R_cp,i (w_f,i - w_o)``.
+
+        Args:
+            p_fingertip_in_palm: Fingertip sphere centres, (n, 3), m.
+            R_fingertip_to_palm: Fingertip orientations, (n, 3, 3).
+            twist_fingertip: Fingertip twists ``(v_f, w_f)``, (n, 6), palm frame.
+            p_object_in_palm: Object centre of mass, (3,), m.
+            R_object_to_palm: Object orientation, (3, 3).
+            twist_object: Object twist ``(v_o, w_o)``, (6,), palm frame.
+        """
+        geometry = self.geometry(
+            p_fingertip_in_palm, R_fingertip_to_palm, p_object_in_palm, R_object_to_palm
+        )
+        w_relative = twist_fingertip[:, 3:] - twist_object[3:]
+        # Rows w_rel,i^T R_pc,i = (R_cp,i w_rel,i)^T.
+        w_in_contact = (w_relative[:, None, :] @ geometry.R_contact_to_palm).reshape(-1, 3)
+        return geometry, self.rolling_rates(geometry, w_in_contact)
 
     def rolling_rates(
         self, geometry: StackedContactGeometry, w_relative_in_contact: np.ndarray
@@ -438,18 +438,10 @@ class ContactStack:
 class SphereOnPlaneStack(ContactStack):
     """Spherical fingertips on flat object faces (the paper's cube).
 
-    The rolling rates of :class:`ContactStack` in closed form, evaluated per contact in
-    plain floats (a few float operations per contact instead of numpy calls).
-
-    With the sphere chart's ``K_cf = I / R``, ``M_cf = diag(R, R cos a)``,
-    ``T_cf = (0, -tan(a) / R)`` and a plane's ``K_co = 0``, ``M_co = I``, ``T_co = 0``, the
-    equations of :meth:`ContactStack.rolling_rates` reduce, for ``w = R_cp (w_f - w_o)``, to
-
-        M_cf xi_cf_dot = R (-w_y, w_x)                   (sliding velocity)
-        xi_cf_dot = (-w_y, w_x / cos a),      xi_co_dot = R_psi R (-w_y, w_x)
-        psi_dot = w_z - tan(a) w_x
-        H_cf = [[0, -1, 0], [1 / cos a, 0, 0]],   H_cf_dot w = (0, tan(a) a_dot b_dot)
-        Omega = (-w_x, -w_y, -tan(a) w_x)
+    The geometry and rolling rates of :class:`ContactStack` in closed form, compiled
+    (:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_geometry` and
+    :func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_rates`, whose
+    docstrings give the formulas).
 
     Args:
         contacts: The contact pairs; every object surface must be a
@@ -460,51 +452,68 @@ class SphereOnPlaneStack(ContactStack):
         super().__init__(contacts)
         if not isinstance(self.object_surfaces, FlatStack):
             raise TypeError('SphereOnPlaneStack: every object surface must be a FlatSurface')
-        self._radii = self.fingertips.radius.tolist()
+        self._radius = np.ascontiguousarray(self.fingertips.radius, dtype=float)
+        self._plane_origin = np.ascontiguousarray(self.object_surfaces.origin, dtype=float)
+        self._plane_frame = np.array(self.object_surfaces.frame(None), dtype=float)
+
+    def geometry(
+        self,
+        p_fingertip_in_palm: np.ndarray,
+        R_fingertip_to_palm: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+    ) -> StackedContactGeometry:
+        """:meth:`ContactStack.geometry`, by the compiled closed forms."""
+        return StackedContactGeometry(
+            *sphere_on_plane_geometry(
+                p_fingertip_in_palm,
+                R_fingertip_to_palm,
+                p_object_in_palm,
+                R_object_to_palm,
+                self._plane_origin,
+                self._plane_frame,
+                self._radius,
+            )
+        )
+
+    def kinematics(
+        self,
+        p_fingertip_in_palm: np.ndarray,
+        R_fingertip_to_palm: np.ndarray,
+        twist_fingertip: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+        twist_object: np.ndarray,
+    ) -> tuple[StackedContactGeometry, StackedRollingRates]:
+        """:meth:`ContactStack.kinematics` in one compiled pass."""
+        arrays = sphere_on_plane_contacts(
+            p_fingertip_in_palm,
+            R_fingertip_to_palm,
+            twist_fingertip,
+            p_object_in_palm,
+            R_object_to_palm,
+            twist_object,
+            self._plane_origin,
+            self._plane_frame,
+            self._radius,
+        )
+        return StackedContactGeometry(*arrays[:7]), StackedRollingRates(*arrays[7:])
 
     def rolling_rates(
         self, geometry: StackedContactGeometry, w_relative_in_contact: np.ndarray
     ) -> StackedRollingRates:
-        """:meth:`ContactStack.rolling_rates`, by the closed forms above."""
-        rows, H_cf = [], []
-        for (a, _), psi, (w_x, w_y, w_z), radius in zip(
-            geometry.xi_cf.tolist(),
-            geometry.psi.tolist(),
-            w_relative_in_contact.tolist(),
-            self._radii,
-            strict=True,
-        ):
-            cos_a, tan_a = math.cos(a), math.tan(a)
-            cos_psi, sin_psi = math.cos(psi), math.sin(psi)
-            sliding_x, sliding_y = -radius * w_y, radius * w_x
-            a_dot, b_dot = -w_y, w_x / cos_a
-            rows.append(
-                (
-                    a_dot,
-                    b_dot,  # xi_cf_dot
-                    cos_psi * sliding_x - sin_psi * sliding_y,  # xi_co_dot = R_psi sliding
-                    -sin_psi * sliding_x - cos_psi * sliding_y,
-                    w_z - tan_a * w_x,  # psi_dot
-                    0.0,
-                    tan_a * a_dot * b_dot,  # H_cf_dot w
-                    sliding_x,
-                    sliding_y,  # sliding velocity
-                    -w_x,
-                    -w_y,
-                    -tan_a * w_x,  # Omega
-                )
-            )
-            H_cf.append(((0.0, -1.0, 0.0), (1.0 / cos_a, 0.0, 0.0)))
-        # One array for all per-contact results (one numpy call), split into column views.
-        table = np.array(rows)
+        """:meth:`ContactStack.rolling_rates`, by the compiled closed forms."""
+        xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega = sphere_on_plane_rates(
+            geometry.xi_cf, geometry.psi, w_relative_in_contact, self._radius
+        )
         return StackedRollingRates(
-            xi_cf_dot=table[:, 0:2],
-            xi_co_dot=table[:, 2:4],
-            psi_dot=table[:, 4],
-            H_cf=np.array(H_cf),
-            H_cf_dot_w=table[:, 5:7],
-            sliding_velocity=table[:, 7:9],
-            frame_angular_velocity=table[:, 9:12],
+            xi_cf_dot=xi_cf_dot,
+            xi_co_dot=xi_co_dot,
+            psi_dot=psi_dot,
+            H_cf=H_cf,
+            H_cf_dot_w=H_cf_dot_w,
+            sliding_velocity=sliding,
+            frame_angular_velocity=Omega,
         )
 
 

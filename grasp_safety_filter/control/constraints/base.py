@@ -21,6 +21,7 @@ from typing import NamedTuple, Protocol, runtime_checkable
 import numpy as np
 
 from grasp_safety_filter.control.class_k import ClassKFunction
+from grasp_safety_filter.control.constraints.box_kernel import box_barrier_rows
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -258,13 +259,15 @@ class BoxBarrier:
         self.alpha1 = alpha1
         self.alpha2 = alpha2
         self.names = names
-        index = np.asarray(index, dtype=np.intp)
-        sign = np.asarray(sign, dtype=float)
-        # Signed selection S (S[r, index[r]] = s_r): h = S x + h_offset, h_dot = S x_dot,
-        # h_ddot(u) = S x_ddot(u); one small product each instead of gathers and scalings.
-        self._selection = np.zeros((index.size, int(index.max(initial=-1)) + 1))
-        self._selection[np.arange(index.size), index] = sign
-        self._h_offset = -sign * np.asarray(bound, dtype=float)
+        self._index = np.ascontiguousarray(index, dtype=np.intp)
+        self._sign = np.ascontiguousarray(sign, dtype=float)
+        self._h_offset = -self._sign * np.asarray(bound, dtype=float)
+        self._alpha_parameters = (
+            alpha1.kind == 'cubic',
+            alpha1.gain,
+            alpha2.kind == 'cubic',
+            alpha2.gain,
+        )
         self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
 
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
@@ -274,29 +277,34 @@ class BoxBarrier:
     def barrier(self, state: GraspState) -> tuple[np.ndarray, np.ndarray]:
         """``(h, h_dot)`` per row, shape (k,) each."""
         x, x_dot, _ = self.coordinates(state)
-        return self._selection @ x + self._h_offset, self._selection @ x_dot
+        return self._sign * x[self._index] + self._h_offset, self._sign * x_dot[self._index]
 
     def rows(self, state: GraspState) -> ConstraintRows:
         """Rows ``s x_ddot(u) + alpha_1'(h) h_dot + alpha_2(h_dot + alpha_1(h)) >= 0``.
 
         In the common form: ``A = s * x_ddot.matrix[index]`` and
-        ``lower = -(s * x_ddot.offset[index] + alpha_1'(h) h_dot + alpha_2(B))``.
+        ``lower = -(s * x_ddot.offset[index] + alpha_1'(h) h_dot + alpha_2(B))``, in one
+        compiled pass (:func:`~grasp_safety_filter.control.constraints.box_kernel.
+        box_barrier_rows`).
         """
         x, x_dot, acceleration = self.coordinates(state)
-        S = self._selection
-        h = S @ x + self._h_offset
-        h_dot = S @ x_dot
-        B = h_dot + self.alpha1.value(h)
-        lower = -(
-            S @ acceleration.offset + self.alpha1.derivative(h) * h_dot + self.alpha2.value(B)
+        A, lower, h = box_barrier_rows(
+            self._index,
+            self._sign,
+            self._h_offset,
+            x,
+            x_dot,
+            acceleration.matrix,
+            acceleration.offset,
+            *self._alpha_parameters,
         )
         self._last_h = (state, h)
-        return ConstraintRows(S @ acceleration.matrix, lower, self.names)
+        return ConstraintRows(A, lower, self.names)
 
     def values(self, state: GraspState, u: np.ndarray | None = None) -> BarrierValues:
         """Barrier values ``h`` per row (independent of u: relative degree two)."""
         last_state, h = self._last_h
         if state is not last_state:  # states are immutable: reuse h of the last rows() call
             x, _, _ = self.coordinates(state)
-            h = self._selection @ x + self._h_offset
+            h = self._sign * x[self._index] + self._h_offset
         return BarrierValues(h, self.names)

@@ -15,6 +15,7 @@ from grasp_safety_filter.control.constraints.base import (
     finite_vector,
     validate_names,
 )
+from grasp_safety_filter.control.constraints.pyramid_kernel import pyramid_rows
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: The l_s-face pyramid inscribed in the circular cone (the paper's).
@@ -134,15 +135,17 @@ class FrictionPyramid:
         """Rows ``h_ij(u) >= eps`` as ``A u >= lower``.
 
         With ``f_c(u) = F u + f_0`` and ``Lambda`` the face normals:
-        ``A = -Lambda F`` and ``lower = eps + Lambda f_0``.
+        ``A = -Lambda F`` and ``lower = eps + Lambda f_0``
+        (:func:`~grasp_safety_filter.control.constraints.pyramid_kernel.pyramid_rows`).
         """
-        n = len(self.contact_names)
         contact_force = state.contact_force
-        check_rows(contact_force.offset, 3 * n, 'contact_force')
-        F = contact_force.matrix.reshape(n, 3, -1)
-        f0 = contact_force.offset.reshape(n, 3, 1)
-        A = np.matmul(self._negative_faces, F).reshape(n * self.faces, -1)
-        lower = self.normal_force_margin - np.matmul(self._negative_faces, f0).reshape(-1)
+        check_rows(contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+        A, lower = pyramid_rows(
+            self._negative_faces,
+            contact_force.matrix,
+            contact_force.offset,
+            self.normal_force_margin,
+        )
         return ConstraintRows(A, lower, self.names)
 
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:

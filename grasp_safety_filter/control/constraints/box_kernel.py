@@ -1,0 +1,89 @@
+"""The rows of :class:`~grasp_safety_filter.control.constraints.base.BoxBarrier`, compiled.
+
+For row r selecting coordinate ``j = index[r]`` with sign ``s = sign[r]`` and
+``h_offset[r] = -s c_r`` (c_r the bound)::
+
+    h = s x_j + h_offset,   h_dot = s x_dot_j,   B = h_dot + alpha_1(h)
+    A[r] = s x_ddot.matrix[j],   lower[r] = -(s x_ddot.offset[j] + alpha_1'(h) h_dot + alpha_2(B))
+
+with the extended class-K functions of :mod:`grasp_safety_filter.control.class_k`, each given
+as ``(cubic, gain)``: ``alpha(h) = k h^3`` and ``alpha'(h) = 3 k h^2`` when cubic, else
+``k h`` and ``k``. One compiled loop over the rows (:mod:`grasp_safety_filter.model.compiled`)
+instead of a dozen numpy calls on arrays of 6 to 18 rows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grasp_safety_filter.model.compiled import kernel
+
+
+@kernel
+def _alpha(cubic: bool, gain: float, h: float) -> float:
+    """``k h^3`` (cubic) or ``k h``."""
+    if cubic:
+        return gain * h * h * h
+    return gain * h
+
+
+@kernel
+def _alpha_slope(cubic: bool, gain: float, h: float) -> float:
+    """``3 k h^2`` (cubic) or ``k``."""
+    if cubic:
+        return (3.0 * gain) * h * h
+    return gain
+
+
+@kernel
+def box_barrier_rows(
+    index: np.ndarray,
+    sign: np.ndarray,
+    h_offset: np.ndarray,
+    x: np.ndarray,
+    x_dot: np.ndarray,
+    x_ddot_matrix: np.ndarray,
+    x_ddot_offset: np.ndarray,
+    alpha1_cubic: bool,
+    alpha1_gain: float,
+    alpha2_cubic: bool,
+    alpha2_gain: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the rows ``A u >= lower`` and the barrier values h (module docstring).
+
+    Args:
+        index: Selected coordinate per row, (k,).
+        sign: +1 (lower bound) or -1 (upper bound) per row, (k,).
+        h_offset: ``-sign * bound`` per row, (k,).
+        x: The coordinates, (d,).
+        x_dot: Their rates, (d,).
+        x_ddot_matrix: ``u ↦ x_ddot`` sensitivity, (d, m).
+        x_ddot_offset: ``x_ddot`` at u = 0, (d,).
+        alpha1_cubic: Whether alpha_1 is cubic (else linear).
+        alpha1_gain: alpha_1's gain.
+        alpha2_cubic: Whether alpha_2 is cubic (else linear).
+        alpha2_gain: alpha_2's gain.
+
+    Returns:
+        ``A`` (k, m), ``lower`` (k,) and ``h`` (k,).
+    """
+    k = index.shape[0]
+    m = x_ddot_matrix.shape[1]
+    A = np.empty((k, m))
+    lower = np.empty(k)
+    h = np.empty(k)
+    for r in range(k):
+        j = index[r]
+        s = sign[r]
+        h_r = s * x[j] + h_offset[r]
+        h_dot = s * x_dot[j]
+        B = h_dot + _alpha(alpha1_cubic, alpha1_gain, h_r)
+        lower[r] = -(
+            s * x_ddot_offset[j]
+            + _alpha_slope(alpha1_cubic, alpha1_gain, h_r) * h_dot
+            + _alpha(alpha2_cubic, alpha2_gain, B)
+        )
+        h[r] = h_r
+        for c in range(m):
+            A[r, c] = s * x_ddot_matrix[j, c]
+    return A, lower, h

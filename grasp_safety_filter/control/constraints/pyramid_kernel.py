@@ -1,0 +1,53 @@
+"""The rows of :class:`~grasp_safety_filter.control.constraints.friction_cone.FrictionPyramid`.
+
+With ``f_c(u) = F u + f_0`` (per contact ``(f_x, f_y, f_n)``, contact-major) and
+``N_i`` the negated face normals of contact i's pyramid (faces × 3)::
+
+    A[i, j] = N_i[j] F_i,     lower[i, j] = eps - N_i[j] f_0,i
+
+rows contact-major, face by face: one compiled loop (:mod:`grasp_safety_filter.model.compiled`)
+instead of batched numpy products on (faces × 3) blocks.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grasp_safety_filter.model.compiled import kernel
+
+
+@kernel
+def pyramid_rows(
+    negative_faces: np.ndarray,
+    force_matrix: np.ndarray,
+    force_offset: np.ndarray,
+    normal_force_margin: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return ``A`` (n faces, m) and ``lower`` (n faces,) of the pyramid rows.
+
+    Args:
+        negative_faces: ``N``, (n, faces, 3).
+        force_matrix: ``F``, (3n, m), N per N·m.
+        force_offset: ``f_0``, (3n,), N.
+        normal_force_margin: ``eps``, N.
+    """
+    n, faces = negative_faces.shape[0], negative_faces.shape[1]
+    m = force_matrix.shape[1]
+    A = np.empty((n * faces, m))
+    lower = np.empty(n * faces)
+    for i in range(n):
+        for j in range(faces):
+            r = i * faces + j
+            N0, N1, N2 = negative_faces[i, j, 0], negative_faces[i, j, 1], negative_faces[i, j, 2]
+            for c in range(m):
+                A[r, c] = (
+                    N0 * force_matrix[3 * i, c]
+                    + N1 * force_matrix[3 * i + 1, c]
+                    + N2 * force_matrix[3 * i + 2, c]
+                )
+            lower[r] = normal_force_margin - (
+                N0 * force_offset[3 * i]
+                + N1 * force_offset[3 * i + 1]
+                + N2 * force_offset[3 * i + 2]
+            )
+    return A, lower

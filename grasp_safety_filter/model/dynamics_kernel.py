@@ -1,0 +1,313 @@
+"""The grasp's contact dynamics at one instant, as one compiled kernel.
+
+From the hand's terms (Pinocchio), the object's and the contacts' geometry and rolling
+rates, :func:`contact_dynamics` computes (DESIGN.md §3; the derivation is in
+:mod:`grasp_safety_filter.model.grasp_model`), per contact i, with ``R_cp,i = R_pc,i^T``,
+``p_fc,i = p_c,i - p_f,i`` and ``p_oc,i = p_c,i - p_o``:
+
+    J_h,i = R_cp,i (J_v,i - p_fc,i × J_w,i),     G_i = [R_pc,i; p_oc,i × R_pc,i]
+    w_c = w_f + R_pc Omega,   v_cf = v_f + w_f × p_fc,   v_co = v_o + w_o × p_oc,
+    p_c_dot = v_cf + R_pc[:, :2] sliding
+    J_h_dot dq      = R_cp (a_f0 - p_fc × alpha_f0 + w_f × (p_c_dot - v_f) - w_c × v_cf)
+    G_dot^T x_o_dot = R_cp (w_o × (p_c_dot - v_o) - w_c × v_co)
+
+and the torque-affine terms, as augmented matrices ``[matrix | offset]`` acting on (u, 1):
+
+    B_ho = J_h M_h^-1 J_h^T + G^T M_o^-1 G
+    B_ho f_c = J_h M_h^-1 (u - h) + J_h_dot dq - G_dot^T x_o_dot - G^T M_o^-1 (w_e - C_o x_o_dot)
+    ddq = M_h^-1 (u - h - J_h^T f_c),   x_o_ddot = M_o^-1 (G f_c + w_e - C_o x_o_dot)
+    xi_cf_ddot,i = H_cf,i R_cp,i (J_w,i ddq + alpha_f0,i - alpha_o - w_c × (w_f - w_o))
+                   + H_cf_dot w
+
+Plain loops compiled by numba (:mod:`grasp_safety_filter.model.compiled`): at these sizes
+(3n ≤ 12 rows, m ≤ 16 joints) one compiled pass costs less than the calls of the numpy
+expressions it replaces. Units: SI; frames and conventions as in
+:mod:`grasp_safety_filter.model.grasp_state`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grasp_safety_filter.model.compiled import kernel
+
+
+@kernel
+def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """``out = a × b`` for 3-vectors."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@kernel
+def _solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``A^-1 B`` by Gaussian elimination with partial pivoting (as LAPACK's dgesv).
+
+    Raises:
+        numpy.linalg.LinAlgError: A pivot is exactly zero (A is singular), as numpy's solve.
+    """
+    k = A.shape[0]
+    LU = A.copy()
+    X = B.copy()
+    columns = X.shape[1]
+    for j in range(k):
+        pivot = j
+        largest = abs(LU[j, j])
+        for r in range(j + 1, k):
+            if abs(LU[r, j]) > largest:
+                largest = abs(LU[r, j])
+                pivot = r
+        if largest == 0.0:
+            raise np.linalg.LinAlgError('Singular matrix')
+        if pivot != j:
+            for c in range(k):
+                LU[j, c], LU[pivot, c] = LU[pivot, c], LU[j, c]
+            for c in range(columns):
+                X[j, c], X[pivot, c] = X[pivot, c], X[j, c]
+        for r in range(j + 1, k):
+            factor = LU[r, j] / LU[j, j]
+            for c in range(j + 1, k):
+                LU[r, c] -= factor * LU[j, c]
+            for c in range(columns):
+                X[r, c] -= factor * X[j, c]
+    for j in range(k - 1, -1, -1):
+        for c in range(columns):
+            total = X[j, c]
+            for r in range(j + 1, k):
+                total -= LU[j, r] * X[r, c]
+            X[j, c] = total / LU[j, j]
+    return X
+
+
+@kernel
+def contact_dynamics(
+    J_fingertip: np.ndarray,
+    twist_fingertip: np.ndarray,
+    J_fingertip_dot_dq: np.ndarray,
+    p_fingertip_in_palm: np.ndarray,
+    M_h_inverse: np.ndarray,
+    h_bias: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    twist_object: np.ndarray,
+    M_o_inverse: np.ndarray,
+    C_o_twist: np.ndarray,
+    w_e: np.ndarray,
+    p_contact_in_palm: np.ndarray,
+    R_contact_to_palm: np.ndarray,
+    H_cf: np.ndarray,
+    H_cf_dot_w: np.ndarray,
+    sliding_velocity: np.ndarray,
+    frame_angular_velocity: np.ndarray,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+    np.ndarray, np.ndarray,
+]:
+    """Contact Jacobians, grasp map, their rates and the torque-affine terms of one instant.
+
+    Args:
+        J_fingertip: ``J_s`` per fingertip (LOCAL_WORLD_ALIGNED), (n, 6, m).
+        twist_fingertip: ``(v_f, w_f)``, (n, 6).
+        J_fingertip_dot_dq: ``(a_f0, alpha_f0) = J_s_dot dq``, (n, 6).
+        p_fingertip_in_palm: Fingertip sphere centres, (n, 3), m.
+        M_h_inverse: ``M_h^-1``, (m, m).
+        h_bias: ``C_h dq + g``, (m,), N·m.
+        p_object_in_palm: Object centre of mass, (3,), m.
+        twist_object: ``(v_o, w_o)``, (6,).
+        M_o_inverse: ``M_o^-1``, (6, 6).
+        C_o_twist: ``C_o x_o_dot``, (6,).
+        w_e: External wrench on the object, (6,).
+        p_contact_in_palm: Contact points, (n, 3), m.
+        R_contact_to_palm: Contact frames ``R_pc``, (n, 3, 3).
+        H_cf: Relative rotation (contact frame) ↦ xi_cf_dot, (n, 2, 3).
+        H_cf_dot_w: ``H_cf_dot w``, (n, 2).
+        sliding_velocity: ``M_cf xi_cf_dot`` along (rho1, rho2), (n, 2), m/s.
+        frame_angular_velocity: ``Omega`` (contact-frame components), (n, 3), rad/s.
+
+    Returns:
+        ``J_h`` (3n, m), ``G`` (6, 3n), ``J_h_dot dq`` (3n,), ``G_dot^T x_o_dot`` (3n,),
+        ``B_ho`` (3n, 3n), and ``[matrix | offset]`` of ``f_c`` (3n, m + 1), ``ddq``
+        (m, m + 1), ``x_o_ddot`` (6, m + 1) and ``xi_cf_ddot`` (2n, m + 1, contact-major).
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular (the contact forces are not determined).
+    """
+    n = J_fingertip.shape[0]
+    m = J_fingertip.shape[2]
+    k = 3 * n
+    J_h = np.empty((k, m))
+    G = np.zeros((6, k))
+    Jh_dot_dq = np.empty(k)
+    G_dot_T_twist = np.empty(k)
+    w_o = twist_object[3:]
+    v_o = twist_object[:3]
+    w_c = np.empty((n, 3))
+    w_relative = np.empty((n, 3))
+    p_fc = np.empty(3)
+    p_oc = np.empty(3)
+    tmp = np.empty(3)
+    tmp2 = np.empty(3)
+    v_cf = np.empty(3)
+    v_co = np.empty(3)
+    p_c_dot = np.empty(3)
+    world = np.empty(3)
+    for i in range(n):
+        R = R_contact_to_palm[i]
+        v_f = twist_fingertip[i, :3]
+        w_f = twist_fingertip[i, 3:]
+        for r in range(3):
+            p_fc[r] = p_contact_in_palm[i, r] - p_fingertip_in_palm[i, r]
+            p_oc[r] = p_contact_in_palm[i, r] - p_object_in_palm[r]
+            w_relative[i, r] = w_f[r] - w_o[r]
+        # J_h,i = R_cp (J_v - p_fc × J_w), column by column.
+        for j in range(m):
+            for r in range(3):
+                tmp[r] = J_fingertip[i, 3 + r, j]
+            _cross(p_fc, tmp, tmp2)
+            for r in range(3):
+                world[r] = J_fingertip[i, r, j] - tmp2[r]
+            for r in range(3):
+                J_h[3 * i + r, j] = R[0, r] * world[0] + R[1, r] * world[1] + R[2, r] * world[2]
+        # G_i = [R_pc; p_oc × R_pc].
+        for c in range(3):
+            for r in range(3):
+                G[r, 3 * i + c] = R[r, c]
+                tmp[r] = R[r, c]
+            _cross(p_oc, tmp, tmp2)
+            for r in range(3):
+                G[3 + r, 3 * i + c] = tmp2[r]
+        # w_c = w_f + R_pc Omega; v_cf = v_f + w_f × p_fc; v_co = v_o + w_o × p_oc.
+        Omega = frame_angular_velocity[i]
+        for r in range(3):
+            w_c[i, r] = w_f[r] + R[r, 0] * Omega[0] + R[r, 1] * Omega[1] + R[r, 2] * Omega[2]
+        _cross(w_f, p_fc, tmp)
+        _cross(w_o, p_oc, tmp2)
+        for r in range(3):
+            v_cf[r] = v_f[r] + tmp[r]
+            v_co[r] = v_o[r] + tmp2[r]
+            p_c_dot[r] = (
+                v_cf[r]
+                + R[r, 0] * sliding_velocity[i, 0]
+                + R[r, 1] * sliding_velocity[i, 1]
+            )
+        # J_h_dot dq = R_cp (a_f0 - p_fc × alpha_f0 + w_f × (p_c_dot - v_f) - w_c × v_cf).
+        a_f0 = J_fingertip_dot_dq[i, :3]
+        alpha_f0 = J_fingertip_dot_dq[i, 3:]
+        _cross(p_fc, alpha_f0, tmp)
+        for r in range(3):
+            world[r] = a_f0[r] - tmp[r]
+            tmp2[r] = p_c_dot[r] - v_f[r]
+        _cross(w_f, tmp2, tmp)
+        for r in range(3):
+            world[r] += tmp[r]
+        _cross(w_c[i], v_cf, tmp)
+        for r in range(3):
+            world[r] -= tmp[r]
+        for r in range(3):
+            Jh_dot_dq[3 * i + r] = R[0, r] * world[0] + R[1, r] * world[1] + R[2, r] * world[2]
+        # G_dot^T x_o_dot = R_cp (w_o × (p_c_dot - v_o) - w_c × v_co).
+        for r in range(3):
+            tmp2[r] = p_c_dot[r] - v_o[r]
+        _cross(w_o, tmp2, world)
+        _cross(w_c[i], v_co, tmp)
+        for r in range(3):
+            world[r] -= tmp[r]
+        for r in range(3):
+            G_dot_T_twist[3 * i + r] = (
+                R[0, r] * world[0] + R[1, r] * world[1] + R[2, r] * world[2]
+            )
+
+    # ---- Torque-affine terms, [matrix | offset] on (u, 1).
+    # Joint acceleration without contact forces: M_h^-1 [I | -h].
+    ddq = np.empty((m, m + 1))
+    for r in range(m):
+        offset = 0.0
+        for j in range(m):
+            ddq[r, j] = M_h_inverse[r, j]
+            offset -= M_h_inverse[r, j] * h_bias[j]
+        ddq[r, m] = offset
+    # Object acceleration from gravity and the bias wrench: M_o^-1 (w_e - C_o x_o_dot).
+    x_ddot_free = np.empty(6)
+    for r in range(6):
+        total = 0.0
+        for c in range(6):
+            total += M_o_inverse[r, c] * (w_e[c] - C_o_twist[c])
+        x_ddot_free[r] = total
+    M_h_inv_J_hT = np.empty((m, k))
+    for r in range(m):
+        for c in range(k):
+            total = 0.0
+            for j in range(m):
+                total += M_h_inverse[r, j] * J_h[c, j]
+            M_h_inv_J_hT[r, c] = total
+    M_o_inv_G = np.empty((6, k))
+    for r in range(6):
+        for c in range(k):
+            total = 0.0
+            for j in range(6):
+                total += M_o_inverse[r, j] * G[j, c]
+            M_o_inv_G[r, c] = total
+    B_ho = np.empty((k, k))
+    for r in range(k):
+        for c in range(k):
+            total = 0.0
+            for j in range(m):
+                total += J_h[r, j] * M_h_inv_J_hT[j, c]
+            for j in range(6):
+                total += G[j, r] * M_o_inv_G[j, c]
+            B_ho[r, c] = total
+    force_rhs = np.empty((k, m + 1))
+    for r in range(k):
+        for c in range(m + 1):
+            total = 0.0
+            for j in range(m):
+                total += J_h[r, j] * ddq[j, c]
+            force_rhs[r, c] = total
+        total = 0.0
+        for j in range(6):
+            total += G[j, r] * x_ddot_free[j]
+        force_rhs[r, m] += Jh_dot_dq[r] - G_dot_T_twist[r] - total
+    force = _solve(B_ho, force_rhs)
+    # ddq = M_h^-1 (u - h) - M_h^-1 J_h^T f_c;  x_o_ddot = M_o^-1 G f_c + x_ddot_free.
+    for r in range(m):
+        for c in range(m + 1):
+            total = 0.0
+            for j in range(k):
+                total += M_h_inv_J_hT[r, j] * force[j, c]
+            ddq[r, c] -= total
+    x_ddot = np.empty((6, m + 1))
+    for r in range(6):
+        for c in range(m + 1):
+            total = 0.0
+            for j in range(k):
+                total += M_o_inv_G[r, j] * force[j, c]
+            x_ddot[r, c] = total
+        x_ddot[r, m] += x_ddot_free[r]
+    # xi_cf_ddot,i = (H_cf R_cp) (J_w ddq - alpha_o + [alpha_f0 - w_c × w_rel]) + H_cf_dot w.
+    xi_ddot = np.empty((2 * n, m + 1))
+    alpha = np.empty((3, m + 1))
+    H_R = np.empty((2, 3))
+    for i in range(n):
+        R = R_contact_to_palm[i]
+        for r in range(3):
+            for c in range(m + 1):
+                total = 0.0
+                for j in range(m):
+                    total += J_fingertip[i, 3 + r, j] * ddq[j, c]
+                alpha[r, c] = total - x_ddot[3 + r, c]
+        _cross(w_c[i], w_relative[i], tmp)
+        for r in range(3):
+            alpha[r, m] += J_fingertip_dot_dq[i, 3 + r] - tmp[r]
+        for a in range(2):
+            for c in range(3):
+                # (H_cf R_cp)[a, c] = sum_r H_cf[a, r] R_pc[c, r].
+                H_R[a, c] = (
+                    H_cf[i, a, 0] * R[c, 0] + H_cf[i, a, 1] * R[c, 1] + H_cf[i, a, 2] * R[c, 2]
+                )
+        for a in range(2):
+            for c in range(m + 1):
+                xi_ddot[2 * i + a, c] = (
+                    H_R[a, 0] * alpha[0, c] + H_R[a, 1] * alpha[1, c] + H_R[a, 2] * alpha[2, c]
+                )
+            xi_ddot[2 * i + a, m] += H_cf_dot_w[i, a]
+    return J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot

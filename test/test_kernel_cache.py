@@ -1,0 +1,77 @@
+"""The compiled kernels' disk cache: where numba writes it, and that a new process loads it."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import subprocess
+import sys
+import tempfile
+
+import numba
+import pytest
+
+from grasp_safety_filter.model import compiled
+
+REPO = Path(__file__).resolve().parent.parent
+#: A process computing one paper state and printing its kernels' cache hits and compilations.
+ONE_STATE = """
+from grasp_states import paper_model, Q_PAPER, P_OBJECT_PAPER
+import numpy as np
+from grasp_safety_filter.model import dynamics_kernel, rolling_kernels
+model = paper_model()
+model.state(0.0, Q_PAPER, np.zeros(9), P_OBJECT_PAPER, np.eye(3), np.zeros(6))
+kernels = (dynamics_kernel.contact_dynamics, rolling_kernels.sphere_on_plane_contacts)
+print(sum(sum(k.stats.cache_hits.values()) for k in kernels),
+      sum(sum(k.stats.cache_misses.values()) for k in kernels))
+"""
+
+
+@pytest.mark.parametrize(
+    ('explicit', 'package_writable', 'user_writable', 'expected'),
+    [
+        ('/some/dir', False, False, None),  # NUMBA_CACHE_DIR given: numba's own choice
+        ('', True, False, None),  # __pycache__ next to the source
+        ('', False, True, None),  # the user's cache directory
+        ('', False, False, 'temporary'),  # neither: a directory under the temporary one
+    ],
+)
+def test_the_cache_falls_back_to_a_temporary_directory_only_when_nothing_else_is_writable(
+    monkeypatch, explicit, package_writable, user_writable, expected
+):
+    monkeypatch.setattr(numba.config, 'CACHE_DIR', explicit)
+    monkeypatch.setenv('XDG_CACHE_HOME', '/user-cache')
+
+    def writable(directory: Path) -> bool:
+        if directory == Path('/user-cache/numba'):
+            return user_writable
+        assert directory == Path(compiled.__file__).resolve().parent / '__pycache__'
+        return package_writable
+
+    monkeypatch.setattr(compiled, '_writable', writable)
+    found = compiled.fallback_cache_directory()
+    if expected is None:
+        assert found is None
+    else:
+        assert Path(found).parent == Path(tempfile.gettempdir())
+        assert str(os.getuid()) in Path(found).name
+
+
+def test_a_second_process_loads_the_kernels_from_the_cache_instead_of_compiling(tmp_path):
+    env = {
+        **os.environ,
+        'NUMBA_CACHE_DIR': str(tmp_path),
+        'PYTHONPATH': os.pathsep.join([str(REPO / 'test'), str(REPO)]),
+    }
+    runs = [
+        subprocess.run(
+            [sys.executable, '-c', ONE_STATE], env=env, capture_output=True, text=True, check=True
+        ).stdout.split()
+        for _ in range(2)
+    ]
+    (first_hits, first_compiled), (second_hits, second_compiled) = (
+        [int(x) for x in run] for run in runs
+    )
+    assert (first_hits, first_compiled) == (0, 2)
+    assert (second_hits, second_compiled) == (2, 0)
+    assert any(tmp_path.rglob('*.nbi')) and any(tmp_path.rglob('*.nbc'))
