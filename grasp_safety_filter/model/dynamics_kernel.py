@@ -20,14 +20,15 @@ and the torque-affine terms, as augmented matrices ``[matrix | offset]`` acting 
                    + H_cf_dot w
 
 Plain loops compiled by numba (:mod:`grasp_safety_filter.model.compiled`): at these sizes
-(3n ≤ 12 rows, m ≤ 16 joints) one compiled pass costs less than the calls of the numpy
-expressions it replaces. Units: SI; frames and conventions as in
+(3n ≤ 12 rows, m ≤ 16 joints) two compiled passes, around LAPACK's solve of ``B_ho``, cost
+less than the calls of the numpy expressions they replace. Units: SI; frames and conventions as in
 :mod:`grasp_safety_filter.model.grasp_state`.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
 
@@ -40,47 +41,6 @@ def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
     out[2] = a[0] * b[1] - a[1] * b[0]
 
 
-@kernel
-def _solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """``A^-1 B`` by Gaussian elimination with partial pivoting (as LAPACK's dgesv).
-
-    Raises:
-        numpy.linalg.LinAlgError: A pivot is exactly zero (A is singular), as numpy's solve.
-    """
-    k = A.shape[0]
-    LU = A.copy()
-    X = B.copy()
-    columns = X.shape[1]
-    for j in range(k):
-        pivot = j
-        largest = abs(LU[j, j])
-        for r in range(j + 1, k):
-            if abs(LU[r, j]) > largest:
-                largest = abs(LU[r, j])
-                pivot = r
-        if largest == 0.0:
-            raise np.linalg.LinAlgError('Singular matrix')
-        if pivot != j:
-            for c in range(k):
-                LU[j, c], LU[pivot, c] = LU[pivot, c], LU[j, c]
-            for c in range(columns):
-                X[j, c], X[pivot, c] = X[pivot, c], X[j, c]
-        for r in range(j + 1, k):
-            factor = LU[r, j] / LU[j, j]
-            for c in range(j + 1, k):
-                LU[r, c] -= factor * LU[j, c]
-            for c in range(columns):
-                X[r, c] -= factor * X[j, c]
-    for j in range(k - 1, -1, -1):
-        for c in range(columns):
-            total = X[j, c]
-            for r in range(j + 1, k):
-                total -= LU[j, r] * X[r, c]
-            X[j, c] = total / LU[j, j]
-    return X
-
-
-@kernel
 def contact_dynamics(
     J_fingertip: np.ndarray,
     twist_fingertip: np.ndarray,
@@ -132,6 +92,60 @@ def contact_dynamics(
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular (the contact forces are not determined).
     """
+    (
+        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
+        x_ddot_free, w_c, w_relative,
+    ) = _velocity_terms(
+        J_fingertip,
+        twist_fingertip,
+        J_fingertip_dot_dq,
+        p_fingertip_in_palm,
+        M_h_inverse,
+        h_bias,
+        p_object_in_palm,
+        twist_object,
+        M_o_inverse,
+        C_o_twist,
+        w_e,
+        p_contact_in_palm,
+        R_contact_to_palm,
+        H_cf,
+        H_cf_dot_w,
+        sliding_velocity,
+        frame_angular_velocity,
+    )
+    # B_ho is at most 12 × 12: LAPACK's dgesv (scipy) in between the two compiled passes.
+    _, _, force, info = dgesv(B_ho, force_rhs)
+    if info > 0:
+        raise np.linalg.LinAlgError('Singular matrix')
+    ddq, x_ddot, xi_ddot = _acceleration_terms(
+        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
+        J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w,
+    )
+    return J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot
+
+
+@kernel
+def _velocity_terms(
+    J_fingertip: np.ndarray,
+    twist_fingertip: np.ndarray,
+    J_fingertip_dot_dq: np.ndarray,
+    p_fingertip_in_palm: np.ndarray,
+    M_h_inverse: np.ndarray,
+    h_bias: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    twist_object: np.ndarray,
+    M_o_inverse: np.ndarray,
+    C_o_twist: np.ndarray,
+    w_e: np.ndarray,
+    p_contact_in_palm: np.ndarray,
+    R_contact_to_palm: np.ndarray,
+    H_cf: np.ndarray,
+    H_cf_dot_w: np.ndarray,
+    sliding_velocity: np.ndarray,
+    frame_angular_velocity: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """Everything up to ``B_ho f_c = rhs``: the Jacobians, rates, ``B_ho`` and ``rhs``."""
     n = J_fingertip.shape[0]
     m = J_fingertip.shape[2]
     k = 3 * n
@@ -267,7 +281,32 @@ def contact_dynamics(
         for j in range(6):
             total += G[j, r] * x_ddot_free[j]
         force_rhs[r, m] += Jh_dot_dq[r] - G_dot_T_twist[r] - total
-    force = _solve(B_ho, force_rhs)
+    return (
+        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
+        x_ddot_free, w_c, w_relative,
+    )
+
+
+@kernel
+def _acceleration_terms(
+    force: np.ndarray,
+    ddq: np.ndarray,
+    M_h_inv_J_hT: np.ndarray,
+    M_o_inv_G: np.ndarray,
+    x_ddot_free: np.ndarray,
+    w_c: np.ndarray,
+    w_relative: np.ndarray,
+    J_fingertip: np.ndarray,
+    J_fingertip_dot_dq: np.ndarray,
+    R_contact_to_palm: np.ndarray,
+    H_cf: np.ndarray,
+    H_cf_dot_w: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """From ``f_c``: ``ddq``, ``x_o_ddot`` and ``xi_cf_ddot`` (augmented, as returned)."""
+    n = J_fingertip.shape[0]
+    m = J_fingertip.shape[2]
+    k = 3 * n
+    tmp = np.empty(3)
     # ddq = M_h^-1 (u - h) - M_h^-1 J_h^T f_c;  x_o_ddot = M_o^-1 G f_c + x_ddot_free.
     for r in range(m):
         for c in range(m + 1):
@@ -310,4 +349,4 @@ def contact_dynamics(
                     H_R[a, 0] * alpha[0, c] + H_R[a, 1] * alpha[1, c] + H_R[a, 2] * alpha[2, c]
                 )
             xi_ddot[2 * i + a, m] += H_cf_dot_w[i, a]
-    return J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot
+    return ddq, x_ddot, xi_ddot
