@@ -270,18 +270,20 @@ def _start(
     The guess is reduced to linearly independent rows, then rows with negative multipliers
     are dropped one at a time (most negative first) until all are nonnegative.
     """
-    candidates = list(dict.fromkeys(row for row in guess if eligible[row]))
-    if candidates:
+    guessed = np.fromiter(guess, dtype=np.intp, count=len(guess))
+    guessed = guessed[eligible[guessed]]
+    # The distinct eligible rows, in the guess's order (most confident first).
+    _, first = np.unique(guessed, return_index=True)
+    candidates = guessed[np.sort(first)]
+    if candidates.size:
         # One rank-revealing (column-pivoted) QR picks independent rows from the guess:
         # C[candidates].T P = Q R, |R_ii| the part of pivoted row i outside the span of the
-        # rows before it.
+        # rows before it; the rank ends at the first pivot within tolerance of that span.
         Q, R, pivots = _pivoted_qr(C[candidates].T)
-        rank = 0
-        for i, pivot in enumerate(pivots[: min(len(candidates), C.shape[1])]):
-            if abs(R[i, i]) <= DEPENDENCE_TOLERANCE * scale[candidates[pivot]]:
-                break
-            rank = i + 1
-        working.replace([candidates[p] for p in pivots[:rank]], Q[:, :rank], R[:rank, :rank])
+        pivoted = candidates[pivots[: min(candidates.size, C.shape[1])]]
+        dependent = np.abs(np.diagonal(R)[: pivoted.size]) <= DEPENDENCE_TOLERANCE * scale[pivoted]
+        rank = int(np.argmax(dependent)) if dependent.any() else pivoted.size
+        working.replace(pivoted[:rank].tolist(), Q[:, :rank], R[:rank, :rank])
     while working.rows:
         # u = u0 + N^T lambda with N u = b_W, N^T = Q R:  R^T R lambda = b_W - N u0.
         rows = working.rows
