@@ -16,7 +16,7 @@ def problem(rng, m=9, k=40):
 
 
 def reference(y0, C, b):
-    """daqp's optimum of min 1/2 ||y - y0||^2 s.t. C y >= b: (y, active rows, multipliers)."""
+    """Return daqp's optimum of min 1/2 ||y - y0||^2 s.t. C y >= b: (y, active, multipliers)."""
     m = y0.size
     x, _, flag, info = daqp.solve(np.eye(m), -y0, C, np.full(b.size, 1e30), b)
     assert flag == 1
