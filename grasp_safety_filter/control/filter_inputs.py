@@ -33,7 +33,7 @@ def checked_torque(u_nom: object, joint_names: Sequence[str]) -> np.ndarray:
         raise ValueError(f'u_nom: expected {m} numbers, got {u_nom!r}') from None
     if u.shape != (m,):
         raise ValueError(f'u_nom: expected shape ({m},), got {u.shape}')
-    if not np.all(np.isfinite(u)):
+    if not np.isfinite(u).all():
         bad = np.flatnonzero(~np.isfinite(u))
         raise ValueError(f'u_nom: non-finite value {u[bad[0]]} for joint {joint_names[bad[0]]!r}')
     return u

@@ -26,8 +26,9 @@ The OSQP backend (:mod:`~grasp_safety_filter.control.qp_solvers.osqp_backend`) u
 after OSQP (a first-order method), whose iterates converge slowly on the filter's typical
 degenerate problems (several nearly dependent barrier rows active at once). The problem is
 small (m = 9 torques): dense linear algebra per step is cheap. Before OSQP, the backend
-tries the previous tick's active set with :func:`solve_on_working_set` (the start of this
-method without its rank reduction: one LU solve) and checks the optimality conditions this
+tries the previous tick's active set
+(:func:`~grasp_safety_filter.control.working_set.optimum_on_working_set`: the start of this
+method without its rank reduction, one LU solve) and checks the optimality conditions this
 method stops on.
 """
 
@@ -163,47 +164,6 @@ def _pivoted_qr(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return Q, R, pivots - 1
 
 
-def solve_on_working_set(
-    u0: np.ndarray, C: np.ndarray, b: np.ndarray, working_set: Sequence[int]
-) -> tuple[np.ndarray, np.ndarray] | None:
-    """Minimise ``1/2 ||u - u0||^2`` subject to ``C_W u = b_W``: the optimum on a guessed set.
-
-    With ``d = u - u0`` and the multipliers lambda (``d = C_W^T lambda``), one LU solve of
-    the KKT system (no normal equations: C_W's conditioning is not squared)::
-
-        [ I    -C_W^T ] [ d      ]   [ 0               ]
-        [ C_W   0     ] [ lambda ] = [ b_W - C_W u0    ]
-
-    It is the optimum of :func:`solve_least_distance` when W is the optimal active set; the
-    multipliers may be negative and the other rows may be violated otherwise: the caller
-    checks both.
-
-    Args:
-        u0: Shape (m,).
-        C: Shape (k, m), finite.
-        b: Shape (k,), finite.
-        working_set: Row indices W, distinct, with linearly independent rows.
-
-    Returns:
-        ``(u, lambda)`` (lambda in the order of ``working_set``), or None when the system is
-        singular (dependent rows) or its solution is not finite.
-    """
-    rows = list(working_set)
-    m, q = C.shape[1], len(rows)
-    C_W = C.take(rows, axis=0)
-    kkt = np.zeros((m + q, m + q))
-    kkt.flat[: m * (m + q + 1) : m + q + 1] = 1.0  # the identity block
-    kkt[:m, m:] = -C_W.T
-    kkt[m:, :m] = C_W
-    rhs = np.zeros(m + q)
-    rhs[m:] = b.take(rows) - C_W @ u0
-    # LAPACK's LU directly: the system is small enough that numpy's wrapper would dominate.
-    _, _, solution, info = scipy.linalg.lapack.dgesv(kkt, rhs, overwrite_a=True, overwrite_b=True)
-    if info != 0 or not np.isfinite(solution).all():
-        return None
-    return u0 + solution[:m], solution[m:]
-
-
 def solve_least_distance(
     u0: np.ndarray,
     C: np.ndarray,
@@ -310,18 +270,20 @@ def _start(
     The guess is reduced to linearly independent rows, then rows with negative multipliers
     are dropped one at a time (most negative first) until all are nonnegative.
     """
-    candidates = list(dict.fromkeys(row for row in guess if eligible[row]))
-    if candidates:
+    guessed = np.fromiter(guess, dtype=np.intp, count=len(guess))
+    guessed = guessed[eligible[guessed]]
+    # The distinct eligible rows, in the guess's order (most confident first).
+    _, first = np.unique(guessed, return_index=True)
+    candidates = guessed[np.sort(first)]
+    if candidates.size:
         # One rank-revealing (column-pivoted) QR picks independent rows from the guess:
         # C[candidates].T P = Q R, |R_ii| the part of pivoted row i outside the span of the
-        # rows before it.
+        # rows before it; the rank ends at the first pivot within tolerance of that span.
         Q, R, pivots = _pivoted_qr(C[candidates].T)
-        rank = 0
-        for i, pivot in enumerate(pivots[: min(len(candidates), C.shape[1])]):
-            if abs(R[i, i]) <= DEPENDENCE_TOLERANCE * scale[candidates[pivot]]:
-                break
-            rank = i + 1
-        working.replace([candidates[p] for p in pivots[:rank]], Q[:, :rank], R[:rank, :rank])
+        pivoted = candidates[pivots[: min(candidates.size, C.shape[1])]]
+        dependent = np.abs(np.diagonal(R)[: pivoted.size]) <= DEPENDENCE_TOLERANCE * scale[pivoted]
+        rank = int(np.argmax(dependent)) if dependent.any() else pivoted.size
+        working.replace(pivoted[:rank].tolist(), Q[:, :rank], R[:rank, :rank])
     while working.rows:
         # u = u0 + N^T lambda with N u = b_W, N^T = Q R:  R^T R lambda = b_W - N u0.
         rows = working.rows

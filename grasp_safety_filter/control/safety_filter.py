@@ -308,10 +308,11 @@ class SafetyFilter:
             self.backend.warm_start(None)
             return self._fallback(state, u_nom, 0.0, 0, 0)
         problem = self.problem
+        # Rows first: u_nom violates one on almost every tick that reaches this test.
         if (
-            (u_nom >= self._u_min).all()
+            (problem.A @ u_nom >= problem.lower).all()
+            and (u_nom >= self._u_min).all()
             and (u_nom <= self._u_max).all()
-            and (problem.A @ u_nom >= problem.lower).all()
         ):
             self._last_good_u = u_nom
             # u_nom is the optimum, with no active row (zero multipliers).

@@ -3,7 +3,7 @@
 A hard :class:`~.problem.Problem` goes through, in order, until one step gives the optimum:
 
 1. The previous tick's active set: the optimum with those rows held as equalities is one
-   small linear solve (:func:`~grasp_safety_filter.control.least_distance.solve_on_working_set`).
+   small linear solve (:func:`~grasp_safety_filter.control.working_set.optimum_on_working_set`).
    It is accepted when it satisfies the KKT conditions the active-set method stops on
    (every row and bound holds, multipliers nonnegative, :data:`ACTIVE_SET_TOLERANCE`); OSQP
    is then not called (``iterations == 0``) and its next warm start is this primal-dual
@@ -52,7 +52,6 @@ from grasp_safety_filter.control.least_distance import (
     LeastDistanceSolution,
     LeastDistanceStatus,
     solve_least_distance,
-    solve_on_working_set,
 )
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_metric import to_metric_coordinates
@@ -62,15 +61,13 @@ from grasp_safety_filter.control.qp_solvers.problem import (
     Solution,
     SolutionStatus,
 )
+from grasp_safety_filter.control.working_set import optimum_on_working_set
 
 #: Torque-space tolerance (N·m, per N·m of |u_nom|) of the KKT certificate of OSQP's answer.
 CERTIFICATE_TOLERANCE = 1e-10
 
 #: Distance tolerance (N·m, in torque space) of the exact active-set method.
 ACTIVE_SET_TOLERANCE = 1e-10
-
-#: Norm floor of a row in the guessed-active-set check (a null row: all zero coefficients).
-_NULL_ROW_NORM = 1e-12
 
 _NO_MULTIPLIERS = np.zeros(0)
 _NO_MULTIPLIERS.setflags(write=False)
@@ -311,27 +308,22 @@ class OSQPBackend:
     ) -> Solution | None:
         """Return the optimum on a guessed active set W if it satisfies the KKT conditions.
 
-        With ``n_i = ||C_i||``: every row and box bound holds (``(C_i u - b_i) / n_i >= -tol``),
-        the rows of W hold with equality (``|C_i u - b_i| / n_i <= tol``) and their
-        multipliers are nonnegative (``lambda_i n_i >= -tol``); stationarity holds by
-        construction (tol: :data:`ACTIVE_SET_TOLERANCE`). None otherwise.
+        Every row and box bound holds, the rows of W with equality, and their multipliers
+        are nonnegative, to :data:`ACTIVE_SET_TOLERANCE`; stationarity holds by
+        construction (one compiled pass,
+        :func:`~grasp_safety_filter.control.working_set.optimum_on_working_set`). None
+        otherwise.
         """
         if not guess:
             return None
-        C, b = self._rows_y, self._hard_lower
-        guessed = solve_on_working_set(self._y_nom, C, b, guess)
-        if guessed is None:
-            return None
-        u_guess, multipliers = guessed  # y = R^-1 u with a metric
-        # Null rows get a floor: such a row holds only if its residual does.
-        scale = np.maximum(np.sqrt(np.einsum('ij,ij->i', C, C)), _NULL_ROW_NORM)
-        distance = (C @ u_guess - b) / scale
-        rows = list(guess)
-        if (
-            distance.min() < -ACTIVE_SET_TOLERANCE
-            or np.abs(distance.take(rows)).max() > ACTIVE_SET_TOLERANCE
-            or (multipliers * scale.take(rows)).min() < -ACTIVE_SET_TOLERANCE
-        ):
+        outcome, u_guess, multipliers = optimum_on_working_set(
+            self._y_nom,
+            self._rows_y,
+            self._hard_lower,
+            np.fromiter(guess, dtype=np.intp, count=len(guess)),
+            ACTIVE_SET_TOLERANCE,
+        )
+        if outcome != 1:  # y = R^-1 u with a metric
             return None
         u = self._clip_finite(self._to_u(u_guess))
         if u is None:

@@ -238,12 +238,13 @@ class Solution:
         """``max(0, max_r (lower_r - A_r u - d_r s_r))`` in the rows' own units (N, rad/s²)."""
         if not problem.n_rows:
             return 0.0
-        residual = problem.A @ self.u - problem.lower
-        if problem.relaxed and self.slack is not None:
-            residual = residual + problem.slack_scale() * self.slack
+        residual = problem.A @ self.u
         with np.errstate(invalid='ignore'):
-            worst = float(np.max(-residual, initial=0.0))
-        return worst if worst == worst else float('inf')
+            residual -= problem.lower
+            if problem.relaxed and self.slack is not None:
+                residual += problem.slack_scale() * self.slack
+        worst = -float(residual.min())  # NaN when a residual is
+        return max(worst, 0.0) if worst == worst else float('inf')
 
     def residuals(self, problem: Problem) -> Residuals:
         """Return the KKT residuals of ``(u, s, active, multipliers)`` on ``problem``."""

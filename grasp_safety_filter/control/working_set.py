@@ -1,0 +1,93 @@
+"""The optimum of a least-distance QP on a guessed working set, and its KKT check, compiled.
+
+For a point y0 (m,), rows ``C y >= b`` (k rows) and a working set W of rows held with
+equality, the optimum of ``min 1/2 ||y - y0||^2 s.t. C_W y = b_W`` solves, with
+``d = y - y0`` and the multipliers lambda (``d = C_W^T lambda``), the KKT system (one LU
+solve, LAPACK's ``dgesv``; no normal equations, so C_W's conditioning is not squared)::
+
+    [ I    -C_W^T ] [ d      ]   [ 0            ]
+    [ C_W   0     ] [ lambda ] = [ b_W - C_W y0 ]
+
+It is the optimum of the whole problem (the stopping test of the exact active-set method,
+:mod:`~grasp_safety_filter.control.least_distance`) when, with ``n_i = max(||C_i||, 1e-12)``
+(a null row then holds only if its residual does) and a distance tolerance tol:
+
+- every row holds: ``(C_i y - b_i) / n_i >= -tol``;
+- the rows of W hold with equality: ``|C_i y - b_i| / n_i <= tol``;
+- their multipliers are nonnegative: ``lambda_i n_i >= -tol``.
+
+The OSQP backend tries the previous tick's active set this way before any solver call; it
+settles almost every tick of a smooth run, so it is one compiled pass (a tick's share of it
+was call overhead of some twenty numpy calls on 9 × 40 arrays).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from grasp_safety_filter.model.compiled import kernel
+
+#: Norm floor of a row in the check (a null row: all zero coefficients).
+NULL_ROW_NORM = 1e-12
+
+
+@kernel
+def optimum_on_working_set(
+    y0: np.ndarray, C: np.ndarray, b: np.ndarray, working_set: np.ndarray, tolerance: float
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """Solve on the working set and check optimality (module docstring).
+
+    Args:
+        y0: Shape (m,).
+        C: Shape (k, m), finite.
+        b: Shape (k,), finite.
+        working_set: Row indices W, distinct, shape (q,), q >= 1.
+        tolerance: The distance tolerance tol (y's unit).
+
+    Returns:
+        ``(outcome, y, lambda)``: outcome 1 when y is the optimum of the whole problem,
+        0 when a row or a multiplier fails the check, -1 when the KKT system is singular
+        (dependent rows) or its solution is not finite; lambda in W's order.
+    """
+    k, m = C.shape
+    q = working_set.shape[0]
+    kkt = np.zeros((m + q, m + q))
+    rhs = np.zeros(m + q)
+    for i in range(m):
+        kkt[i, i] = 1.0
+    for a in range(q):
+        r = working_set[a]
+        residual = b[r]
+        for c in range(m):
+            kkt[c, m + a] = -C[r, c]
+            kkt[m + a, c] = C[r, c]
+            residual -= C[r, c] * y0[c]
+        rhs[m + a] = residual
+    try:
+        solution = np.linalg.solve(kkt, rhs)
+    except Exception:  # numba's LinAlgError: a singular system (dependent rows)
+        return -1, y0, rhs[m:]
+    y = y0 + solution[:m]
+    multipliers = solution[m:]
+    for value in solution:
+        if not math.isfinite(value):
+            return -1, y, multipliers
+    norms = np.empty(k)
+    distances = np.empty(k)
+    for i in range(k):
+        squares = 0.0
+        dot = 0.0
+        for c in range(m):
+            squares += C[i, c] * C[i, c]
+            dot += C[i, c] * y[c]
+        norms[i] = max(math.sqrt(squares), NULL_ROW_NORM)
+        distances[i] = (dot - b[i]) / norms[i]
+        if not distances[i] >= -tolerance:
+            return 0, y, multipliers
+    for a in range(q):
+        r = working_set[a]
+        if abs(distances[r]) > tolerance or multipliers[a] * norms[r] < -tolerance:
+            return 0, y, multipliers
+    return 1, y, multipliers

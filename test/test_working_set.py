@@ -1,0 +1,75 @@
+"""The compiled working-set optimum and its KKT check against an independent solver (daqp)."""
+
+import daqp
+import numpy as np
+import pytest
+
+from grasp_safety_filter.control.working_set import optimum_on_working_set
+
+TOLERANCE = 1e-10
+
+
+def problem(rng, m=9, k=40):
+    C = rng.normal(size=(k, m)) * rng.uniform(0.1, 100.0, size=(k, 1))
+    b = C @ rng.normal(size=m) - rng.uniform(0.0, 2.0, size=k) * np.linalg.norm(C, axis=1)
+    return rng.normal(scale=5.0, size=m), C, b
+
+
+def reference(y0, C, b):
+    """Return daqp's optimum of min 1/2 ||y - y0||^2 s.t. C y >= b: (y, active, multipliers)."""
+    m = y0.size
+    x, _, flag, info = daqp.solve(np.eye(m), -y0, C, np.full(b.size, 1e30), b)
+    assert flag == 1
+    lam = info['lam']
+    active = np.flatnonzero(lam < 0.0)
+    return x, active, -lam[active]
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_the_optimal_active_set_is_accepted_with_the_reference_optimum(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(40):
+        y0, C, b = problem(rng)
+        x, active, multipliers = reference(y0, C, b)
+        if not active.size:
+            continue
+        outcome, y, lam = optimum_on_working_set(y0, C, b, active.astype(np.intp), TOLERANCE)
+        assert outcome == 1
+        assert np.abs(y - x).max() < 1e-7
+        assert np.allclose(lam, multipliers, rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_a_wrong_set_is_refused(seed):
+    rng = np.random.default_rng(100 + seed)
+    refused = 0
+    for _ in range(40):
+        y0, C, b = problem(rng)
+        _, active, _ = reference(y0, C, b)
+        if not active.size:
+            continue
+        # One active row missing: the optimum on the rest violates it (unless degenerate).
+        outcome, y, _ = optimum_on_working_set(y0, C, b, active[1:].astype(np.intp), TOLERANCE)
+        violated = (C[active[0]] @ y - b[active[0]]) / np.linalg.norm(C[active[0]])
+        assert (outcome == 1) == (violated >= -TOLERANCE)
+        refused += outcome == 0
+        # An inactive row added as an equality: a negative multiplier or a violated row.
+        inactive = np.setdiff1d(np.arange(b.size), active)[:1]
+        rows = np.concatenate((active, inactive)).astype(np.intp)
+        if rows.size <= C.shape[1]:
+            assert optimum_on_working_set(y0, C, b, rows, TOLERANCE)[0] == 0
+    assert refused > 0
+
+
+def test_dependent_rows_are_singular():
+    C = np.array([[1.0, 0.0], [2.0, 0.0], [0.0, 1.0]])
+    b = np.array([1.0, 2.0, 0.0])
+    assert optimum_on_working_set(np.zeros(2), C, b, np.array([0, 1]), TOLERANCE)[0] == -1
+
+
+def test_a_null_row_holds_only_if_its_residual_does():
+    C = np.array([[1.0, 0.0], [0.0, 0.0]])
+    y0 = np.zeros(2)
+    rows = np.array([0])
+    assert optimum_on_working_set(y0, C, np.array([1.0, -1.0]), rows, TOLERANCE)[0] == 1
+    assert optimum_on_working_set(y0, C, np.array([1.0, 1.0]), rows, TOLERANCE)[0] == 0
