@@ -119,3 +119,18 @@ def test_stage_rotation_matrix_has_the_models_bits():
     for bad in (np.zeros(4), np.array([np.nan, 0.0, 0.0, 1.0]), np.array([np.inf, 0, 0, 1.0])):
         with pytest.raises(ValueError, match='non-zero finite quaternion'):
             _rotation_matrix(bad)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_stage_rate_is_the_models_terms_bit_for_bit(scenario, seed):
+    """One implementation: ``at`` runs the kernels ``GraspModel.state`` runs, on the same bits."""
+    model, config = scenario
+    m = model.n_joints
+    rng = np.random.default_rng(20 + seed)
+    rate = PlantRate(model)
+    x = random_state(model, config, rng, 1e-4 * seed)
+    u = rng.normal(0.0, 0.5, m)
+    s = SimState.from_vector(0.0, x, m)
+    state = model.state(0.0, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
+    from_state, _ = rate.from_state(state, u, x[2 * m + 3 : 2 * m + 7], 2500.0, 100.0)
+    np.testing.assert_array_equal(rate.at(x, u, 2500.0, 100.0), from_state)
