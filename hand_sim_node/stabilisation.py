@@ -24,7 +24,21 @@ import numpy as np
 from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.quaternion import quaternion_derivative
+from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
+
+
+def _solve(B_ho: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``B_ho^-1 b`` by LAPACK's gesv (as the model's kernel solves it).
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular.
+    """
+    _, _, solution, info = dgesv(B_ho, b)
+    if info != 0:
+        raise np.linalg.LinAlgError(f'B_ho is singular (LAPACK gesv info {info})')
+    return solution
 
 
 @kernel
@@ -153,9 +167,7 @@ def stabilised_rate(
         velocity_gain,
     )
     if position_gain != 0.0 or velocity_gain != 0.0:
-        _, _, correction, info = dgesv(state.B_ho, stabilisation)
-        if info != 0:
-            raise np.linalg.LinAlgError(f'B_ho is singular (LAPACK gesv info {info})')
+        correction = _solve(state.B_ho, stabilisation)
     else:
         correction = stabilisation  # zero
     force, joints, body = state.contact_force, state.joint_acceleration, state.object_acceleration
@@ -177,3 +189,188 @@ def stabilised_rate(
     m = effort.shape[0]
     x_dot[2 * m + 3 : 2 * m + 7] = quaternion_derivative(quaternion_xyzw, state.twist_object[3:])
     return x_dot, f_c
+
+
+@kernel
+def _sphere_on_plane_stage_system(
+    J_fingertip: np.ndarray,
+    twist_fingertip: np.ndarray,
+    J_fingertip_dot_dq: np.ndarray,
+    p_fingertip_in_palm: np.ndarray,
+    R_fingertip_to_palm: np.ndarray,
+    M_h_inverse: np.ndarray,
+    h_bias: np.ndarray,
+    dq: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    M_o_inverse: np.ndarray,
+    C_o_twist: np.ndarray,
+    w_e: np.ndarray,
+    plane_origin: np.ndarray,
+    plane_frame: np.ndarray,
+    radius: np.ndarray,
+    position_gain: float,
+    velocity_gain: float,
+) -> tuple[np.ndarray, ...]:
+    """Run the model's contact kinematics and first dynamics pass, then ``s``.
+
+    Returns ``B_ho``, the right-hand sides of ``B_ho [F | f_0] = force_rhs`` and of
+    ``B_ho c = s``, and what the second pass reads.
+    """
+    contacts = sphere_on_plane_contacts(
+        p_fingertip_in_palm,
+        R_fingertip_to_palm,
+        twist_fingertip,
+        p_object_in_palm,
+        R_object_to_palm,
+        twist_object,
+        plane_origin,
+        plane_frame,
+        radius,
+    )
+    penetration, p_contact, R_pc = contacts[3], contacts[4], contacts[5]
+    H_cf, H_cf_dot_w, sliding, Omega = contacts[10], contacts[11], contacts[12], contacts[13]
+    (
+        J_h, G, _, _, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
+        w_relative,
+    ) = velocity_terms(
+        J_fingertip,
+        twist_fingertip,
+        J_fingertip_dot_dq,
+        p_fingertip_in_palm,
+        M_h_inverse,
+        h_bias,
+        p_object_in_palm,
+        twist_object,
+        M_o_inverse,
+        C_o_twist,
+        w_e,
+        p_contact,
+        R_pc,
+        H_cf,
+        H_cf_dot_w,
+        sliding,
+        Omega,
+    )
+    stabilisation = baumgarte_correction(
+        J_h, G, dq, twist_object, penetration, position_gain, velocity_gain
+    )
+    return (
+        B_ho, force_rhs, stabilisation, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
+        w_relative, R_pc, H_cf, H_cf_dot_w,
+    )
+
+
+@kernel
+def _sphere_on_plane_stage_rate(
+    force: np.ndarray,
+    stabilisation: np.ndarray,
+    correction: np.ndarray,
+    G: np.ndarray,
+    ddq: np.ndarray,
+    M_h_inv_J_hT: np.ndarray,
+    M_o_inv_G: np.ndarray,
+    x_ddot_free: np.ndarray,
+    w_c: np.ndarray,
+    w_relative: np.ndarray,
+    J_fingertip: np.ndarray,
+    J_fingertip_dot_dq: np.ndarray,
+    R_contact_to_palm: np.ndarray,
+    H_cf: np.ndarray,
+    H_cf_dot_w: np.ndarray,
+    M_o_inverse: np.ndarray,
+    effort: np.ndarray,
+    dq: np.ndarray,
+    twist_object: np.ndarray,
+) -> np.ndarray:
+    """From ``[F | f_0]`` and ``c``: the model's second pass, then the module's formulas."""
+    m = ddq.shape[0]
+    joints, body, _ = acceleration_terms(
+        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
+        J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w,
+    )
+    x_dot, _ = _stabilised_rates(
+        force[:, :m], force[:, m], joints[:, :m], joints[:, m], body[:, :m], body[:, m],
+        effort, stabilisation, correction, M_o_inverse, G, dq, twist_object,
+    )
+    return x_dot
+
+
+def sphere_on_plane_stage_rate(
+    hand: Any,
+    surface_arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
+    dq: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    quaternion_xyzw: np.ndarray,
+    M_o_inverse: np.ndarray,
+    C_o_twist: np.ndarray,
+    w_e: np.ndarray,
+    effort: np.ndarray,
+    position_gain: float,
+    velocity_gain: float,
+) -> np.ndarray:
+    """``x_dot`` of spherical fingertips on flat faces, from the hand's terms at a stage.
+
+    The kernels :meth:`GraspModel.state` runs (the contacts' closed forms, both passes of
+    :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`) and
+    :func:`stabilised_rate`'s formulas, in two compiled calls around one LAPACK solve of
+    ``B_ho`` (for ``[F | f_0]``, as the model's, and for ``c``): the same arithmetic, bit
+    for bit, without a Python round trip per kernel.
+
+    Args:
+        hand: The hand's terms at the stage (``HandModel.terms``).
+        surface_arrays: The faces' origins, frames and the fingertip radii
+            (``SphereOnPlaneStack.surface_arrays``).
+        dq: Joint velocities (m,), rad/s.
+        p_object_in_palm: Object centre of mass (3,), m.
+        R_object_to_palm: Object orientation (3, 3).
+        twist_object: Object twist (6,), palm coordinates.
+        quaternion_xyzw: The orientation quaternion as integrated (4,).
+        M_o_inverse: ``M_o^-1`` (6, 6), read-only.
+        C_o_twist: ``C_o x_o_dot`` (6,), read-only.
+        w_e: External wrench on the object (6,), read-only.
+        effort: Joint torque u, shape (m,), N·m.
+        position_gain: ``K_p`` of the stabilisation, 1/s².
+        velocity_gain: ``K_v`` of the stabilisation, 1/s.
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular.
+    """
+    plane_origin, plane_frame, radius = surface_arrays
+    (
+        B_ho, force_rhs, stabilisation, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
+        w_relative, R_pc, H_cf, H_cf_dot_w,
+    ) = _sphere_on_plane_stage_system(
+        hand.J_fingertip,
+        hand.twist_fingertip,
+        hand.J_fingertip_dot_dq,
+        hand.p_fingertip_in_palm,
+        hand.R_fingertip_to_palm,
+        hand.M_h_inverse,
+        hand.h_bias,
+        dq,
+        p_object_in_palm,
+        R_object_to_palm,
+        twist_object,
+        M_o_inverse,
+        C_o_twist,
+        w_e,
+        plane_origin,
+        plane_frame,
+        radius,
+        position_gain,
+        velocity_gain,
+    )
+    # Two solves, not one of [force_rhs | s]: LAPACK's bits depend on the number of columns.
+    force, correction = _solve(B_ho, force_rhs), _solve(B_ho, stabilisation)
+    x_dot = _sphere_on_plane_stage_rate(
+        force, stabilisation, correction, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
+        w_relative, hand.J_fingertip, hand.J_fingertip_dot_dq, R_pc, H_cf, H_cf_dot_w, M_o_inverse,
+        effort, dq, twist_object,
+    )
+    m = effort.shape[0]
+    x_dot[2 * m + 3 : 2 * m + 7] = quaternion_derivative(quaternion_xyzw, twist_object[3:])
+    return x_dot

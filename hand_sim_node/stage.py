@@ -35,8 +35,8 @@ import numpy as np
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_state import GraspState
-from grasp_safety_filter.model.rolling import contact_stack
-from hand_sim_node.stabilisation import stabilised_rate
+from grasp_safety_filter.model.rolling import contact_stack, SphereOnPlaneStack
+from hand_sim_node.stabilisation import sphere_on_plane_stage_rate, stabilised_rate
 
 
 def _rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
@@ -161,11 +161,19 @@ class PlantRate:
         R_o = _rotation_matrix(quaternion)
         hand = self._hand.terms(x[:m], dq)
         p_f = hand.p_fingertip_in_palm
-        geometry, rates = self._contacts().kinematics(
-            p_f, hand.R_fingertip_to_palm, hand.twist_fingertip, p_o, R_o, twist_o
-        )
+        stack = self._contacts()
         rigid_object = self._object
         M_o_inv = rigid_object.inverse_inertia_matrix(R_o)
+        C_o_twist = rigid_object.bias_wrench(R_o, twist_o)
+        if isinstance(stack, SphereOnPlaneStack):
+            # The same kernels in one compiled call before and one after the solve.
+            return sphere_on_plane_stage_rate(
+                hand, stack.surface_arrays, dq, p_o, R_o, twist_o, quaternion, M_o_inv,
+                C_o_twist, rigid_object.external_wrench(), effort, position_gain, velocity_gain,
+            )
+        geometry, rates = stack.kinematics(
+            p_f, hand.R_fingertip_to_palm, hand.twist_fingertip, p_o, R_o, twist_o
+        )
         J_h, G, _, _, B_ho, force, ddq, x_ddot, _ = contact_dynamics(
             hand.J_fingertip,
             hand.twist_fingertip,
@@ -176,7 +184,7 @@ class PlantRate:
             p_o,
             twist_o,
             M_o_inv,
-            rigid_object.bias_wrench(R_o, twist_o),
+            C_o_twist,
             rigid_object.external_wrench(),
             geometry.p_contact_in_palm,
             geometry.R_contact_to_palm,
