@@ -14,6 +14,11 @@ contact frame, m/s), the Baumgarte-stabilised plant (:mod:`hand_sim_node.simulat
 F^T B_ho c = F^T s``). Two compiled passes around LAPACK's solve of ``B_ho c = s``, as in
 the model's kernel; the quaternion's rate is :func:`~grasp_safety_filter.model.quaternion.
 quaternion_derivative`'s. Units: SI.
+
+:func:`stabilised_rate` reads the model's terms from a GraspState (or the stage's
+equivalent); :func:`sphere_on_plane_stage_rate` computes them at a Runge–Kutta stage of
+spherical fingertips on flat faces by calling the model's kernels from compiled code
+(numba's dispatch and boxing cost more than a kernel's arithmetic at these sizes).
 """
 
 from __future__ import annotations

@@ -21,7 +21,10 @@ compiled in :func:`~hand_sim_node.stabilisation.stabilised_rate`:
 - :meth:`PlantRate.at` at the intermediate Runge–Kutta stages, from the configuration: the
   same compiled kernels :meth:`GraspModel.state` runs (the hand's terms, the contacts'
   kinematics, :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`), without
-  building a read-only GraspState around them.
+  building a read-only GraspState around them. For spherical fingertips on flat faces
+  (the paper's grasp) they run inside two compiled calls around the solves of ``B_ho``
+  (:func:`~hand_sim_node.stabilisation.sphere_on_plane_stage_rate`): the same bits
+  without a Python round trip per kernel.
 """
 
 from __future__ import annotations
@@ -73,9 +76,9 @@ def _rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
 class StageTerms:
     """The model's terms at a Runge–Kutta stage that :func:`stabilised_rate` reads.
 
-    The outputs of :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics` as
-    they come (no read-only freezing, no copies): the fields of a :class:`GraspState` that
-    the plant's rate needs, without the terms only the safety filter reads.
+    The outputs of :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`,
+    not copied (made read-only, as in a GraspState): the fields of a :class:`GraspState`
+    that the plant's rate needs, without the terms only the safety filter reads.
     """
 
     dq: np.ndarray
