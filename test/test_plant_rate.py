@@ -14,6 +14,7 @@ import pytest
 
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.quaternion import quaternion_derivative, rotation_matrix
+from grasp_safety_filter.model.rolling import ContactStack
 from hand_sim_node.config import SimConfig
 from hand_sim_node.simulator import SimState, Simulator
 from hand_sim_node.stage import _rotation_matrix, PlantRate
@@ -119,3 +120,34 @@ def test_stage_rotation_matrix_has_the_models_bits():
     for bad in (np.zeros(4), np.array([np.nan, 0.0, 0.0, 1.0]), np.array([np.inf, 0, 0, 1.0])):
         with pytest.raises(ValueError, match='non-zero finite quaternion'):
             _rotation_matrix(bad)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_stage_rate_is_the_models_terms_bit_for_bit(scenario, seed):
+    """One implementation: ``at`` runs the kernels ``GraspModel.state`` runs, on the same bits."""
+    model, config = scenario
+    m = model.n_joints
+    rng = np.random.default_rng(20 + seed)
+    rate = PlantRate(model)
+    x = random_state(model, config, rng, 1e-4 * seed)
+    u = rng.normal(0.0, 0.5, m)
+    s = SimState.from_vector(0.0, x, m)
+    state = model.state(0.0, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
+    from_state, _ = rate.from_state(state, u, x[2 * m + 3 : 2 * m + 7], 2500.0, 100.0)
+    np.testing.assert_array_equal(rate.at(x, u, 2500.0, 100.0), from_state)
+
+
+def test_stage_rate_of_any_contact_stack_equals_the_solved_equations(scenario):
+    """The general stack's path (curved surfaces; numpy kinematics) on the paper's faces."""
+    model, config = scenario
+    m = model.n_joints
+    rng = np.random.default_rng(31)
+    rate = PlantRate(model)
+    rate._contact_pairs, rate._contact_stack = model.contacts, ContactStack(model.contacts)
+    for gap in (0.0, 1e-4):
+        x = random_state(model, config, rng, gap)
+        u = rng.normal(0.0, 0.5, m)
+        _, expected, _ = oracle_rate(model, x, u, 2500.0, 100.0)
+        np.testing.assert_allclose(
+            rate.at(x, u, 2500.0, 100.0), expected, rtol=0, atol=1e-11 * np.abs(expected).max()
+        )

@@ -350,3 +350,10 @@ def _acceleration_terms(
                 )
             xi_ddot[2 * i + a, m] += H_cf_dot_w[i, a]
     return ddq, x_ddot, xi_ddot
+
+
+#: The two compiled passes of :func:`contact_dynamics`, for a compiled caller that solves
+#: ``B_ho`` itself (the simulator's Runge–Kutta stages: one LAPACK solve for the
+#: torque-affine terms and the constraint stabilisation together).
+velocity_terms = _velocity_terms
+acceleration_terms = _acceleration_terms

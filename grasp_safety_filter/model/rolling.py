@@ -456,6 +456,15 @@ class SphereOnPlaneStack(ContactStack):
         self._plane_origin = np.ascontiguousarray(self.object_surfaces.origin, dtype=float)
         self._plane_frame = np.array(self.object_surfaces.frame(None), dtype=float)
 
+    @property
+    def surface_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return the kernels' constants: faces' origins, frames and fingertip radii.
+
+        Each face's origin (n, 3), m, and ``[e1, e2, n]`` (n, 3, 3) in the object frame, and
+        each fingertip's radius (n,), m.
+        """
+        return self._plane_origin, self._plane_frame, self._radius
+
     def geometry(
         self,
         p_fingertip_in_palm: np.ndarray,
