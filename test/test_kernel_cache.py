@@ -22,8 +22,8 @@ from grasp_safety_filter.model import dynamics_kernel, rolling_kernels
 model = paper_model()
 model.state(0.0, Q_PAPER, np.zeros(9), P_OBJECT_PAPER, np.eye(3), np.zeros(6))
 kernels = (
-    dynamics_kernel._velocity_terms,
-    dynamics_kernel._acceleration_terms,
+    dynamics_kernel.velocity_terms,
+    dynamics_kernel.acceleration_terms,
     rolling_kernels.sphere_on_plane_contacts,
 )
 print(sum(sum(k.stats.cache_hits.values()) for k in kernels),

@@ -95,7 +95,7 @@ def contact_dynamics(
     (
         J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
         x_ddot_free, w_c, w_relative,
-    ) = _velocity_terms(
+    ) = velocity_terms(
         J_fingertip,
         twist_fingertip,
         J_fingertip_dot_dq,
@@ -118,7 +118,7 @@ def contact_dynamics(
     _, _, force, info = dgesv(B_ho, force_rhs)
     if info > 0:
         raise np.linalg.LinAlgError('Singular matrix')
-    ddq, x_ddot, xi_ddot = _acceleration_terms(
+    ddq, x_ddot, xi_ddot = acceleration_terms(
         force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
         J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w,
     )
@@ -126,7 +126,7 @@ def contact_dynamics(
 
 
 @kernel
-def _velocity_terms(
+def velocity_terms(
     J_fingertip: np.ndarray,
     twist_fingertip: np.ndarray,
     J_fingertip_dot_dq: np.ndarray,
@@ -145,7 +145,11 @@ def _velocity_terms(
     sliding_velocity: np.ndarray,
     frame_angular_velocity: np.ndarray,
 ) -> tuple[np.ndarray, ...]:
-    """Everything up to ``B_ho f_c = rhs``: the Jacobians, rates, ``B_ho`` and ``rhs``."""
+    """Everything up to ``B_ho f_c = rhs``: the Jacobians, rates, ``B_ho`` and ``rhs``.
+
+    The first of :func:`contact_dynamics`' two compiled passes; a compiled caller that
+    solves ``B_ho`` itself (the simulator's Runge–Kutta stages) calls both.
+    """
     n = J_fingertip.shape[0]
     m = J_fingertip.shape[2]
     k = 3 * n
@@ -288,7 +292,7 @@ def _velocity_terms(
 
 
 @kernel
-def _acceleration_terms(
+def acceleration_terms(
     force: np.ndarray,
     ddq: np.ndarray,
     M_h_inv_J_hT: np.ndarray,
@@ -351,9 +355,3 @@ def _acceleration_terms(
             xi_ddot[2 * i + a, m] += H_cf_dot_w[i, a]
     return ddq, x_ddot, xi_ddot
 
-
-#: The two compiled passes of :func:`contact_dynamics`, for a compiled caller that solves
-#: ``B_ho`` itself (the simulator's Runge–Kutta stages: one LAPACK solve for the
-#: torque-affine terms and the constraint stabilisation together).
-velocity_terms = _velocity_terms
-acceleration_terms = _acceleration_terms
