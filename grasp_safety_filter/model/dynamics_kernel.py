@@ -354,4 +354,3 @@ def acceleration_terms(
                 )
             xi_ddot[2 * i + a, m] += H_cf_dot_w[i, a]
     return ddq, x_ddot, xi_ddot
-
