@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_state import GraspState
-from grasp_safety_filter.model.rolling import contact_stack, SphereOnPlaneStack
 from hand_sim_node.stabilisation import sphere_on_plane_stage_rate, stabilised_rate
 
 

@@ -8,12 +8,8 @@ import pinocchio as pin
 import pytest
 
 from grasp_safety_filter.model.arrays import matvec
-from grasp_safety_filter.model.rolling import (
-    contact_stack,
-    ContactPair,
-    ContactStack,
-    SphereOnPlaneStack,
-)
+from grasp_safety_filter.model.contact_stack import contact_stack, ContactStack, SphereOnPlaneStack
+from grasp_safety_filter.model.rolling import ContactPair
 from grasp_safety_filter.model.surface_stacks import SurfaceList
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
 

@@ -19,9 +19,9 @@ import pinocchio as pin
 import pytest
 from random_hands import random_hand
 
+from grasp_safety_filter.model.contact_stack import contact_stack, ContactStack, SphereOnPlaneStack
 from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.model.rolling import contact_stack, ContactStack, SphereOnPlaneStack
 
 PAPER_CASES = {
     'cube': {},

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from grasp_safety_filter.model.contact_stack import ContactStack
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.quaternion import quaternion_derivative, rotation_matrix
-from grasp_safety_filter.model.rolling import ContactStack
 from hand_sim_node.config import SimConfig
 from hand_sim_node.simulator import SimState, Simulator
 from hand_sim_node.stage import _rotation_matrix, PlantRate

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.contact_stack import contact_stack
 from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -37,7 +38,7 @@ from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
 from grasp_safety_filter.model.per_contact import friction_coefficients
 from grasp_safety_filter.model.rigid_object import RigidObject
-from grasp_safety_filter.model.rolling import contact_stack, ContactGeometry, ContactPair
+from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
 from grasp_safety_filter.model.surfaces import SphereSurface
 
 __all__ = ['FingertipWorkspace', 'GraspConfigError', 'GraspModel']
