@@ -141,6 +141,11 @@ def test_cpu_times_are_reported_next_to_wall_times(bench):
     by_status = document['replay']['node_tick_cpu_us_by_status']
     assert {k: v['n'] for k, v in by_status.items()} == document['replay']['statuses']
     assert 'CPU median' in table and 'node tick by status (thread CPU' in table
+    step_cpu = document['real_time_factor']['filtered_loop']['simulator_step_cpu_us']
+    step_wall = document['real_time_factor']['filtered_loop']['simulator_step_us']
+    assert step_cpu['n'] == step_wall['n'] > 0
+    assert 0.0 < step_cpu['median'] <= step_cpu['p99'] <= step_cpu['max'] <= step_wall['max']
+    assert f'simulator step (ode3): CPU median {step_cpu["median"]:,.1f} µs' in table
 
 
 def test_every_qp_backend_replays_the_same_ticks_and_agrees(bench):

@@ -772,7 +772,7 @@ def test_the_paper_runs_first_relaxed_tick_is_a_conflict_of_joint_and_workspace_
     towards it.
     """
     scenario = Scenario.load(config_path())
-    ticks, _, _ = record_filtered_run(scenario, 3.0)
+    ticks, _, _, _ = record_filtered_run(scenario, 3.0)
     first = next(i for i, tick in enumerate(ticks) if tick.status is FilterStatus.RELAXED)
     tick = ticks[first]
     model = scenario.model

@@ -178,7 +178,7 @@ def test_soft_friction_creeps_with_the_load_and_the_noslip_solver_stops_it(scena
 def test_closed_loop_on_our_plant_is_the_recorded_run(scenario):
     """The loop written once over the interface is the benchmark's loop on our simulator."""
     duration = 0.03
-    ticks, _, _ = record_filtered_run(scenario, duration)
+    ticks, _, _, _ = record_filtered_run(scenario, duration)
     plant = RigidPlant(scenario.model, scenario.sim_config)
     run = run_closed_loop(
         plant, NominalController(scenario.nominal_config), scenario.reference(plant.observe()),

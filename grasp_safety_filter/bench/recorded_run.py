@@ -154,7 +154,7 @@ def _closed_loop(
 
 def record_filtered_run(
     scenario: Scenario, duration: float
-) -> tuple[list[Tick], LoopRate, np.ndarray]:
+) -> tuple[list[Tick], LoopRate, np.ndarray, np.ndarray]:
     """Run simulator + nominal controller + filter closed loop and keep every tick.
 
     The controller and the filter read the simulator's own model terms of each state
@@ -163,12 +163,13 @@ def record_filtered_run(
 
     Returns:
         The ticks, the loop's rate (its wall time includes the bookkeeping of the ticks,
-        a few µs each) and the simulator step's wall time per tick, s.
+        a few µs each), and the simulator step's wall time and thread CPU time per tick, s.
     """
     simulator, controller, reference, n_steps = _closed_loop(scenario, duration)
     safety_filter = scenario.safety_filter()
     ticks: list[Tick] = []
     step_times: list[float] = []
+    step_cpu_times: list[float] = []
     wall_start = time.perf_counter()
     while simulator.stop_reason is None and simulator.step_index < n_steps:
         s = simulator.state
@@ -189,11 +190,14 @@ def record_filtered_run(
                 result.status,
             )
         )
+        # The CPU clock is read outside the wall-clock interval it brackets.
+        cpu_start = time.thread_time()
         step_start = time.perf_counter()
         simulator.step(result.u)
         step_times.append(time.perf_counter() - step_start)
+        step_cpu_times.append(time.thread_time() - cpu_start)
     rate = LoopRate.of(simulator, time.perf_counter() - wall_start)
-    return ticks, rate, np.array(step_times)
+    return ticks, rate, np.array(step_times), np.array(step_cpu_times)
 
 
 def nominal_loop_rate(scenario: Scenario, duration: float) -> LoopRate:
