@@ -28,9 +28,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.bench.recorded_run import Scenario
-from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
-from hand_sim_node.closed_loop import run_closed_loop
 from hand_sim_node.mjcf import CONES, MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 
@@ -96,14 +94,7 @@ def compare(
             )
         )
 
-    run = run_closed_loop(
-        plant,
-        NominalController(scenario.nominal_config),
-        scenario.reference(plant.observe()),
-        scenario.safety_filter() if mode == 'filtered' else None,
-        duration,
-        after_step=record,
-    )
+    run = scenario.run_on(plant, mode == 'filtered', duration, after_step=record)
     n = scenario.model.n_contacts
     t, f_model, f_mujoco, a_model, a_mujoco = (
         np.array(column) for column in zip(*rows, strict=True)

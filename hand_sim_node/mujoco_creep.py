@@ -45,9 +45,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.bench.recorded_run import Scenario
-from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
-from hand_sim_node.closed_loop import run_closed_loop
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 
@@ -129,12 +127,10 @@ def hold(
     normal_in_palm = start.R_contact_to_palm[:, :, 2]
     horizontal = bool(np.all(np.abs(normal_in_palm @ start.w_e[:3]) <= 1e-9 * weight))
     samples: list[ContactCreep] = []
-    run = run_closed_loop(
+    run = replace(scenario, nominal_config=nominal).run_on(
         plant,
-        NominalController(nominal),
-        scenario.reference(plant.observe()),
-        scenario.safety_filter(),
-        duration,
+        filtered=True,
+        duration=duration,
         after_step=lambda _plant: samples.append(contact_creep(plant)),
     )
     last = samples[-round(window / plant.time_step) :]

@@ -34,9 +34,8 @@ import numpy as np
 import yaml
 
 from grasp_safety_filter.bench.recorded_run import Scenario
-from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
-from hand_sim_node.closed_loop import LoopRun, run_closed_loop
+from hand_sim_node.closed_loop import LoopRun
 from hand_sim_node.mjcf import CONES, INTEGRATORS, MjcfOptions
 from hand_sim_node.mujoco_plant import ContactReport, MuJoCoPlant
 from hand_sim_node.plant import RigidPlant
@@ -127,11 +126,9 @@ def run_on_mujoco(
     """One run (``"nominal"`` or ``"filtered"``) of ``scenario`` on MuJoCo, measured."""
     plant = MuJoCoPlant(scenario.model, scenario.sim_config, options)
     reports: list[ContactReport] = []
-    run = run_closed_loop(
+    run = scenario.run_on(
         plant,
-        NominalController(scenario.nominal_config),
-        scenario.reference(plant.observe()),
-        scenario.safety_filter() if mode == 'filtered' else None,
+        mode == 'filtered',
         duration,
         after_step=lambda _plant: reports.append(plant.contacts()),
     )
@@ -147,14 +144,7 @@ def run_on_rigid(scenario: Scenario, mode: str, duration: float) -> dict[str, An
         if plant.last_report is not None:
             events.update(event.family for event in plant.last_report.events)
 
-    run = run_closed_loop(
-        plant,
-        NominalController(scenario.nominal_config),
-        scenario.reference(plant.observe()),
-        scenario.safety_filter() if mode == 'filtered' else None,
-        duration,
-        after_step=count,
-    )
+    run = scenario.run_on(plant, mode == 'filtered', duration, after_step=count)
     statuses = Counter(str(tick.status.value) for tick in run.ticks if tick.status is not None)
     return {
         'stop_reason': run.stop_reason,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 import tempfile
@@ -24,9 +25,9 @@ from grasp_safety_filter.io.schemas import (
     SAFETY_FILTER_NODE,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
-from hand_sim_node.closed_loop import run_closed_loop
+from hand_sim_node.closed_loop import LoopRun, run_closed_loop
 from hand_sim_node.config import SimConfig
-from hand_sim_node.plant import RigidPlant
+from hand_sim_node.plant import Observation, Plant, RigidPlant
 from hand_sim_node.simulator import SimState, Simulator
 
 
@@ -79,10 +80,32 @@ class Scenario:
         """Build a fresh filter (no warm start)."""
         return SafetyFilter.from_config(self.model, self.filter_config)
 
-    def reference(self, start: Tick | SimState) -> ReferenceSource:
+    def reference(self, start: Tick | SimState | Observation) -> ReferenceSource:
         """Build the nominal controller's reference, started at ``start``'s pose and time."""
         return self.nominal_config.make_reference(
             Pose(start.p_object_in_palm, start.R_object_to_palm), start.t
+        )
+
+    def run_on(
+        self,
+        plant: Plant,
+        filtered: bool,
+        duration: float,
+        after_step: Callable[[Plant], None] | None = None,
+    ) -> LoopRun:
+        """Run the scenario's closed loop on ``plant`` from its current state.
+
+        The nominal controller, its reference started at the plant's pose, and a fresh
+        filter when ``filtered`` (else u = u_nom); ``after_step`` as in
+        :func:`~hand_sim_node.closed_loop.run_closed_loop`.
+        """
+        return run_closed_loop(
+            plant,
+            NominalController(self.nominal_config),
+            self.reference(plant.observe()),
+            self.safety_filter() if filtered else None,
+            duration,
+            after_step,
         )
 
 
@@ -206,13 +229,7 @@ def nominal_loop_rate(scenario: Scenario, duration: float) -> LoopRate:
     The closed loop of :func:`hand_sim_node.closed_loop.run_closed_loop` on the rigid plant.
     """
     plant = RigidPlant(scenario.model, scenario.sim_config)
-    loop = run_closed_loop(
-        plant,
-        NominalController(scenario.nominal_config),
-        scenario.reference(plant.observe()),
-        None,
-        duration,
-    )
+    loop = scenario.run_on(plant, filtered=False, duration=duration)
     return LoopRate.of(plant.simulator, loop.wall)
 
 
