@@ -10,15 +10,13 @@ before the handlers are in place.
 
 from __future__ import annotations
 
-import signal
 import sys
 from typing import Any
 
 from grasp_safety_filter.io.interrupts import (
     interrupt_on_signals,
+    record_termination_requests,
     signal_name,
-    TERMINATION_SIGNALS,
-    TerminationRequests,
 )
 
 INTERRUPTED = 130
@@ -65,9 +63,7 @@ def record(argv: list[str] | None = None) -> int:
     :func:`grasp_safety_filter.nodes.recorder_node.record`): one that came while the
     recorder imported rclpy ends it before it starts.
     """
-    termination = TerminationRequests()
-    for signum in TERMINATION_SIGNALS:
-        signal.signal(signum, termination)
+    termination = record_termination_requests()
     from grasp_safety_filter.nodes.recorder_node import main
 
     if termination.requested:

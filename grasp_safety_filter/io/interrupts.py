@@ -150,6 +150,21 @@ class TerminationRequests:
         return bool(self.received)
 
 
+def record_termination_requests() -> TerminationRequests:
+    """Record :data:`TERMINATION_SIGNALS` from now on; return the record.
+
+    A record installed earlier (a console entry point's, from the process's first instant)
+    is kept, with what it holds: a signal received before this call is not lost.
+    """
+    installed = signal.getsignal(signal.SIGINT)
+    termination = (
+        installed if isinstance(installed, TerminationRequests) else TerminationRequests()
+    )
+    for signum in TERMINATION_SIGNALS:
+        signal.signal(signum, termination)
+    return termination
+
+
 class _Redelivery:
     """A daemon thread that sends the process a signal again, when asked to."""
 

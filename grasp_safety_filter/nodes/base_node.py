@@ -37,7 +37,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.diagnostic_keys import Key
-from grasp_safety_filter.io.interrupts import TERMINATION_SIGNALS, TerminationRequests
+from grasp_safety_filter.io.interrupts import record_termination_requests, TERMINATION_SIGNALS
 from grasp_safety_filter.io.messages import (
     bounded_text,
     byte_value,
@@ -319,12 +319,7 @@ def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) 
     """
     arguments = list(sys.argv if args is None else args)
     # The console entry point records the signals from the process's first instant.
-    installed = signal.getsignal(signal.SIGINT)
-    termination = (
-        installed if isinstance(installed, TerminationRequests) else TerminationRequests()
-    )
-    for signum in TERMINATION_SIGNALS:
-        signal.signal(signum, termination)
+    termination = record_termination_requests()
     context = rclpy.get_default_context()
     node = None
     executor = None

@@ -10,9 +10,8 @@ as it does later. This module imports nothing heavy itself.
 from __future__ import annotations
 
 import importlib
-import signal
 
-from grasp_safety_filter.io.interrupts import TERMINATION_SIGNALS, TerminationRequests
+from grasp_safety_filter.io.interrupts import record_termination_requests
 
 #: Console script name -> the module whose ``main(args)`` runs that node.
 NODE_MODULES: dict[str, str] = {
@@ -32,9 +31,7 @@ def run_node(name: str, args: list[str] | None = None) -> None:
     quietly once the import is done, before anything is started; a later one is seen by
     :func:`~grasp_safety_filter.nodes.base_node.spin_node`, which keeps the same record.
     """
-    termination = TerminationRequests()
-    for signum in TERMINATION_SIGNALS:
-        signal.signal(signum, termination)
+    termination = record_termination_requests()
     module = importlib.import_module(NODE_MODULES[name])
     if termination.requested:
         raise SystemExit(0)

@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
-import signal
 import sys
 import time
 
@@ -34,7 +33,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder
-from grasp_safety_filter.io.interrupts import TERMINATION_SIGNALS, TerminationRequests
+from grasp_safety_filter.io.interrupts import record_termination_requests
 from grasp_safety_filter.io.messages import rclpy_message_class
 from grasp_safety_filter.nodes.base_node import make_executor
 
@@ -81,12 +80,7 @@ def record(bag: Path, node_name: str = RECORDER_NODE_NAME, storage: str = 'mcap'
     support while subscribing) nor a write nor the closing of the bag. A signal during
     the set-up ends the recording as soon as it is made; a second one changes nothing.
     """
-    installed = signal.getsignal(signal.SIGINT)
-    termination = (
-        installed if isinstance(installed, TerminationRequests) else TerminationRequests()
-    )
-    for signum in TERMINATION_SIGNALS:
-        signal.signal(signum, termination)
+    termination = record_termination_requests()
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
     node = rclpy.create_node(node_name)
     executor = make_executor(node.context)
