@@ -30,12 +30,14 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
-from grasp_safety_filter.model.contact_stack import contact_stack
+from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
+from grasp_safety_filter.model.packed_state import PackedGraspState
+from grasp_safety_filter.model.packed_terms import PackedLayout, sphere_on_plane_terms
 from grasp_safety_filter.model.per_contact import friction_coefficients
 from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
@@ -102,6 +104,7 @@ class GraspModel:
         self.declared_faces = list(declared_faces) if declared_faces is not None else [None] * n
         self._contacts: list[ContactPair] | None = None
         self._contact_stack = None
+        self._packed_layout: PackedLayout | None = None
         if contacts is not None:
             self._set_contacts(contacts)
         # [I | 0], (m, m + 1): the joint torque u as an affine map of (u, 1).
@@ -117,6 +120,12 @@ class GraspModel:
     def _set_contacts(self, contacts: Sequence[ContactPair]) -> None:
         self._contacts = list(contacts)
         self._contact_stack = contact_stack(self._contacts)
+        # Spherical fingertips on flat faces: every term in one compiled pass (packed_terms).
+        self._packed_layout = (
+            PackedLayout.of(len(self._contacts), self.hand.n_joints)
+            if isinstance(self._contact_stack, SphereOnPlaneStack)
+            else None
+        )
 
     @property
     def contacts_bound(self) -> bool:
@@ -325,13 +334,17 @@ class GraspModel:
         torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
         in one compiled pass (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`).
         """
+        if self._contacts is None:
+            self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
+        if self._packed_layout is not None:
+            packed = self._packed_state(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)
+            if packed is not None:
+                return packed
         m = self.n_joints
         q = np.array(q, dtype=float)
         dq = np.array(dq, dtype=float)
         p_o = np.array(p_object_in_palm, dtype=float)
         R_o = np.array(R_object_to_palm, dtype=float)
-        if self._contacts is None:
-            self.bind_contacts(q, p_o, R_o)
         twist_o = np.array(twist_object, dtype=float)
         hand = self.hand.terms(q, dq)
         p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
@@ -413,6 +426,58 @@ class GraspModel:
             xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
             xi_co_rate_terms=partial(self._contact_stack.object_rate_terms, geometry, rates),
         )
+
+    def _packed_state(
+        self,
+        t: float,
+        q: np.ndarray,
+        dq: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+        twist_object: np.ndarray,
+    ) -> PackedGraspState | None:
+        """:meth:`state` by :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`.
+
+        The same terms (the same formulas and LAPACK solve), computed in one compiled pass
+        from Pinocchio's and the object's terms into one buffer. None when ``B_ho`` is
+        singular or not finite (numba's solve refuses both): the staged computation then
+        reports a singular ``B_ho`` or returns the non-finite terms, as it always has.
+        """
+        q = _vector(q)
+        dq = _vector(dq)
+        R_o = _vector(R_object_to_palm)
+        twist_o = _vector(twist_object)
+        raw = self.hand.raw_terms(q, dq)
+        obj = self.object
+        object_terms = (
+            obj.inertia_matrix(R_o), obj.bias_wrench(R_o, twist_o), obj.external_wrench()
+        )
+        buffer = np.empty(self._packed_layout.size)
+        try:
+            sphere_on_plane_terms(
+                buffer,
+                *raw,
+                self.hand.pinocchio_index,
+                q,
+                dq,
+                _vector(p_object_in_palm),
+                R_o,
+                twist_o,
+                obj.inverse_inertia_matrix(R_o),
+                object_terms[1],
+                object_terms[2],
+                *self._contact_stack.surface_arrays,
+            )
+        except np.linalg.LinAlgError:
+            return None
+        return PackedGraspState.of(
+            float(t), buffer, self._packed_layout, object_terms, self._contact_stack
+        )
+
+
+def _vector(x: Any) -> np.ndarray:
+    """``x`` as a C-contiguous float64 array (itself when it is one already)."""
+    return np.ascontiguousarray(x, dtype=np.float64)
 
 
 def state_of(model: Any, sample: Any) -> GraspState:
