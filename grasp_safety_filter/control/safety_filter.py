@@ -53,6 +53,7 @@ than letting a contact roll towards the fingertip's edge.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 import time
 from typing import Any
 
@@ -181,6 +182,14 @@ class SafetyFilter:
             metric_factor=self.hard_qp.metric_factor,
         )
         self.relaxed_problem = self.problem.with_slack(weights)
+        # Per family, what writes its rows into the stacked buffer: rows_into where the
+        # family has it (no array per tick), else its rows() copied in.
+        self._row_writers = tuple(
+            partial(family.rows_into, A=self.problem.A, lower=self.problem.lower, start=rows.start)
+            if hasattr(family, 'rows_into')
+            else partial(_copy_rows, family, self.problem.A, self.problem.lower, rows)
+            for family, rows in zip(self.families, self._results.slices, strict=True)
+        )
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
         self._last_good_u: np.ndarray | None = None
 
@@ -350,13 +359,10 @@ class SafetyFilter:
                 f'state: expected {self.n_joints} joints and {len(self.contact_names)} '
                 f'contacts, got {state.n_joints} and {state.n_contacts}'
             )
-        A = self.problem.A
         lower = self.problem.lower
         with np.errstate(all='ignore'):
-            for family, rows in zip(self.families, self._results.slices, strict=True):
-                block = family.rows(state)
-                A[rows] = block.A
-                lower[rows] = block.lower
+            for write in self._row_writers:
+                write(state)
         metric_ok = True
         if self.problem.metric_factor is not None:
             try:
@@ -398,3 +404,12 @@ class SafetyFilter:
         return self._results.result(
             state, u, status, rows, solve_time, iterations, active_set_steps
         )
+
+
+def _copy_rows(
+    family: ConstraintFamily, A: np.ndarray, lower: np.ndarray, rows: slice, state: GraspState
+) -> None:
+    """Copy a family's rows at ``state`` into rows ``rows`` of the stacked A and lower."""
+    block = family.rows(state)
+    A[rows] = block.A
+    lower[rows] = block.lower

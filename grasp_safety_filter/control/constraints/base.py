@@ -21,7 +21,10 @@ from typing import NamedTuple, Protocol, runtime_checkable
 import numpy as np
 
 from grasp_safety_filter.control.class_k import ClassKFunction
-from grasp_safety_filter.control.constraints.box_kernel import box_barrier_rows
+from grasp_safety_filter.control.constraints.box_kernel import (
+    box_barrier_rows,
+    box_barrier_rows_into,
+)
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -117,6 +120,14 @@ class ConstraintFamily(Protocol):
 
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Barrier values h at this state (and torque u where h depends on it)."""
+        ...
+
+
+class StackedConstraintFamily(ConstraintFamily, Protocol):
+    """A family that can also write its rows straight into the filter's stacked rows."""
+
+    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
+        """Write :meth:`rows` into rows ``start:`` of ``A`` (K, m) and ``lower`` (K,)."""
         ...
 
 
@@ -264,9 +275,9 @@ class BoxBarrier:
         self._h_offset = -self._sign * np.asarray(bound, dtype=float)
         self._alpha_parameters = (
             alpha1.kind == 'cubic',
-            alpha1.gain,
+            float(alpha1.gain),
             alpha2.kind == 'cubic',
-            alpha2.gain,
+            float(alpha2.gain),
         )
         self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
 
@@ -296,10 +307,30 @@ class BoxBarrier:
             x_dot,
             acceleration.matrix,
             acceleration.offset,
-            *self._alpha_parameters,
+            self._alpha_parameters,
         )
         self._last_h = (state, h)
         return ConstraintRows(A, lower, self.names)
+
+    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
+        """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``."""
+        x, x_dot, acceleration = self.coordinates(state)
+        h = np.empty(self._index.shape[0])
+        box_barrier_rows_into(
+            self._index,
+            self._sign,
+            self._h_offset,
+            x,
+            x_dot,
+            acceleration.matrix,
+            acceleration.offset,
+            self._alpha_parameters,
+            A,
+            lower,
+            start,
+            h,
+        )
+        self._last_h = (state, h)
 
     def values(self, state: GraspState, u: np.ndarray | None = None) -> BarrierValues:
         """Barrier values ``h`` per row (independent of u: relative degree two)."""

@@ -15,7 +15,10 @@ from grasp_safety_filter.control.constraints.base import (
     finite_vector,
     validate_names,
 )
-from grasp_safety_filter.control.constraints.pyramid_kernel import pyramid_rows
+from grasp_safety_filter.control.constraints.pyramid_kernel import (
+    pyramid_rows,
+    pyramid_rows_into,
+)
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: The l_s-face pyramid inscribed in the circular cone (the paper's).
@@ -147,6 +150,20 @@ class FrictionPyramid:
             self.normal_force_margin,
         )
         return ConstraintRows(A, lower, self.names)
+
+    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
+        """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``."""
+        contact_force = state.contact_force
+        check_rows(contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+        pyramid_rows_into(
+            self._negative_faces,
+            contact_force.matrix,
+            contact_force.offset,
+            self.normal_force_margin,
+            A,
+            lower,
+            start,
+        )
 
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Margins ``h_ij`` (N) at the contact forces ``f_c(u)`` the torque u produces."""
