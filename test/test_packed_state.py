@@ -14,6 +14,7 @@ from grasp_states import paper_model, random_configuration
 import numpy as np
 import pytest
 
+from grasp_safety_filter.control.safety_filter import SafetyFilter
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.packed_state import PackedGraspState
 
@@ -78,3 +79,29 @@ def test_a_field_is_made_once_and_a_replaced_copy_keeps_its_changes():
     assert copy.q is q and copy.J_h is state.J_h and copy.t == state.t
     with pytest.raises(ValueError):
         state.q[0] = 1.0
+
+
+def test_rows_read_from_the_buffer_equal_the_rows_of_the_fields(monkeypatch):
+    """Each family's rows_into on a packed state (read in its buffer) against rows()."""
+    model = paper_model()
+    families = SafetyFilter.from_config(model).families
+    assert all(hasattr(family, 'rows_into') for family in families)
+    rng = np.random.default_rng(12)
+    for _ in range(3):
+        packed, staged = _states(model, random_configuration(model, rng), monkeypatch)
+        assert packed.packed_terms is not None and staged.packed_terms is None
+        for family in families:
+            expected = family.rows(staged)
+            k, m = expected.A.shape
+            A, lower = np.full((k + 2, m), np.nan), np.full(k + 2, np.nan)
+            family.rows_into(packed, A, lower, 1)
+            np.testing.assert_allclose(
+                A[1:-1], expected.A, rtol=0, atol=1e-9, err_msg=family.family
+            )
+            np.testing.assert_allclose(
+                lower[1:-1], expected.lower, rtol=1e-12, atol=1e-9, err_msg=family.family
+            )
+            assert np.isnan(A[[0, -1]]).all() and np.isnan(lower[[0, -1]]).all()
+            np.testing.assert_allclose(
+                family.values(packed, np.zeros(m)).h, family.values(staged, np.zeros(m)).h
+            )

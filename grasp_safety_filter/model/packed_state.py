@@ -98,6 +98,24 @@ class PackedGraspState(GraspState):
     xi_cf_ddot = _View()
     xi_co_rate_terms = _View()
 
+    @property
+    def packed_terms(self) -> tuple[np.ndarray, PackedLayout] | None:
+        """The buffer and its layout (None for a copy whose fields were given)."""
+        fields = self.__dict__
+        return (fields['_buffer'], fields['_layout']) if '_layout' in fields else None
+
+    @property
+    def n_contacts(self) -> int:
+        """Number of contacts n."""
+        layout = self.__dict__.get('_layout')
+        return layout.n_contacts if layout is not None else self.xi_cf.shape[0]
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints m."""
+        layout = self.__dict__.get('_layout')
+        return layout.n_joints if layout is not None else self.q.shape[0]
+
     @classmethod
     def of(
         cls,

@@ -80,11 +80,17 @@ class PackedLayout(NamedTuple):
         size: The buffer's length (float64 entries).
         places: Per term name, its ``(start, stop, shape)`` in the buffer.
         n_joints: m.
+        n_contacts: n.
     """
 
     size: int
     places: dict[str, tuple[int, int, tuple[int, ...]]]
     n_joints: int
+    n_contacts: int
+
+    def start(self, name: str) -> int:
+        """Return the index of a term's first entry (its entries follow in C order)."""
+        return self.places[name][0]
 
     @classmethod
     def of(cls, n: int, m: int) -> PackedLayout:
@@ -95,7 +101,7 @@ class PackedLayout(NamedTuple):
             stop = start + int(np.prod(shape))
             places[name] = (start, stop, shape)
             start = stop
-        return cls(start, places, m)
+        return cls(start, places, m, n)
 
 
 @kernel

@@ -78,3 +78,42 @@ def pyramid_rows(
         negative_faces, force_matrix, force_offset, normal_force_margin, A, lower, 0
     )
     return A, lower
+
+
+@kernel
+def pyramid_rows_packed(
+    negative_faces: np.ndarray,
+    terms: np.ndarray,
+    force_start: int,
+    normal_force_margin: float,
+    A: np.ndarray,
+    lower: np.ndarray,
+    start: int,
+) -> None:
+    """:func:`pyramid_rows_into` with ``[F | f_0]`` read from a packed buffer.
+
+    Args:
+        negative_faces: ``N``, (n, faces, 3).
+        terms: The grasp state's packed terms
+            (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout`).
+        force_start: Where ``[F | f_0]`` (3n, m + 1) starts in ``terms``.
+        normal_force_margin: ``eps``, N.
+        A: The stacked rows' matrix (K, m), K ≥ start + n faces.
+        lower: The stacked rows' lower bounds.
+        start: The first row written.
+    """
+    n, faces = negative_faces.shape[0], negative_faces.shape[1]
+    m = A.shape[1]
+    width = m + 1
+    for i in range(n):
+        x_row = force_start + 3 * i * width
+        y_row = x_row + width
+        z_row = y_row + width
+        for j in range(faces):
+            r = start + i * faces + j
+            N0, N1, N2 = negative_faces[i, j, 0], negative_faces[i, j, 1], negative_faces[i, j, 2]
+            for c in range(m):
+                A[r, c] = N0 * terms[x_row + c] + N1 * terms[y_row + c] + N2 * terms[z_row + c]
+            lower[r] = normal_force_margin - (
+                N0 * terms[x_row + m] + N1 * terms[y_row + m] + N2 * terms[z_row + m]
+            )
