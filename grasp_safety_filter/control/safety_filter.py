@@ -84,6 +84,7 @@ from grasp_safety_filter.control.qp_solvers import (
     SolutionStatus,
 )
 from grasp_safety_filter.control.result_assembly import ACTIVE_TOLERANCE, ResultAssembler
+from grasp_safety_filter.control.row_checks import all_finite, inside
 from grasp_safety_filter.model.grasp_state import GraspState
 
 __all__ = [
@@ -318,11 +319,7 @@ class SafetyFilter:
             return self._fallback(state, u_nom, 0.0, 0, 0)
         problem = self.problem
         # Rows first: u_nom violates one on almost every tick that reaches this test.
-        if (
-            (problem.A @ u_nom >= problem.lower).all()
-            and (u_nom >= self._u_min).all()
-            and (u_nom <= self._u_max).all()
-        ):
+        if inside(problem.A, problem.lower, u_nom, self._u_min, self._u_max):
             self._last_good_u = u_nom
             # u_nom is the optimum, with no active row (zero multipliers).
             self.backend.warm_start(Solution(u_nom, SolutionStatus.OPTIMAL))
@@ -369,7 +366,7 @@ class SafetyFilter:
                 write_inertia_factor(state.M_h, self.problem.metric_factor)
             except ValueError:
                 metric_ok = False  # an M_h that overflowed: as rows that did
-        if metric_ok and np.isfinite(self.hard_qp.C_data).all() and np.isfinite(lower).all():
+        if metric_ok and all_finite(self.hard_qp.C_data, lower):
             return True
         raise_if_measured_not_finite(state)
         return False
