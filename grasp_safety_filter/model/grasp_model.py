@@ -36,8 +36,8 @@ from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, Gr
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
-from grasp_safety_filter.model.packed_state import PackedGraspState
-from grasp_safety_filter.model.packed_terms import PackedLayout, sphere_on_plane_terms
+from grasp_safety_filter.model.packed_state import packed_state
+from grasp_safety_filter.model.packed_terms import PackedLayout
 from grasp_safety_filter.model.per_contact import friction_coefficients
 from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
@@ -333,11 +333,23 @@ class GraspModel:
         All contacts are evaluated together (arrays with a leading contact axis), and the
         torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
         in one compiled pass (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`).
+        Spherical fingertips on flat faces (the paper's cube) take one compiled pass for
+        everything after Pinocchio, into one buffer whose views are the fields
+        (:func:`~grasp_safety_filter.model.packed_state.packed_state`); other contacts take
+        the stages below.
         """
         if self._contacts is None:
             self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
         if self._packed_layout is not None:
-            packed = self._packed_state(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)
+            # One compiled pass (packed_state); None: the staged computation reports a
+            # singular B_ho or returns the non-finite terms, as it always has.
+            packed = packed_state(
+                self.hand,
+                self.object,
+                self._contact_stack,
+                self._packed_layout,
+                (t, q, dq, p_object_in_palm, R_object_to_palm, twist_object),
+            )
             if packed is not None:
                 return packed
         m = self.n_joints
@@ -426,58 +438,6 @@ class GraspModel:
             xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
             xi_co_rate_terms=partial(self._contact_stack.object_rate_terms, geometry, rates),
         )
-
-    def _packed_state(
-        self,
-        t: float,
-        q: np.ndarray,
-        dq: np.ndarray,
-        p_object_in_palm: np.ndarray,
-        R_object_to_palm: np.ndarray,
-        twist_object: np.ndarray,
-    ) -> PackedGraspState | None:
-        """:meth:`state` by :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`.
-
-        The same terms (the same formulas and LAPACK solve), computed in one compiled pass
-        from Pinocchio's and the object's terms into one buffer. None when ``B_ho`` is
-        singular or not finite (numba's solve refuses both): the staged computation then
-        reports a singular ``B_ho`` or returns the non-finite terms, as it always has.
-        """
-        q = _vector(q)
-        dq = _vector(dq)
-        R_o = _vector(R_object_to_palm)
-        twist_o = _vector(twist_object)
-        raw = self.hand.raw_terms(q, dq)
-        obj = self.object
-        object_terms = (
-            obj.inertia_matrix(R_o), obj.bias_wrench(R_o, twist_o), obj.external_wrench()
-        )
-        buffer = np.empty(self._packed_layout.size)
-        try:
-            sphere_on_plane_terms(
-                buffer,
-                *raw,
-                self.hand.pinocchio_index,
-                q,
-                dq,
-                _vector(p_object_in_palm),
-                R_o,
-                twist_o,
-                obj.inverse_inertia_matrix(R_o),
-                object_terms[1],
-                object_terms[2],
-                *self._contact_stack.surface_arrays,
-            )
-        except np.linalg.LinAlgError:
-            return None
-        return PackedGraspState.of(
-            float(t), buffer, self._packed_layout, object_terms, self._contact_stack
-        )
-
-
-def _vector(x: Any) -> np.ndarray:
-    """``x`` as a C-contiguous float64 array (itself when it is one already)."""
-    return np.ascontiguousarray(x, dtype=np.float64)
 
 
 def state_of(model: Any, sample: Any) -> GraspState:

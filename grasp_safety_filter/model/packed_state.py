@@ -11,11 +11,14 @@ import numpy as np
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.contact_stack import (
     ContactStack,
+    SphereOnPlaneStack,
     StackedContactGeometry,
     StackedRollingRates,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
-from grasp_safety_filter.model.packed_terms import PackedLayout
+from grasp_safety_filter.model.hand import HandModel
+from grasp_safety_filter.model.packed_terms import PackedLayout, sphere_on_plane_terms
+from grasp_safety_filter.model.rigid_object import RigidObject
 
 #: GraspState's affine terms and the packed ``[matrix | offset]`` each is a view of.
 _AFFINE = {
@@ -178,3 +181,61 @@ class PackedGraspState(GraspState):
             self.frame_angular_velocity,
         )
         return partial(self._stack.object_rate_terms, geometry, rates)
+
+
+def packed_state(
+    hand: HandModel,
+    rigid_object: RigidObject,
+    stack: SphereOnPlaneStack,
+    layout: PackedLayout,
+    sample: tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+) -> PackedGraspState | None:
+    """Return every model term of one instant, computed in one compiled pass.
+
+    :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms` gives the same
+    terms as the staged computation of
+    :meth:`~grasp_safety_filter.model.grasp_model.GraspModel.state` (the same formulas and
+    LAPACK solve), computed in one compiled pass from Pinocchio's and the object's terms
+    into one buffer.
+
+    Args:
+        hand: The hand.
+        rigid_object: The object.
+        stack: The contacts (spherical fingertips on flat faces).
+        layout: The buffer's layout for these contacts and joints.
+        sample: ``(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)``.
+
+    Returns:
+        The state, or None when ``B_ho`` is singular or not finite (numba's solve refuses
+        both; the caller then runs the staged computation).
+    """
+    t, q, dq, p_object_in_palm, R_object_to_palm, twist_object = sample
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    dq = np.ascontiguousarray(dq, dtype=np.float64)
+    R_o = np.ascontiguousarray(R_object_to_palm, dtype=np.float64)
+    twist_o = np.ascontiguousarray(twist_object, dtype=np.float64)
+    raw = hand.raw_terms(q, dq)
+    object_terms = (
+        rigid_object.inertia_matrix(R_o),
+        rigid_object.bias_wrench(R_o, twist_o),
+        rigid_object.external_wrench(),
+    )
+    buffer = np.empty(layout.size)
+    try:
+        sphere_on_plane_terms(
+            buffer,
+            *raw,
+            hand.pinocchio_index,
+            q,
+            dq,
+            np.ascontiguousarray(p_object_in_palm, dtype=np.float64),
+            R_o,
+            twist_o,
+            rigid_object.inverse_inertia_matrix(R_o),
+            object_terms[1],
+            object_terms[2],
+            *stack.surface_arrays,
+        )
+    except np.linalg.LinAlgError:
+        return None
+    return PackedGraspState.of(float(t), buffer, layout, object_terms, stack)
