@@ -105,6 +105,10 @@ def box_lower(u_min: np.ndarray, u_max: np.ndarray) -> np.ndarray:
 class ConstraintFamily(Protocol):
     """What the safety filter needs from a constraint family.
 
+    A family may also have ``rows_into(state, A, lower, start)``, writing :meth:`rows`
+    into rows ``start:`` of the filter's stacked ``A`` (K, m) and ``lower`` (K,) with no
+    array of its own; the filter then calls it instead of :meth:`rows`.
+
     Attributes:
         family: Family name, the first component of every row name (e.g. ``"no_slip"``).
         names: Row names, fixed at construction.
@@ -121,14 +125,6 @@ class ConstraintFamily(Protocol):
 
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Barrier values h at this state (and torque u where h depends on it)."""
-        ...
-
-
-class StackedConstraintFamily(ConstraintFamily, Protocol):
-    """A family that can also write its rows straight into the filter's stacked rows."""
-
-    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
-        """Write :meth:`rows` into rows ``start:`` of ``A`` (K, m) and ``lower`` (K,)."""
         ...
 
 
