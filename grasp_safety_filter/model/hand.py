@@ -226,6 +226,10 @@ class HandModel:
             M_inverse=pin.cholesky.computeMinv(model, data),
         )
 
+    def frame_twists(self, raw: RawHandTerms, dq: np.ndarray) -> np.ndarray:
+        """Return the fingertip frame twists ``J_s dq``, (n, 6), as :meth:`terms` has them."""
+        return self._from_pin(raw.J_frames) @ dq
+
     def terms(self, q: np.ndarray, dq: np.ndarray) -> HandTerms:
         """Everything the grasp model needs from the hand at ``(q, dq)``."""
         raw = self.raw_terms(q, dq)
@@ -243,7 +247,7 @@ class HandModel:
             R_fingertip_to_palm=np.ascontiguousarray(raw.placements[:, :3, :3]),
             J_fingertip=J,
             # The frame twists are J_s dq (the same as Pinocchio's frame velocities).
-            twist_fingertip=J @ dq,
+            twist_fingertip=self.frame_twists(raw, dq),
             J_fingertip_dot_dq=raw.J_frames_dot_dq,
             M_h_inverse=M_inv,
         )

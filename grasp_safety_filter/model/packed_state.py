@@ -226,6 +226,7 @@ def packed_state(
             buffer,
             *raw,
             hand.pinocchio_index,
+            hand.frame_twists(raw, dq),
             q,
             dq,
             np.ascontiguousarray(p_object_in_palm, dtype=np.float64),

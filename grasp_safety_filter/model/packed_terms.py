@@ -124,6 +124,7 @@ def sphere_on_plane_terms(
     g: np.ndarray,
     M_inverse_pin: np.ndarray,
     joint_index: np.ndarray,
+    twist_f: np.ndarray,
     q: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -148,6 +149,9 @@ def sphere_on_plane_terms(
         g: ``g(q)`` (Pinocchio's order), (nv,), N·m.
         M_inverse_pin: ``M_h^-1`` (Pinocchio's order), (nv, nv).
         joint_index: Pinocchio's index of each of the model's joints, (m,).
+        twist_f: The fingertip frame twists ``J_s dq``, (n, 6)
+            (:meth:`~grasp_safety_filter.model.hand.HandModel.frame_twists`: numpy's product,
+            whose rounding the staged computation has).
         q: Joint angles, (m,), rad.
         dq: Joint velocities, (m,), rad/s.
         p_object_in_palm: Object centre of mass, (3,), m.
@@ -169,18 +173,14 @@ def sphere_on_plane_terms(
     p_f = np.empty((n, 3))
     R_f = np.empty((n, 3, 3))
     J_s = np.empty((n, 6, m))
-    twist_f = np.empty((n, 6))
     for i in range(n):
         for r in range(3):
             p_f[i, r] = placements[i, r, 3]
             for c in range(3):
                 R_f[i, r, c] = placements[i, r, c]
         for r in range(6):
-            total = 0.0
             for j in range(m):
                 J_s[i, r, j] = J_frames[i, r, joint_index[j]]
-                total += J_s[i, r, j] * dq[j]
-            twist_f[i, r] = total
     M_h = np.empty((m, m))
     M_h_inverse = np.empty((m, m))
     h_bias = np.empty(m)
