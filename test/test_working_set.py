@@ -4,7 +4,10 @@ import daqp
 import numpy as np
 import pytest
 
-from grasp_safety_filter.control.working_set import optimum_on_working_set
+from grasp_safety_filter.control.working_set import (
+    clipped_optimum_on_working_set,
+    optimum_on_working_set,
+)
 
 TOLERANCE = 1e-10
 
@@ -73,3 +76,36 @@ def test_a_null_row_holds_only_if_its_residual_does():
     rows = np.array([0])
     assert optimum_on_working_set(y0, C, np.array([1.0, -1.0]), rows, TOLERANCE)[0] == 1
     assert optimum_on_working_set(y0, C, np.array([1.0, 1.0]), rows, TOLERANCE)[0] == 0
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_the_clipped_optimum_agrees_with_the_solve_clip_and_row_check(seed):
+    """clipped_optimum_on_working_set against its three steps done separately in numpy."""
+    rng = np.random.default_rng(100 + seed)
+    accepted = rejected = 0
+    for _ in range(60):
+        y0, C, b = problem(rng)
+        _, active, _ = reference(y0, C, b)
+        if not active.size:
+            continue
+        guess = active if rng.uniform() < 0.7 else active[:-1]
+        bound = rng.uniform(0.5, 20.0)
+        u_min, u_max = np.full(y0.size, -bound), np.full(y0.size, bound)
+        A, lower = C[:30], b[:30] - rng.uniform(0.0, 1e-5, 30)
+        outcome, u, lam = clipped_optimum_on_working_set(
+            y0, C, b, guess.astype(np.intp), TOLERANCE, u_min, u_max, A, lower, 1e-6
+        )
+        expected_outcome, y, expected_lam = optimum_on_working_set(
+            y0, C, b, guess.astype(np.intp), TOLERANCE
+        )
+        if expected_outcome != 1:
+            assert outcome == expected_outcome
+            continue
+        clipped = np.minimum(np.maximum(y, u_min), u_max)
+        violation = max(0.0, float(np.max(lower - A @ clipped)))
+        assert outcome == (1 if violation <= 1e-6 else 0)
+        np.testing.assert_array_equal(u, clipped)
+        np.testing.assert_array_equal(lam, expected_lam)
+        accepted += outcome == 1
+        rejected += outcome == 0
+    assert accepted and rejected  # both answers were exercised

@@ -37,6 +37,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
+import functools
 
 import numpy as np
 import scipy.linalg
@@ -143,6 +144,14 @@ def _solve_triangular(T: np.ndarray, v: np.ndarray, lower: bool) -> np.ndarray:
     return x
 
 
+@functools.lru_cache(maxsize=64)
+def _upper_triangle(rows: int, columns: int) -> np.ndarray:
+    """Return the mask of the entries on and above the diagonal of a (rows, columns) matrix."""
+    mask = np.triu(np.ones((rows, columns), dtype=bool))
+    mask.setflags(write=False)
+    return mask
+
+
 def _pivoted_qr(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Economic column-pivoted QR ``M P = Q R`` (LAPACK ``dgeqp3`` and ``dorgqr`` directly).
 
@@ -157,7 +166,7 @@ def _pivoted_qr(M: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     packed, pivots, tau, _, info = scipy.linalg.lapack.dgeqp3(M, lwork=max(64 * (n + 1), 1))
     if info != 0:
         raise np.linalg.LinAlgError(f'dgeqp3 failed with info = {info}')
-    R = np.triu(packed[:r])
+    R = np.where(_upper_triangle(r, n), packed[:r], 0.0)  # np.triu, with the mask kept
     Q, _, info = scipy.linalg.lapack.dorgqr(packed[:, :r], tau[:r], lwork=max(64 * r, 1))
     if info != 0:
         raise np.linalg.LinAlgError(f'dorgqr failed with info = {info}')
@@ -273,8 +282,7 @@ def _start(
     guessed = np.fromiter(guess, dtype=np.intp, count=len(guess))
     guessed = guessed[eligible[guessed]]
     # The distinct eligible rows, in the guess's order (most confident first).
-    _, first = np.unique(guessed, return_index=True)
-    candidates = guessed[np.sort(first)]
+    candidates = np.fromiter(dict.fromkeys(guessed.tolist()), dtype=np.intp)
     if candidates.size:
         # One rank-revealing (column-pivoted) QR picks independent rows from the guess:
         # C[candidates].T P = Q R, |R_ii| the part of pivoted row i outside the span of the

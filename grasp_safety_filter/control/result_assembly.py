@@ -15,6 +15,7 @@ from grasp_safety_filter.control.constraints import (
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
 from grasp_safety_filter.control.margins import Margins, RowValues
 from grasp_safety_filter.control.qp_solvers import FEASIBILITY_TOLERANCE
+from grasp_safety_filter.control.row_checks import residuals
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
@@ -86,12 +87,12 @@ class ResultAssembler:
         # Residuals then (when read) box margins, side by side, for the active-row test.
         slack = np.empty(len(self.names))
         A, lower = rows
-        with np.errstate(all='ignore'):
-            residual = np.subtract(A @ u, lower, out=slack[:k])
+        smallest = residuals(A, lower, u, slack)  # slack[:k] = A u - lower
+        residual = slack[:k]
         relaxed_families: tuple[str, ...] = ()
         worst = 0.0
-        # min() is NaN when a row is: NaN rows count as violated, as in the test below.
-        if k and not residual.min() >= -FEASIBILITY_TOLERANCE:
+        # The minimum is NaN when a row is: NaN rows count as violated, as in the test below.
+        if k and not smallest >= -FEASIBILITY_TOLERANCE:
             violated = ~(residual >= -FEASIBILITY_TOLERANCE)
             relaxed_families = tuple(
                 self.families[i].family for i in np.unique(self._row_family[violated])

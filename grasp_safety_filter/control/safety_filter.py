@@ -53,6 +53,7 @@ than letting a contact roll towards the fingertip's edge.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 import time
 from typing import Any
 
@@ -83,6 +84,7 @@ from grasp_safety_filter.control.qp_solvers import (
     SolutionStatus,
 )
 from grasp_safety_filter.control.result_assembly import ACTIVE_TOLERANCE, ResultAssembler
+from grasp_safety_filter.control.row_checks import all_finite, inside
 from grasp_safety_filter.model.grasp_state import GraspState
 
 __all__ = [
@@ -181,6 +183,14 @@ class SafetyFilter:
             metric_factor=self.hard_qp.metric_factor,
         )
         self.relaxed_problem = self.problem.with_slack(weights)
+        # Per family, what writes its rows into the stacked buffer: rows_into where the
+        # family has it (no array per tick), else its rows() copied in.
+        self._row_writers = tuple(
+            partial(family.rows_into, A=self.problem.A, lower=self.problem.lower, start=rows.start)
+            if hasattr(family, 'rows_into')
+            else partial(_copy_rows, family, self.problem.A, self.problem.lower, rows)
+            for family, rows in zip(self.families, self._results.slices, strict=True)
+        )
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
         self._last_good_u: np.ndarray | None = None
 
@@ -309,11 +319,7 @@ class SafetyFilter:
             return self._fallback(state, u_nom, 0.0, 0, 0)
         problem = self.problem
         # Rows first: u_nom violates one on almost every tick that reaches this test.
-        if (
-            (problem.A @ u_nom >= problem.lower).all()
-            and (u_nom >= self._u_min).all()
-            and (u_nom <= self._u_max).all()
-        ):
+        if inside(problem.A, problem.lower, u_nom, self._u_min, self._u_max):
             self._last_good_u = u_nom
             # u_nom is the optimum, with no active row (zero multipliers).
             self.backend.warm_start(Solution(u_nom, SolutionStatus.OPTIMAL))
@@ -350,20 +356,17 @@ class SafetyFilter:
                 f'state: expected {self.n_joints} joints and {len(self.contact_names)} '
                 f'contacts, got {state.n_joints} and {state.n_contacts}'
             )
-        A = self.problem.A
         lower = self.problem.lower
         with np.errstate(all='ignore'):
-            for family, rows in zip(self.families, self._results.slices, strict=True):
-                block = family.rows(state)
-                A[rows] = block.A
-                lower[rows] = block.lower
+            for write in self._row_writers:
+                write(state)
         metric_ok = True
         if self.problem.metric_factor is not None:
             try:
                 write_inertia_factor(state.M_h, self.problem.metric_factor)
             except ValueError:
                 metric_ok = False  # an M_h that overflowed: as rows that did
-        if metric_ok and np.isfinite(self.hard_qp.C_data).all() and np.isfinite(lower).all():
+        if metric_ok and all_finite(self.hard_qp.C_data, lower):
             return True
         raise_if_measured_not_finite(state)
         return False
@@ -398,3 +401,12 @@ class SafetyFilter:
         return self._results.result(
             state, u, status, rows, solve_time, iterations, active_set_steps
         )
+
+
+def _copy_rows(
+    family: ConstraintFamily, A: np.ndarray, lower: np.ndarray, rows: slice, state: GraspState
+) -> None:
+    """Copy a family's rows at ``state`` into rows ``rows`` of the stacked A and lower."""
+    block = family.rows(state)
+    A[rows] = block.A
+    lower[rows] = block.lower

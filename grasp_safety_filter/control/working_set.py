@@ -91,3 +91,48 @@ def optimum_on_working_set(
         if abs(distances[r]) > tolerance or multipliers[a] * norms[r] < -tolerance:
             return 0, y, multipliers
     return 1, y, multipliers
+
+
+@kernel
+def clipped_optimum_on_working_set(
+    y0: np.ndarray,
+    C: np.ndarray,
+    b: np.ndarray,
+    working_set: np.ndarray,
+    tolerance: float,
+    u_min: np.ndarray,
+    u_max: np.ndarray,
+    A: np.ndarray,
+    lower: np.ndarray,
+    feasibility_tolerance: float,
+) -> tuple[int, np.ndarray, np.ndarray]:
+    """:func:`optimum_on_working_set` for the identity metric (y = u), then the answer's checks.
+
+    The optimum u is clipped to the box ``[u_min, u_max]`` and the barrier rows
+    ``A u >= lower`` are checked to ``feasibility_tolerance`` in their own units, as the
+    OSQP backend checks any answer
+    (:meth:`~grasp_safety_filter.control.qp_solvers.problem.Solution.row_violation`).
+
+    Returns:
+        ``(outcome, u, lambda)``: outcome 1 when u (clipped) is the optimum and passes the
+        row check, 0 when a check fails, -1 as :func:`optimum_on_working_set`, -2 when u
+        is not finite.
+    """
+    outcome, y, multipliers = optimum_on_working_set(y0, C, b, working_set, tolerance)
+    if outcome != 1:
+        return outcome, y, multipliers
+    m = y.shape[0]
+    u = np.empty(m)
+    for j in range(m):
+        if not math.isfinite(y[j]):
+            return -2, y, multipliers
+        u[j] = min(max(y[j], u_min[j]), u_max[j])
+    worst = 0.0
+    for r in range(A.shape[0]):
+        residual = 0.0
+        for c in range(m):
+            residual += A[r, c] * u[c]
+        shortfall = lower[r] - residual
+        if not shortfall <= worst:  # NaN counts as violated
+            worst = shortfall if shortfall == shortfall else math.inf
+    return (1 if worst <= feasibility_tolerance else 0), u, multipliers

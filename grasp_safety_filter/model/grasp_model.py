@@ -30,12 +30,14 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
-from grasp_safety_filter.model.contact_stack import contact_stack
+from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
+from grasp_safety_filter.model.packed_state import packed_state
+from grasp_safety_filter.model.packed_terms import PackedLayout
 from grasp_safety_filter.model.per_contact import friction_coefficients
 from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
@@ -102,6 +104,7 @@ class GraspModel:
         self.declared_faces = list(declared_faces) if declared_faces is not None else [None] * n
         self._contacts: list[ContactPair] | None = None
         self._contact_stack = None
+        self._packed_layout: PackedLayout | None = None
         if contacts is not None:
             self._set_contacts(contacts)
         # [I | 0], (m, m + 1): the joint torque u as an affine map of (u, 1).
@@ -117,6 +120,12 @@ class GraspModel:
     def _set_contacts(self, contacts: Sequence[ContactPair]) -> None:
         self._contacts = list(contacts)
         self._contact_stack = contact_stack(self._contacts)
+        # Spherical fingertips on flat faces: every term in one compiled pass (packed_terms).
+        self._packed_layout = (
+            PackedLayout.of(len(self._contacts), self.hand.n_joints)
+            if isinstance(self._contact_stack, SphereOnPlaneStack)
+            else None
+        )
 
     @property
     def contacts_bound(self) -> bool:
@@ -324,14 +333,30 @@ class GraspModel:
         All contacts are evaluated together (arrays with a leading contact axis), and the
         torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
         in one compiled pass (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`).
+        Spherical fingertips on flat faces (the paper's cube) take one compiled pass for
+        everything after Pinocchio, into one buffer whose views are the fields
+        (:func:`~grasp_safety_filter.model.packed_state.packed_state`); other contacts take
+        the stages below.
         """
+        if self._contacts is None:
+            self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
+        if self._packed_layout is not None:
+            # One compiled pass (packed_state); None: the staged computation reports a
+            # singular B_ho or returns the non-finite terms, as it always has.
+            packed = packed_state(
+                self.hand,
+                self.object,
+                self._contact_stack,
+                self._packed_layout,
+                (t, q, dq, p_object_in_palm, R_object_to_palm, twist_object),
+            )
+            if packed is not None:
+                return packed
         m = self.n_joints
         q = np.array(q, dtype=float)
         dq = np.array(dq, dtype=float)
         p_o = np.array(p_object_in_palm, dtype=float)
         R_o = np.array(R_object_to_palm, dtype=float)
-        if self._contacts is None:
-            self.bind_contacts(q, p_o, R_o)
         twist_o = np.array(twist_object, dtype=float)
         hand = self.hand.terms(q, dq)
         p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip

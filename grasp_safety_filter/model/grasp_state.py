@@ -118,6 +118,13 @@ class GraspState:
     xi_cf_ddot: AffineMap
     xi_co_rate_terms: Callable[[], tuple[np.ndarray, np.ndarray]]
 
+    #: ``(buffer, layout)`` when every field is a view of one read-only buffer
+    #: (:class:`~grasp_safety_filter.model.packed_state.PackedGraspState`), else None:
+    #: compiled consumers may read the terms there
+    #: (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout` says where). Not a
+    #: dataclass field (no annotation): constructors and copies never set it.
+    packed_terms = None
+
     @cached_property
     def xi_co_ddot(self) -> AffineMap:
         """``u ↦ xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot(u) + c``, shape (2n, m)."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -15,7 +16,7 @@ import pinocchio as pin
 from grasp_safety_filter.model.fingertips import fingertip_spheres
 from grasp_safety_filter.model.urdf import check_urdf_file, HandModelError
 
-__all__ = ['HandModel', 'HandModelError', 'HandTerms']
+__all__ = ['HandModel', 'HandModelError', 'HandTerms', 'RawHandTerms']
 
 
 @dataclass(frozen=True)
@@ -43,6 +44,28 @@ class HandTerms:
     twist_fingertip: np.ndarray
     J_fingertip_dot_dq: np.ndarray
     M_h_inverse: np.ndarray
+
+
+class RawHandTerms(NamedTuple):
+    """Pinocchio's terms at one ``(q, dq)``, in its joint order (see :meth:`HandModel.raw_terms`).
+
+    Attributes:
+        placements: Fingertip frame placements, homogeneous, (n, 4, 4).
+        J_frames: Fingertip frame Jacobians (LOCAL_WORLD_ALIGNED), (n, 6, nv).
+        J_frames_dot_dq: Their classical accelerations at ddq = 0, ``J_s_dot dq``, (n, 6).
+        M_upper: Joint-space inertia, upper triangle only (a view of Pinocchio's buffer).
+        nle: ``C_h dq + g(q)``, (nv,) (a view of Pinocchio's buffer).
+        g: ``g(q)``, (nv,) (a view of Pinocchio's buffer).
+        M_inverse: ``M_h^-1``, (nv, nv), full.
+    """
+
+    placements: np.ndarray
+    J_frames: np.ndarray
+    J_frames_dot_dq: np.ndarray
+    M_upper: np.ndarray
+    nle: np.ndarray
+    g: np.ndarray
+    M_inverse: np.ndarray
 
 
 class HandModel:
@@ -104,6 +127,9 @@ class HandModel:
                 )
             idx.append(joint.idx_q)
         self._idx = np.array(idx)
+        #: Pinocchio's index of each of the caller's joints, (m,) (read-only).
+        self.pinocchio_index = self._idx.astype(np.intp)
+        self.pinocchio_index.setflags(write=False)
         lower = self.model.lowerPositionLimit[self._idx]
         upper = self.model.upperPositionLimit[self._idx]
         effort = self.model.effortLimit[self._idx]
@@ -167,44 +193,62 @@ class HandModel:
         """``x`` with its last (joint) axis in the caller's joint order (``x`` itself if equal)."""
         return x if self._in_pin_order else x[..., self._idx]
 
+    def raw_terms(self, q: np.ndarray, dq: np.ndarray) -> RawHandTerms:
+        """Pinocchio's hand terms at ``(q, dq)``, as Pinocchio gives them (its joint order).
+
+        One recursive pass gives M (upper triangle), C dq + g, g, the joint Jacobians and
+        the kinematics with ddq = 0, whose frame accelerations are then J_s_dot dq; M^-1
+        comes from Pinocchio's Cholesky factor of M, which follows the kinematic tree. The
+        few per-frame reads are the only Python loop: :meth:`terms` and the compiled grasp
+        terms (:mod:`grasp_safety_filter.model.packed_terms`) do the rest.
+        """
+        model, data = self.model, self.data
+        pin.computeAllTerms(model, data, self._to_pin(q), self._to_pin(dq))
+        pin.updateFramePlacements(model, data)
+        world_aligned = pin.LOCAL_WORLD_ALIGNED
+        placements, jacobians, accelerations = [], [], []
+        for f in self.frame_ids:
+            placements.append(data.oMf[f].homogeneous)
+            jacobians.append(pin.getFrameJacobian(model, data, f, world_aligned))
+            accelerations.append(
+                pin.getFrameClassicalAcceleration(model, data, f, world_aligned).vector
+            )
+        pin.cholesky.decompose(model, data)
+        # data.M, data.nle and data.g are views of Pinocchio's buffers (overwritten by its
+        # next call); computeMinv returns a new, full symmetric array.
+        return RawHandTerms(
+            placements=np.array(placements),
+            J_frames=np.array(jacobians),
+            J_frames_dot_dq=np.array(accelerations),
+            M_upper=data.M,
+            nle=data.nle,
+            g=data.g,
+            M_inverse=pin.cholesky.computeMinv(model, data),
+        )
+
+    def frame_twists(self, raw: RawHandTerms, dq: np.ndarray) -> np.ndarray:
+        """Return the fingertip frame twists ``J_s dq``, (n, 6), as :meth:`terms` has them."""
+        return self._from_pin(raw.J_frames) @ dq
+
     def terms(self, q: np.ndarray, dq: np.ndarray) -> HandTerms:
         """Everything the grasp model needs from the hand at ``(q, dq)``."""
-        model, data = self.model, self.data
-        q_pin, dq_pin = self._to_pin(q), self._to_pin(dq)
-        # One recursive pass gives M (upper triangle), C dq + g, g, the joint Jacobians and
-        # the kinematics with ddq = 0, whose frame accelerations are then J_s_dot dq.
-        pin.computeAllTerms(model, data, q_pin, dq_pin)
-        pin.updateFramePlacements(model, data)
-        frames, world_aligned = self.frame_ids, pin.LOCAL_WORLD_ALIGNED
-        placements = np.array([data.oMf[f].homogeneous for f in frames])
-        J = self._from_pin(
-            np.array([pin.getFrameJacobian(model, data, f, world_aligned) for f in frames])
-        )
-        J_dot_dq = np.array(
-            [
-                pin.getFrameClassicalAcceleration(model, data, f, world_aligned).vector
-                for f in frames
-            ]
-        )
-        # M^-1 from Pinocchio's Cholesky factor of M, which follows the kinematic tree
-        # (computeMinv returns a new, full symmetric array; data.M, data.nle and data.g are
-        # views of Pinocchio's buffers, hence the copies).
-        pin.cholesky.decompose(model, data)
-        M_inv = pin.cholesky.computeMinv(model, data)
-        M = np.where(self._upper, data.M, data.M.T)
+        raw = self.raw_terms(q, dq)
+        M = np.where(self._upper, raw.M_upper, raw.M_upper.T)
+        M_inv = raw.M_inverse
         if not self._in_pin_order:
             M, M_inv = M[self._idx_square], M_inv[self._idx_square]
+        J = self._from_pin(raw.J_frames)
         return HandTerms(
             M_h=M,
-            h_bias=self._from_pin(data.nle.copy()),
-            gravity_torque=self._from_pin(data.g.copy()),
+            h_bias=self._from_pin(raw.nle.copy()),
+            gravity_torque=self._from_pin(raw.g.copy()),
             # Contiguous copies: the compiled kernels take one memory layout.
-            p_fingertip_in_palm=np.ascontiguousarray(placements[:, :3, 3]),
-            R_fingertip_to_palm=np.ascontiguousarray(placements[:, :3, :3]),
+            p_fingertip_in_palm=np.ascontiguousarray(raw.placements[:, :3, 3]),
+            R_fingertip_to_palm=np.ascontiguousarray(raw.placements[:, :3, :3]),
             J_fingertip=J,
             # The frame twists are J_s dq (the same as Pinocchio's frame velocities).
-            twist_fingertip=J @ dq,
-            J_fingertip_dot_dq=J_dot_dq,
+            twist_fingertip=self.frame_twists(raw, dq),
+            J_fingertip_dot_dq=raw.J_frames_dot_dq,
             M_h_inverse=M_inv,
         )
 

@@ -16,12 +16,16 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import math
-from typing import NamedTuple, Protocol, runtime_checkable
+from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
 from grasp_safety_filter.control.class_k import ClassKFunction
-from grasp_safety_filter.control.constraints.box_kernel import box_barrier_rows
+from grasp_safety_filter.control.constraints.box_kernel import (
+    box_barrier_rows,
+    box_barrier_rows_into,
+    box_barrier_rows_packed,
+)
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -100,6 +104,10 @@ def box_lower(u_min: np.ndarray, u_max: np.ndarray) -> np.ndarray:
 @runtime_checkable
 class ConstraintFamily(Protocol):
     """What the safety filter needs from a constraint family.
+
+    A family may also have ``rows_into(state, A, lower, start)``, writing :meth:`rows`
+    into rows ``start:`` of the filter's stacked ``A`` (K, m) and ``lower`` (K,) with no
+    array of its own; the filter then calls it instead of :meth:`rows`.
 
     Attributes:
         family: Family name, the first component of every row name (e.g. ``"no_slip"``).
@@ -241,6 +249,10 @@ class BoxBarrier:
 
     family: str = ''
     state_fields: tuple[str, ...] = ()
+    #: The packed terms (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout`
+    #: names) of x, x_dot and ``[matrix | offset]`` of x_ddot, which :meth:`rows_into`
+    #: reads straight from a packed state; None: it reads :meth:`coordinates`.
+    packed_fields: tuple[str, str, str] | None = None
 
     def __init__(
         self,
@@ -264,11 +276,12 @@ class BoxBarrier:
         self._h_offset = -self._sign * np.asarray(bound, dtype=float)
         self._alpha_parameters = (
             alpha1.kind == 'cubic',
-            alpha1.gain,
+            float(alpha1.gain),
             alpha2.kind == 'cubic',
-            alpha2.gain,
+            float(alpha2.gain),
         )
         self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
+        self._packed_starts: tuple[Any, tuple[int, int, int]] = (None, (0, 0, 0))
 
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
         """Return the constrained coordinates x, their rates x_dot and ``u ↦ x_ddot``."""
@@ -296,10 +309,63 @@ class BoxBarrier:
             x_dot,
             acceleration.matrix,
             acceleration.offset,
-            *self._alpha_parameters,
+            self._alpha_parameters,
         )
         self._last_h = (state, h)
         return ConstraintRows(A, lower, self.names)
+
+    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
+        """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``.
+
+        From a packed state (``state.packed_terms``), the compiled rows read x, x_dot and
+        x_ddot in its buffer (:attr:`packed_fields`), with no array made per field.
+        """
+        h = np.empty(self._index.shape[0])
+        packed = getattr(state, 'packed_terms', None) if self.packed_fields else None
+        if packed is not None:
+            terms, layout = packed
+            x_start, x_dot_start, x_ddot_start = self._packed_field_starts(state, layout)
+            box_barrier_rows_packed(
+                self._index,
+                self._sign,
+                self._h_offset,
+                terms,
+                x_start,
+                x_dot_start,
+                x_ddot_start,
+                self._alpha_parameters,
+                A,
+                lower,
+                start,
+                h,
+            )
+        else:
+            x, x_dot, acceleration = self.coordinates(state)
+            box_barrier_rows_into(
+                self._index,
+                self._sign,
+                self._h_offset,
+                x,
+                x_dot,
+                acceleration.matrix,
+                acceleration.offset,
+                self._alpha_parameters,
+                A,
+                lower,
+                start,
+                h,
+            )
+        self._last_h = (state, h)
+
+    def _packed_field_starts(self, state: GraspState, layout: Any) -> tuple[int, int, int]:
+        """Where :attr:`packed_fields` start in a layout's buffer (shapes checked once)."""
+        known, starts = self._packed_starts
+        if layout is not known:
+            self.coordinates(state)  # raises ValueError if the fields do not fit the family
+            x, x_dot, x_ddot = self.packed_fields
+            starts = (layout.start(x), layout.start(x_dot), layout.start(x_ddot))
+            self._packed_starts = (layout, starts)
+        return starts
 
     def values(self, state: GraspState, u: np.ndarray | None = None) -> BarrierValues:
         """Barrier values ``h`` per row (independent of u: relative degree two)."""

@@ -36,7 +36,7 @@ def _alpha_slope(cubic: bool, gain: float, h: float) -> float:
 
 
 @kernel
-def box_barrier_rows(
+def box_barrier_rows_into(
     index: np.ndarray,
     sign: np.ndarray,
     h_offset: np.ndarray,
@@ -44,12 +44,13 @@ def box_barrier_rows(
     x_dot: np.ndarray,
     x_ddot_matrix: np.ndarray,
     x_ddot_offset: np.ndarray,
-    alpha1_cubic: bool,
-    alpha1_gain: float,
-    alpha2_cubic: bool,
-    alpha2_gain: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the rows ``A u >= lower`` and the barrier values h (module docstring).
+    alpha_parameters: tuple[bool, float, bool, float],
+    A: np.ndarray,
+    lower: np.ndarray,
+    start: int,
+    h: np.ndarray,
+) -> None:
+    """Write the rows ``A u >= lower`` at rows ``start:`` of A and lower, h into ``h``.
 
     Args:
         index: Selected coordinate per row, (k,).
@@ -59,31 +60,102 @@ def box_barrier_rows(
         x_dot: Their rates, (d,).
         x_ddot_matrix: ``u ↦ x_ddot`` sensitivity, (d, m).
         x_ddot_offset: ``x_ddot`` at u = 0, (d,).
-        alpha1_cubic: Whether alpha_1 is cubic (else linear).
-        alpha1_gain: alpha_1's gain.
-        alpha2_cubic: Whether alpha_2 is cubic (else linear).
-        alpha2_gain: alpha_2's gain.
-
-    Returns:
-        ``A`` (k, m), ``lower`` (k,) and ``h`` (k,).
+        alpha_parameters: ``(alpha_1 cubic, alpha_1 gain, alpha_2 cubic, alpha_2 gain)``:
+            whether each class-K function is cubic (else linear), and its gain.
+        A: The stacked rows' matrix, (K, m), K ≥ start + k.
+        lower: The stacked rows' lower bounds, (K,).
+        start: The first row written.
+        h: The barrier values, (k,).
     """
+    alpha1_cubic, alpha1_gain, alpha2_cubic, alpha2_gain = alpha_parameters
     k = index.shape[0]
     m = x_ddot_matrix.shape[1]
-    A = np.empty((k, m))
-    lower = np.empty(k)
-    h = np.empty(k)
     for r in range(k):
         j = index[r]
         s = sign[r]
         h_r = s * x[j] + h_offset[r]
         h_dot = s * x_dot[j]
         B = h_dot + _alpha(alpha1_cubic, alpha1_gain, h_r)
-        lower[r] = -(
+        lower[start + r] = -(
             s * x_ddot_offset[j]
             + _alpha_slope(alpha1_cubic, alpha1_gain, h_r) * h_dot
             + _alpha(alpha2_cubic, alpha2_gain, B)
         )
         h[r] = h_r
         for c in range(m):
-            A[r, c] = s * x_ddot_matrix[j, c]
+            A[start + r, c] = s * x_ddot_matrix[j, c]
+
+
+@kernel
+def box_barrier_rows(
+    index: np.ndarray,
+    sign: np.ndarray,
+    h_offset: np.ndarray,
+    x: np.ndarray,
+    x_dot: np.ndarray,
+    x_ddot_matrix: np.ndarray,
+    x_ddot_offset: np.ndarray,
+    alpha_parameters: tuple[bool, float, bool, float],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the rows ``A`` (k, m), ``lower`` (k,) and h (k,) (:func:`box_barrier_rows_into`)."""
+    k = index.shape[0]
+    A = np.empty((k, x_ddot_matrix.shape[1]))
+    lower = np.empty(k)
+    h = np.empty(k)
+    box_barrier_rows_into(
+        index, sign, h_offset, x, x_dot, x_ddot_matrix, x_ddot_offset, alpha_parameters,
+        A, lower, 0, h,
+    )
     return A, lower, h
+
+
+@kernel
+def box_barrier_rows_packed(
+    index: np.ndarray,
+    sign: np.ndarray,
+    h_offset: np.ndarray,
+    terms: np.ndarray,
+    x_start: int,
+    x_dot_start: int,
+    x_ddot_start: int,
+    alpha_parameters: tuple[bool, float, bool, float],
+    A: np.ndarray,
+    lower: np.ndarray,
+    start: int,
+    h: np.ndarray,
+) -> None:
+    """:func:`box_barrier_rows_into` with x, x_dot and x_ddot read from a packed buffer.
+
+    Args:
+        index: Selected coordinate per row, (k,).
+        sign: +1 (lower bound) or -1 (upper bound) per row, (k,).
+        h_offset: ``-sign * bound`` per row, (k,).
+        terms: The grasp state's packed terms
+            (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout`).
+        x_start: Where the coordinates x (d,) start in ``terms``.
+        x_dot_start: Where their rates (d,) start.
+        x_ddot_start: Where ``[matrix | offset]`` of ``u ↦ x_ddot`` (d, m + 1) starts.
+        alpha_parameters: As :func:`box_barrier_rows_into`'s.
+        A: The stacked rows' matrix, (K, m), K ≥ start + k.
+        lower: The stacked rows' lower bounds, (K,).
+        start: The first row written.
+        h: The barrier values, (k,).
+    """
+    alpha1_cubic, alpha1_gain, alpha2_cubic, alpha2_gain = alpha_parameters
+    k = index.shape[0]
+    m = A.shape[1]
+    for r in range(k):
+        j = index[r]
+        s = sign[r]
+        h_r = s * terms[x_start + j] + h_offset[r]
+        h_dot = s * terms[x_dot_start + j]
+        B = h_dot + _alpha(alpha1_cubic, alpha1_gain, h_r)
+        row = x_ddot_start + j * (m + 1)
+        lower[start + r] = -(
+            s * terms[row + m]
+            + _alpha_slope(alpha1_cubic, alpha1_gain, h_r) * h_dot
+            + _alpha(alpha2_cubic, alpha2_gain, B)
+        )
+        h[r] = h_r
+        for c in range(m):
+            A[start + r, c] = s * terms[row + c]

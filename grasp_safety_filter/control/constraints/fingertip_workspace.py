@@ -112,6 +112,8 @@ class FingertipWorkspaceBarrier(BoxBarrier):
             alpha2=alpha2 if alpha2 is not None else ClassKFunction(),
         )
 
+    packed_fields = ('xi_cf', 'xi_cf_dot', 'xi_cf_ddot_augmented')
+
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
         """``(xi_cf, xi_cf_dot)`` flattened contact-major, and ``u ↦ xi_cf_ddot``."""
         n = len(self.contact_names)

@@ -15,7 +15,11 @@ from grasp_safety_filter.control.constraints.base import (
     finite_vector,
     validate_names,
 )
-from grasp_safety_filter.control.constraints.pyramid_kernel import pyramid_rows
+from grasp_safety_filter.control.constraints.pyramid_kernel import (
+    pyramid_rows,
+    pyramid_rows_into,
+    pyramid_rows_packed,
+)
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: The l_s-face pyramid inscribed in the circular cone (the paper's).
@@ -125,6 +129,8 @@ class FrictionPyramid:
         face[:, :, :2] = tangential
         face[:, :, 2] = -apothem[:, np.newaxis]
         self._negative_faces = -face
+        self._packed_layout: object = None
+        self._force_start = 0
         self.names = tuple(
             f'{self.family}/{contact}/face{j}'
             for contact in self.contact_names
@@ -147,6 +153,44 @@ class FrictionPyramid:
             self.normal_force_margin,
         )
         return ConstraintRows(A, lower, self.names)
+
+    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
+        """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``.
+
+        From a packed state (``state.packed_terms``), the compiled rows read ``[F | f_0]``
+        in its buffer, with no array made for ``contact_force``.
+        """
+        packed = getattr(state, 'packed_terms', None)
+        if packed is not None:
+            terms, layout = packed
+            if layout is not self._packed_layout:
+                # The shapes, checked once per layout.
+                check_rows(
+                    state.contact_force.offset, 3 * len(self.contact_names), 'contact_force'
+                )
+                self._packed_layout = layout
+                self._force_start = layout.start('contact_force_augmented')
+            pyramid_rows_packed(
+                self._negative_faces,
+                terms,
+                self._force_start,
+                self.normal_force_margin,
+                A,
+                lower,
+                start,
+            )
+            return
+        contact_force = state.contact_force
+        check_rows(contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+        pyramid_rows_into(
+            self._negative_faces,
+            contact_force.matrix,
+            contact_force.offset,
+            self.normal_force_margin,
+            A,
+            lower,
+            start,
+        )
 
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Margins ``h_ij`` (N) at the contact forces ``f_c(u)`` the torque u produces."""

@@ -80,6 +80,8 @@ class JointLimitBarrier(BoxBarrier):
             alpha2=alpha2 if alpha2 is not None else ClassKFunction(),
         )
 
+    packed_fields = ('q', 'dq', 'joint_acceleration_augmented')
+
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
         """``(q, dq, u ↦ ddq)`` from the state."""
         m = len(self.joint_names)

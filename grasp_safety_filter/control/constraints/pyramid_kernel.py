@@ -17,6 +17,46 @@ from grasp_safety_filter.model.compiled import kernel
 
 
 @kernel
+def pyramid_rows_into(
+    negative_faces: np.ndarray,
+    force_matrix: np.ndarray,
+    force_offset: np.ndarray,
+    normal_force_margin: float,
+    A: np.ndarray,
+    lower: np.ndarray,
+    start: int,
+) -> None:
+    """Write the pyramid rows at rows ``start:`` of ``A`` (K, m) and ``lower`` (K,).
+
+    Args:
+        negative_faces: ``N``, (n, faces, 3).
+        force_matrix: ``F``, (3n, m), N per N·m.
+        force_offset: ``f_0``, (3n,), N.
+        normal_force_margin: ``eps``, N.
+        A: The stacked rows' matrix, K ≥ start + n faces.
+        lower: The stacked rows' lower bounds.
+        start: The first row written.
+    """
+    n, faces = negative_faces.shape[0], negative_faces.shape[1]
+    m = force_matrix.shape[1]
+    for i in range(n):
+        for j in range(faces):
+            r = start + i * faces + j
+            N0, N1, N2 = negative_faces[i, j, 0], negative_faces[i, j, 1], negative_faces[i, j, 2]
+            for c in range(m):
+                A[r, c] = (
+                    N0 * force_matrix[3 * i, c]
+                    + N1 * force_matrix[3 * i + 1, c]
+                    + N2 * force_matrix[3 * i + 2, c]
+                )
+            lower[r] = normal_force_margin - (
+                N0 * force_offset[3 * i]
+                + N1 * force_offset[3 * i + 1]
+                + N2 * force_offset[3 * i + 2]
+            )
+
+
+@kernel
 def pyramid_rows(
     negative_faces: np.ndarray,
     force_matrix: np.ndarray,
@@ -31,23 +71,49 @@ def pyramid_rows(
         force_offset: ``f_0``, (3n,), N.
         normal_force_margin: ``eps``, N.
     """
+    rows = negative_faces.shape[0] * negative_faces.shape[1]
+    A = np.empty((rows, force_matrix.shape[1]))
+    lower = np.empty(rows)
+    pyramid_rows_into(
+        negative_faces, force_matrix, force_offset, normal_force_margin, A, lower, 0
+    )
+    return A, lower
+
+
+@kernel
+def pyramid_rows_packed(
+    negative_faces: np.ndarray,
+    terms: np.ndarray,
+    force_start: int,
+    normal_force_margin: float,
+    A: np.ndarray,
+    lower: np.ndarray,
+    start: int,
+) -> None:
+    """:func:`pyramid_rows_into` with ``[F | f_0]`` read from a packed buffer.
+
+    Args:
+        negative_faces: ``N``, (n, faces, 3).
+        terms: The grasp state's packed terms
+            (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout`).
+        force_start: Where ``[F | f_0]`` (3n, m + 1) starts in ``terms``.
+        normal_force_margin: ``eps``, N.
+        A: The stacked rows' matrix (K, m), K ≥ start + n faces.
+        lower: The stacked rows' lower bounds.
+        start: The first row written.
+    """
     n, faces = negative_faces.shape[0], negative_faces.shape[1]
-    m = force_matrix.shape[1]
-    A = np.empty((n * faces, m))
-    lower = np.empty(n * faces)
+    m = A.shape[1]
+    width = m + 1
     for i in range(n):
+        x_row = force_start + 3 * i * width
+        y_row = x_row + width
+        z_row = y_row + width
         for j in range(faces):
-            r = i * faces + j
+            r = start + i * faces + j
             N0, N1, N2 = negative_faces[i, j, 0], negative_faces[i, j, 1], negative_faces[i, j, 2]
             for c in range(m):
-                A[r, c] = (
-                    N0 * force_matrix[3 * i, c]
-                    + N1 * force_matrix[3 * i + 1, c]
-                    + N2 * force_matrix[3 * i + 2, c]
-                )
+                A[r, c] = N0 * terms[x_row + c] + N1 * terms[y_row + c] + N2 * terms[z_row + c]
             lower[r] = normal_force_margin - (
-                N0 * force_offset[3 * i]
-                + N1 * force_offset[3 * i + 1]
-                + N2 * force_offset[3 * i + 2]
+                N0 * terms[x_row + m] + N1 * terms[y_row + m] + N2 * terms[z_row + m]
             )
-    return A, lower

@@ -61,7 +61,10 @@ from grasp_safety_filter.control.qp_solvers.problem import (
     Solution,
     SolutionStatus,
 )
-from grasp_safety_filter.control.working_set import optimum_on_working_set
+from grasp_safety_filter.control.working_set import (
+    clipped_optimum_on_working_set,
+    optimum_on_working_set,
+)
 
 #: Torque-space tolerance (N·m, per N·m of |u_nom|) of the KKT certificate of OSQP's answer.
 CERTIFICATE_TOLERANCE = 1e-10
@@ -311,11 +314,32 @@ class OSQPBackend:
         Every row and box bound holds, the rows of W with equality, and their multipliers
         are nonnegative, to :data:`ACTIVE_SET_TOLERANCE`; stationarity holds by
         construction (one compiled pass,
-        :func:`~grasp_safety_filter.control.working_set.optimum_on_working_set`). None
-        otherwise.
+        :func:`~grasp_safety_filter.control.working_set.optimum_on_working_set`; with the
+        identity metric, the box clip and the row check in the same pass:
+        :func:`~grasp_safety_filter.control.working_set.clipped_optimum_on_working_set`).
+        None otherwise.
         """
         if not guess:
             return None
+        if self._R is None:
+            # y = u: the solve, the clip and the row check in one compiled pass.
+            outcome, u, multipliers = clipped_optimum_on_working_set(
+                self._y_nom,
+                self._rows_y,
+                self._hard_lower,
+                np.fromiter(guess, dtype=np.intp, count=len(guess)),
+                ACTIVE_SET_TOLERANCE,
+                self._u_min,
+                self._u_max,
+                problem.A,
+                problem.lower,
+                FEASIBILITY_TOLERANCE,
+            )
+            if outcome != 1:
+                return None
+            self._last_active = guess
+            self._pending = (u, guess, multipliers)
+            return Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
         outcome, u_guess, multipliers = optimum_on_working_set(
             self._y_nom,
             self._rows_y,

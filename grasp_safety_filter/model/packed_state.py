@@ -1,0 +1,242 @@
+"""A GraspState whose terms live in one read-only buffer, each handed out when first read."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from functools import partial
+from typing import Any
+
+import numpy as np
+
+from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.contact_stack import (
+    ContactStack,
+    SphereOnPlaneStack,
+    StackedContactGeometry,
+    StackedRollingRates,
+)
+from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.model.hand import HandModel
+from grasp_safety_filter.model.packed_terms import PackedLayout, sphere_on_plane_terms
+from grasp_safety_filter.model.rigid_object import RigidObject
+
+#: GraspState's affine terms and the packed ``[matrix | offset]`` each is a view of.
+_AFFINE = {
+    'contact_force': 'contact_force_augmented',
+    'joint_acceleration': 'joint_acceleration_augmented',
+    'object_acceleration': 'object_acceleration_augmented',
+    'xi_cf_ddot': 'xi_cf_ddot_augmented',
+}
+
+
+class _View:
+    """A field of :class:`PackedGraspState`: made from the buffer on first read, then kept.
+
+    A non-data descriptor: once the instance holds the field, Python reads it from there
+    and never calls this again.
+    """
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, state: PackedGraspState | None, owner: type | None = None) -> Any:
+        if state is None:
+            return self
+        fields = state.__dict__
+        if '_layout' not in fields:  # a copy with every field given (dataclasses.replace)
+            raise AttributeError(self.name)
+        value = state._make(self.name)
+        fields[self.name] = value
+        return value
+
+
+class PackedGraspState(GraspState):
+    """A :class:`GraspState` whose fields are views of one read-only buffer.
+
+    The buffer is :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`'s:
+    the same fields and values as the staged computation, read-only arrays. Each field is
+    a view of the buffer, made when it is first read and kept; a tick's state is thus built
+    with no array per term, and a consumer pays only for the fields it reads. Build with
+    :meth:`of`; ``dataclasses.replace`` gives a copy with every field set.
+    """
+
+    q = _View()
+    dq = _View()
+    p_object_in_palm = _View()
+    R_object_to_palm = _View()
+    twist_object = _View()
+    p_fingertip_in_palm = _View()
+    R_fingertip_to_palm = _View()
+    twist_fingertip = _View()
+    J_fingertip = _View()
+    M_h = _View()
+    h_bias = _View()
+    gravity_torque = _View()
+    xi_cf = _View()
+    xi_co = _View()
+    psi = _View()
+    penetration = _View()
+    p_contact_in_palm = _View()
+    R_contact_to_palm = _View()
+    R_contact_to_fingertip = _View()
+    xi_cf_dot = _View()
+    xi_co_dot = _View()
+    psi_dot = _View()
+    H_cf = _View()
+    H_cf_dot_w = _View()
+    sliding_velocity = _View()
+    frame_angular_velocity = _View()
+    J_h = _View()
+    G = _View()
+    Jh_dot_dq = _View()
+    G_dot_T_twist = _View()
+    B_ho = _View()
+    contact_force_augmented = _View()
+    joint_acceleration_augmented = _View()
+    object_acceleration_augmented = _View()
+    xi_cf_ddot_augmented = _View()
+    contact_force = _View()
+    joint_acceleration = _View()
+    object_acceleration = _View()
+    xi_cf_ddot = _View()
+    xi_co_rate_terms = _View()
+
+    @property
+    def packed_terms(self) -> tuple[np.ndarray, PackedLayout] | None:
+        """The buffer and its layout (None for a copy whose fields were given)."""
+        fields = self.__dict__
+        return (fields['_buffer'], fields['_layout']) if '_layout' in fields else None
+
+    @property
+    def n_contacts(self) -> int:
+        """Number of contacts n."""
+        layout = self.__dict__.get('_layout')
+        return layout.n_contacts if layout is not None else self.xi_cf.shape[0]
+
+    @property
+    def n_joints(self) -> int:
+        """Number of joints m."""
+        layout = self.__dict__.get('_layout')
+        return layout.n_joints if layout is not None else self.q.shape[0]
+
+    @classmethod
+    def of(
+        cls,
+        t: float,
+        buffer: np.ndarray,
+        layout: PackedLayout,
+        object_terms: tuple[np.ndarray, np.ndarray, np.ndarray],
+        stack: ContactStack,
+    ) -> PackedGraspState:
+        """Wrap a filled buffer (made read-only here) as the state at time ``t``, s.
+
+        Args:
+            t: Time stamp, s.
+            buffer: The terms, laid out as ``layout`` says.
+            layout: Where each term lies.
+            object_terms: ``M_o``, ``C_o x_o_dot`` and ``w_e``, read-only arrays.
+            stack: The contacts (for :attr:`GraspState.xi_co_rate_terms`).
+        """
+        buffer.setflags(write=False)
+        state = object.__new__(cls)
+        fields = state.__dict__
+        fields['t'] = t
+        fields['M_o'], fields['C_o_twist'], fields['w_e'] = object_terms
+        fields['_buffer'] = buffer
+        fields['_layout'] = layout
+        fields['_stack'] = stack
+        return state
+
+    def _make(self, name: str) -> Any:
+        places = self._layout.places
+        if name in places:
+            start, stop, shape = places[name]
+            return self._buffer[start:stop].reshape(shape)
+        augmented_name = _AFFINE.get(name)
+        if augmented_name is not None:
+            augmented = getattr(self, augmented_name)
+            m = self._layout.n_joints
+            return AffineMap(augmented[:, :m], augmented[:, m])
+        if name == 'xi_co_rate_terms':
+            return self._rate_terms()
+        raise AttributeError(name)
+
+    def _rate_terms(self) -> Callable[[], tuple[np.ndarray, np.ndarray]]:
+        geometry = StackedContactGeometry(
+            self.xi_cf,
+            self.xi_co,
+            self.psi,
+            self.penetration,
+            self.p_contact_in_palm,
+            self.R_contact_to_palm,
+            self.R_contact_to_fingertip,
+        )
+        rates = StackedRollingRates(
+            self.xi_cf_dot,
+            self.xi_co_dot,
+            self.psi_dot,
+            self.H_cf,
+            self.H_cf_dot_w,
+            self.sliding_velocity,
+            self.frame_angular_velocity,
+        )
+        return partial(self._stack.object_rate_terms, geometry, rates)
+
+
+def packed_state(
+    hand: HandModel,
+    rigid_object: RigidObject,
+    stack: SphereOnPlaneStack,
+    layout: PackedLayout,
+    sample: tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+) -> PackedGraspState | None:
+    """Return every model term of one instant, computed in one compiled pass.
+
+    :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms` gives the same
+    terms as the staged computation of
+    :meth:`~grasp_safety_filter.model.grasp_model.GraspModel.state` (the same formulas and
+    LAPACK solve), computed in one compiled pass from Pinocchio's and the object's terms
+    into one buffer.
+
+    Args:
+        hand: The hand.
+        rigid_object: The object.
+        stack: The contacts (spherical fingertips on flat faces).
+        layout: The buffer's layout for these contacts and joints.
+        sample: ``(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)``.
+
+    Returns:
+        The state, or None when ``B_ho`` is singular or not finite (numba's solve refuses
+        both; the caller then runs the staged computation).
+    """
+    t, q, dq, p_object_in_palm, R_object_to_palm, twist_object = sample
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    dq = np.ascontiguousarray(dq, dtype=np.float64)
+    R_o = np.ascontiguousarray(R_object_to_palm, dtype=np.float64)
+    twist_o = np.ascontiguousarray(twist_object, dtype=np.float64)
+    raw = hand.raw_terms(q, dq)
+    object_terms = (
+        rigid_object.inertia_matrix(R_o),
+        rigid_object.bias_wrench(R_o, twist_o),
+        rigid_object.external_wrench(),
+    )
+    buffer = np.empty(layout.size)
+    try:
+        sphere_on_plane_terms(
+            buffer,
+            *raw,
+            hand.pinocchio_index,
+            hand.frame_twists(raw, dq),
+            q,
+            dq,
+            np.ascontiguousarray(p_object_in_palm, dtype=np.float64),
+            R_o,
+            twist_o,
+            rigid_object.inverse_inertia_matrix(R_o),
+            object_terms[1],
+            object_terms[2],
+            *stack.surface_arrays,
+        )
+    except np.linalg.LinAlgError:
+        return None
+    return PackedGraspState.of(float(t), buffer, layout, object_terms, stack)

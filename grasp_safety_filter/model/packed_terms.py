@@ -1,0 +1,251 @@
+"""Every model term of a tick in one compiled pass, written into one flat buffer.
+
+For spherical fingertips on flat faces (the paper's cube), :func:`sphere_on_plane_terms`
+takes Pinocchio's raw hand terms (:meth:`~grasp_safety_filter.model.hand.HandModel.raw_terms`)
+and the object's, and runs in one call what :meth:`HandModel.terms
+<grasp_safety_filter.model.hand.HandModel.terms>`, the contact kinematics
+(:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`) and the contact
+dynamics (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`) compute one
+after the other: the same formulas (those functions' docstrings), the same LAPACK solve of
+``B_ho``. Each term goes to its place in one float64 buffer (:class:`PackedLayout`), from
+which :class:`~grasp_safety_filter.model.packed_state.PackedGraspState` hands out read-only
+views when they are read. A tick's terms are a few hundred float operations: one call with
+one output, instead of a call per stage and an array per term, is most of what saving
+Python's per-call cost can give.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
+from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
+
+
+def packed_fields(n: int, m: int) -> tuple[tuple[str, tuple[int, ...]], ...]:
+    """Return the buffer's terms in order, with their shapes, for n contacts and m joints.
+
+    The order is the one :func:`sphere_on_plane_terms` writes. Names are
+    :class:`~grasp_safety_filter.model.grasp_state.GraspState` fields, the contact
+    geometry's and rolling rates' fields, and ``*_augmented``: ``[matrix | offset]`` of an
+    affine term, (k, m + 1).
+    """
+    k = 3 * n
+    return (
+        ('q', (m,)),
+        ('dq', (m,)),
+        ('p_object_in_palm', (3,)),
+        ('R_object_to_palm', (3, 3)),
+        ('twist_object', (6,)),
+        ('p_fingertip_in_palm', (n, 3)),
+        ('R_fingertip_to_palm', (n, 3, 3)),
+        ('twist_fingertip', (n, 6)),
+        ('J_fingertip', (n, 6, m)),
+        ('M_h', (m, m)),
+        ('h_bias', (m,)),
+        ('gravity_torque', (m,)),
+        ('xi_cf', (n, 2)),
+        ('xi_co', (n, 2)),
+        ('psi', (n,)),
+        ('penetration', (n,)),
+        ('p_contact_in_palm', (n, 3)),
+        ('R_contact_to_palm', (n, 3, 3)),
+        ('R_contact_to_fingertip', (n, 3, 3)),
+        ('xi_cf_dot', (n, 2)),
+        ('xi_co_dot', (n, 2)),
+        ('psi_dot', (n,)),
+        ('H_cf', (n, 2, 3)),
+        ('H_cf_dot_w', (n, 2)),
+        ('sliding_velocity', (n, 2)),
+        ('frame_angular_velocity', (n, 3)),
+        ('J_h', (k, m)),
+        ('G', (6, k)),
+        ('Jh_dot_dq', (k,)),
+        ('G_dot_T_twist', (k,)),
+        ('B_ho', (k, k)),
+        ('contact_force_augmented', (k, m + 1)),
+        ('joint_acceleration_augmented', (m, m + 1)),
+        ('object_acceleration_augmented', (6, m + 1)),
+        ('xi_cf_ddot_augmented', (2 * n, m + 1)),
+    )
+
+
+class PackedLayout(NamedTuple):
+    """Where each term lies in the buffer.
+
+    Attributes:
+        size: The buffer's length (float64 entries).
+        places: Per term name, its ``(start, stop, shape)`` in the buffer.
+        n_joints: m.
+        n_contacts: n.
+    """
+
+    size: int
+    places: dict[str, tuple[int, int, tuple[int, ...]]]
+    n_joints: int
+    n_contacts: int
+
+    def start(self, name: str) -> int:
+        """Return the index of a term's first entry (its entries follow in C order)."""
+        return self.places[name][0]
+
+    @classmethod
+    def of(cls, n: int, m: int) -> PackedLayout:
+        """Return the layout of :func:`packed_fields` for n contacts and m joints."""
+        places = {}
+        start = 0
+        for name, shape in packed_fields(n, m):
+            stop = start + int(np.prod(shape))
+            places[name] = (start, stop, shape)
+            start = stop
+        return cls(start, places, m, n)
+
+
+@kernel
+def _put(out: np.ndarray, start: int, values: np.ndarray) -> int:
+    """Copy ``values`` (C-contiguous) to ``out[start:]``; return the index after them."""
+    flat = values.ravel()
+    for i in range(flat.size):
+        out[start + i] = flat[i]
+    return start + flat.size
+
+
+@kernel
+def sphere_on_plane_terms(
+    out: np.ndarray,
+    placements: np.ndarray,
+    J_frames: np.ndarray,
+    J_frames_dot_dq: np.ndarray,
+    M_upper: np.ndarray,
+    nle: np.ndarray,
+    g: np.ndarray,
+    M_inverse_pin: np.ndarray,
+    joint_index: np.ndarray,
+    twist_f: np.ndarray,
+    q: np.ndarray,
+    dq: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    M_o_inverse: np.ndarray,
+    C_o_twist: np.ndarray,
+    w_e: np.ndarray,
+    plane_origin: np.ndarray,
+    plane_frame: np.ndarray,
+    radius: np.ndarray,
+) -> None:
+    """Write every term of :func:`packed_fields` into ``out``, in that order.
+
+    Args:
+        out: The buffer, (:attr:`PackedLayout.size`,).
+        placements: Fingertip frame placements, homogeneous, (n, 4, 4), m.
+        J_frames: Fingertip frame Jacobians (LOCAL_WORLD_ALIGNED, Pinocchio's order), (n, 6, nv).
+        J_frames_dot_dq: Their classical accelerations at ddq = 0, (n, 6).
+        M_upper: M_h, upper triangle (Pinocchio's order), (nv, nv), kg·m².
+        nle: ``C_h dq + g`` (Pinocchio's order), (nv,), N·m.
+        g: ``g(q)`` (Pinocchio's order), (nv,), N·m.
+        M_inverse_pin: ``M_h^-1`` (Pinocchio's order), (nv, nv).
+        joint_index: Pinocchio's index of each of the model's joints, (m,).
+        twist_f: The fingertip frame twists ``J_s dq``, (n, 6)
+            (:meth:`~grasp_safety_filter.model.hand.HandModel.frame_twists`: numpy's product,
+            whose rounding the staged computation has).
+        q: Joint angles, (m,), rad.
+        dq: Joint velocities, (m,), rad/s.
+        p_object_in_palm: Object centre of mass, (3,), m.
+        R_object_to_palm: Object orientation, (3, 3).
+        twist_object: ``(v_o, w_o)``, (6,).
+        M_o_inverse: ``M_o^-1``, (6, 6).
+        C_o_twist: ``C_o x_o_dot``, (6,).
+        w_e: External wrench on the object, (6,).
+        plane_origin: Each face's origin in the object frame, (n, 3), m.
+        plane_frame: Each face's ``[e1, e2, n]`` in the object frame, (n, 3, 3).
+        radius: Each fingertip's radius, (n,), m.
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular.
+    """
+    n = J_frames.shape[0]
+    m = joint_index.shape[0]
+    # ---- The hand, in the model's joint order (HandModel.terms).
+    p_f = np.empty((n, 3))
+    R_f = np.empty((n, 3, 3))
+    J_s = np.empty((n, 6, m))
+    for i in range(n):
+        for r in range(3):
+            p_f[i, r] = placements[i, r, 3]
+            for c in range(3):
+                R_f[i, r, c] = placements[i, r, c]
+        for r in range(6):
+            for j in range(m):
+                J_s[i, r, j] = J_frames[i, r, joint_index[j]]
+    M_h = np.empty((m, m))
+    M_h_inverse = np.empty((m, m))
+    h_bias = np.empty(m)
+    gravity = np.empty(m)
+    for r in range(m):
+        a = joint_index[r]
+        h_bias[r] = nle[a]
+        gravity[r] = g[a]
+        for c in range(m):
+            b = joint_index[c]
+            # Pinocchio fills the upper triangle of M only.
+            M_h[r, c] = M_upper[a, b] if a <= b else M_upper[b, a]
+            M_h_inverse[r, c] = M_inverse_pin[a, b]
+    # ---- Contact geometry and rolling rates.
+    contacts = sphere_on_plane_contacts(
+        p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
+        plane_origin, plane_frame, radius,
+    )
+    # ---- Contact dynamics (contact_dynamics: two passes around the solve of B_ho).
+    (
+        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
+        x_ddot_free, w_c, w_relative,
+    ) = velocity_terms(
+        J_s, twist_f, J_frames_dot_dq, p_f, M_h_inverse, h_bias, p_object_in_palm,
+        twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
+        contacts[11], contacts[12], contacts[13],
+    )
+    force = np.linalg.solve(B_ho, force_rhs)
+    ddq, x_ddot, xi_ddot = acceleration_terms(
+        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
+        J_s, J_frames_dot_dq, contacts[5], contacts[10], contacts[11],
+    )
+    # ---- Into the buffer, in packed_fields' order.
+    at = _put(out, 0, q)
+    at = _put(out, at, dq)
+    at = _put(out, at, p_object_in_palm)
+    at = _put(out, at, R_object_to_palm)
+    at = _put(out, at, twist_object)
+    at = _put(out, at, p_f)
+    at = _put(out, at, R_f)
+    at = _put(out, at, twist_f)
+    at = _put(out, at, J_s)
+    at = _put(out, at, M_h)
+    at = _put(out, at, h_bias)
+    at = _put(out, at, gravity)
+    for array in contacts[:2]:  # xi_cf, xi_co
+        at = _put(out, at, array)
+    for array in contacts[2:4]:  # psi, penetration
+        at = _put(out, at, array)
+    at = _put(out, at, contacts[4])  # p_contact
+    for array in contacts[5:7]:  # R_pc, R_fc
+        at = _put(out, at, array)
+    for array in contacts[7:9]:  # xi_cf_dot, xi_co_dot
+        at = _put(out, at, array)
+    at = _put(out, at, contacts[9])  # psi_dot
+    at = _put(out, at, contacts[10])  # H_cf
+    for array in contacts[11:13]:  # H_cf_dot_w, sliding
+        at = _put(out, at, array)
+    at = _put(out, at, contacts[13])  # Omega
+    at = _put(out, at, J_h)
+    at = _put(out, at, G)
+    at = _put(out, at, Jh_dot_dq)
+    at = _put(out, at, G_dot_T_twist)
+    at = _put(out, at, B_ho)
+    at = _put(out, at, force)
+    at = _put(out, at, ddq)
+    at = _put(out, at, x_ddot)
+    _put(out, at, xi_ddot)
