@@ -40,7 +40,16 @@ def seconds_to_nanoseconds(t: float) -> int:
     if not math.isfinite(t) or t < 0.0:
         raise MessageError(f'time: expected a finite number of seconds >= 0, got {t!r}')
     # Exact rational product: a float product could round a time ns / 1e9 to ns +- 1.
-    return round(Fraction(t) * _NANOSECONDS_PER_SECOND)
+    if not isinstance(t, float):
+        return round(Fraction(t) * _NANOSECONDS_PER_SECOND)
+    # A float is numerator / 2**k exactly: the same product and rounding (half to even,
+    # as round(Fraction)) in integers, without building Fractions.
+    numerator, denominator = t.as_integer_ratio()
+    ns, remainder = divmod(numerator * _NANOSECONDS_PER_SECOND, denominator)
+    twice = 2 * remainder
+    if twice > denominator or (twice == denominator and ns & 1):
+        ns += 1
+    return ns
 
 
 def nanoseconds_to_seconds(ns: int) -> float:
@@ -113,6 +122,8 @@ def check_frame(source: str, what: str, received: str, expected: str) -> None:
 def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
     """Received names as a list; raise on duplicates."""
     received = [str(n) for n in names]
+    if len(set(received)) == len(received):
+        return received
     duplicates = sorted(n for n, count in Counter(received).items() if count > 1)
     if duplicates:
         raise MessageError(
@@ -121,10 +132,36 @@ def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
     return received
 
 
+#: Name lists already matched: ``{(received, expected): index}`` (see :func:`match_names`).
+_MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
+#: Most name lists remembered (a stream sends one or two; the cache is emptied when full).
+_MAX_MATCHED = 256
+
+
 def match_names(
     source: str, received_names: Sequence[str], expected_names: Sequence[str], kind: str
 ) -> np.ndarray:
-    """Index of each expected name in the received names (any order, each exactly once)."""
+    """Index of each expected name in the received names (any order, each exactly once).
+
+    Every stream sends the same names again and again: a pair of name lists that matched
+    once gives the same (read-only) index without checking again; one that did not is
+    checked, and refused, every time.
+    """
+    key = (tuple(str(n) for n in received_names), tuple(expected_names))
+    index = _MATCHED.get(key)
+    if index is None:
+        index = _match_names(source, list(key[0]), expected_names, kind)
+        index.flags.writeable = False
+        if len(_MATCHED) >= _MAX_MATCHED:
+            _MATCHED.clear()
+        _MATCHED[key] = index
+    return index
+
+
+def _match_names(
+    source: str, received_names: Sequence[str], expected_names: Sequence[str], kind: str
+) -> np.ndarray:
+    """:func:`match_names` without the memory of name lists already matched."""
     received = checked_names(source, received_names, kind)
     index = {name: i for i, name in enumerate(received)}
     expected = set(expected_names)
