@@ -28,6 +28,8 @@ OBJECT_FRAME = 'object'
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
 _ROTATION_TOLERANCE = 1e-6
+_IDENTITY = np.eye(3)
+_IDENTITY.flags.writeable = False
 _NANOSECONDS_PER_SECOND = 1_000_000_000
 _INT32_MAX = 2**31 - 1
 
@@ -210,6 +212,8 @@ def array_field(
             f'({len(names)})'
         )
     bad = ~np.isfinite(array)
+    if not bad.any():
+        return array
     if allow_positive_inf is not None:
         bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
     if bad.any():
@@ -221,10 +225,10 @@ def array_field(
 
 def finite_vector(source: str, what: str, values: Sequence[float]) -> np.ndarray:
     """Return ``values`` as a float64 array; raise :class:`MessageError` if one is not finite."""
-    array = np.array([float(v) for v in values], dtype=np.float64)
-    if not np.isfinite(array).all():
-        raise MessageError(f'{source}: {what} must be finite, got {array.tolist()}')
-    return array
+    floats = [float(v) for v in values]
+    if not all(map(math.isfinite, floats)):  # a few numbers: cheaper than numpy's
+        raise MessageError(f'{source}: {what} must be finite, got {floats}')
+    return np.array(floats, dtype=np.float64)
 
 
 def unit_quaternion(source: str, what: str, msg: Any) -> np.ndarray:
@@ -259,9 +263,10 @@ def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
 
     """
     R = shaped_array('rotation matrix', R, (3, 3))
-    if not np.isfinite(R).all():
+    error = float(np.abs(R.T @ R - _IDENTITY).max())
+    # A non-finite entry makes the error NaN or inf: checked only then.
+    if not error <= _ROTATION_TOLERANCE and not np.isfinite(R).all():
         raise MessageError(f'rotation matrix: expected finite entries, got {R.tolist()}')
-    error = float(np.abs(R.T @ R - np.eye(3)).max())
     if error > _ROTATION_TOLERANCE or np.linalg.det(R) < 0.0:
         raise MessageError(
             f'rotation matrix: expected orthonormal with det +1 (within '
@@ -277,8 +282,8 @@ def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:
 
 def quaternion_msg(msgs: MessageNamespace, R: np.ndarray) -> Any:
     """Build a ``geometry_msgs/Quaternion`` of the rotation matrix ``R``."""
-    x, y, z, w = quaternion_xyzw_from_matrix(R)
-    return msgs.Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+    x, y, z, w = quaternion_xyzw_from_matrix(R).tolist()
+    return msgs.Quaternion(x=x, y=y, z=z, w=w)
 
 
 def vector3_msg(msgs: MessageNamespace, v: np.ndarray) -> Any:
