@@ -363,8 +363,8 @@ def open_bag(path: Path | str) -> Iterator[OpenBag]:
     """
     path = Path(path)
     _check_bag_directory(path)
-    reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
     try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
         reader.open()
         bag = OpenBag(path, reader)
     except Exception as error:
