@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from fractions import Fraction
 import math
 
 from grasp_states import paper_model, random_configuration
@@ -116,6 +117,15 @@ def test_time_rounds_to_the_nearest_nanosecond():
     assert m.seconds_to_nanoseconds(1e-10) == 0
 
 
+def test_time_rounds_exact_halves_of_a_nanosecond_to_even(rng):
+    # k / 1024 s is exactly k * 976562.5 ns: a tie, rounded half to even as round() does.
+    assert m.seconds_to_nanoseconds(1 / 1024) == 976_562
+    assert m.seconds_to_nanoseconds(3 / 1024) == 2_929_688
+    times = [k / 2048 for k in range(1, 4096)] + list(rng.uniform(0.0, 2.0**31 - 1, 2000))
+    for t in times:
+        assert m.seconds_to_nanoseconds(t) == round(Fraction(t) * 10**9)
+
+
 @pytest.mark.parametrize('t', [-1e-9, math.nan, math.inf, 2.0**31])
 def test_time_outside_builtin_interfaces_is_rejected(t):
     with pytest.raises(MessageError, match='time'):
@@ -149,6 +159,23 @@ def test_joint_state_is_matched_by_name_in_any_order(rng):
     assert_bitwise_equal(data.position, q)
     assert_bitwise_equal(data.velocity, dq)
     assert_bitwise_equal(data.effort, effort)
+
+
+def test_a_name_list_that_matched_once_is_still_checked_when_it_changes(rng):
+    effort = rng.normal(size=len(JOINTS))
+    good = through_cdr(m.effort_to_msg(MSGS, 2.0, JOINTS, effort))
+    for _ in range(2):  # the second time from the memory of matched name lists
+        assert_bitwise_equal(m.effort_from_msg(good, JOINTS).effort, effort)
+    renamed = through_cdr(m.effort_to_msg(MSGS, 2.0, [*JOINTS[:-1], 'other'], effort))
+    duplicated = through_cdr(m.effort_to_msg(MSGS, 2.0, JOINTS, effort))
+    duplicated.name = [*JOINTS[:-1], JOINTS[0]]
+    for _ in range(2):  # a refused list is refused every time
+        with pytest.raises(MessageError, match='unknown joint names'):
+            m.effort_from_msg(renamed, JOINTS)
+        with pytest.raises(MessageError, match='duplicate joint names'):
+            m.effort_from_msg(duplicated, JOINTS)
+    with pytest.raises(MessageError, match='missing joint names'):
+        m.effort_from_msg(good, [*JOINTS, 'extra'])
 
 
 def test_effort_round_trip_is_exact_and_carries_effort_only(rng):

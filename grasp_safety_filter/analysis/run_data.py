@@ -30,7 +30,7 @@ from grasp_safety_filter.analysis.columns import Column
 from grasp_safety_filter.analysis.filter_statuses import FilterStatuses, FilterStatusReader
 from grasp_safety_filter.analysis.tracking import ObjectTracking, TRACKING_TOPICS, TrackingReader
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.io.bag import bag_topics, BagReadError, iter_bag
+from grasp_safety_filter.io.bag import BagReadError, iter_bag, open_bag, OpenBag
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
 from grasp_safety_filter.io.messages import (
     contacts_from_msg,
@@ -277,9 +277,17 @@ def _first_per_stamp(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.unique(stamps, return_index=True)
 
 
-def _read_scenario(bag: Path) -> dict[str, Any]:
-    """Read the first ``/grasp/scenario`` message: the names every other message is read by."""
-    for _, _, msg in iter_bag(bag, topics=[topics.SCENARIO]):
+def _read_scenario(bag: Path, opened: OpenBag | None = None) -> dict[str, Any]:
+    """Read the first ``/grasp/scenario`` message: the names every other message is read by.
+
+    ``opened``: the bag already open (None: opened here).
+    """
+    messages = (
+        iter_bag(bag, topics=[topics.SCENARIO])
+        if opened is None
+        else opened.messages(topics=[topics.SCENARIO])
+    )
+    for _, _, msg in messages:
         return scenario_from_msg(msg)
     raise RunDataError(f'{bag}: no messages on {topics.SCENARIO}; the analysis needs it')
 
@@ -300,14 +308,19 @@ def read_scenario(bag: Path | str) -> dict[str, Any]:
 
 
 def _load_run(bag: Path) -> RunData:
-    recorded = bag_topics(bag)
+    with open_bag(bag) as opened:  # once: its metadata and index are read once
+        return _read_run(bag, opened)
+
+
+def _read_run(bag: Path, opened: OpenBag) -> RunData:
+    recorded = opened.topics
     for name in ANALYSED_TOPICS:
         if name in recorded and recorded[name].msgtype != topics.topic_spec(name).msgtype:
             raise RunDataError(
                 f'{bag}: {name} has type {recorded[name].msgtype}; the analysis needs '
                 f'{topics.topic_spec(name).msgtype}'
             )
-    scenario = _read_scenario(bag)
+    scenario = _read_scenario(bag, opened)
     joint_names, contact_names = scenario['joint_names'], scenario['contact_names']
     m = len(joint_names)
     series = _Series(m, len(contact_names))
@@ -319,7 +332,7 @@ def _load_run(bag: Path) -> RunData:
     if margins is not None and margins.msgtype == topics.topic_spec(topics.MARGINS).msgtype:
         barriers = BarrierReader()
         wanted.append(topics.MARGINS)
-    for topic, _, msg in iter_bag(bag, topics=wanted):
+    for topic, _, msg in opened.messages(topics=wanted):
         if topic == topics.JOINT_STATES:
             series.joint_stamps.append(header_stamp_ns(msg))
             series.q.append(joint_state_from_msg(msg, joint_names, source=topic).position)

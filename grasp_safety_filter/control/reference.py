@@ -121,7 +121,17 @@ class ReferenceSample:
     @property
     def pose(self) -> Pose:
         """The desired pose."""
-        return Pose(self.r[:3], matrix_from_euler(self.r[3:]))
+        return Pose(self.r[:3], self.R_to_palm)
+
+    @property
+    def p_in_palm(self) -> np.ndarray:
+        """Desired object centre of mass in the palm frame, shape (3,), m (a read-only view)."""
+        return self.r[:3]
+
+    @property
+    def R_to_palm(self) -> np.ndarray:
+        """Desired orientation ``R_object_to_palm``, shape (3, 3): that of :attr:`pose`."""
+        return matrix_from_euler(self.r[3:])
 
     @property
     def twist(self) -> np.ndarray:

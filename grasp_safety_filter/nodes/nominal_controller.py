@@ -265,12 +265,13 @@ class NominalControllerEndpoint:
 
     def _reference_msg(self, t: float, sample: ReferenceSample) -> Any:
         """Return the tracked sample as ``nav_msgs/Odometry``, framed as ``/object/odom``."""
-        pose = sample.pose
+        # The pose's parts without a Pose: a rotation built from Euler angles needs no check
+        # here, and odometry_to_msg checks it again anyway.
         return odometry_to_msg(
             self.msgs,
             t,
-            pose.p_in_palm,
-            pose.R_to_palm,
+            sample.p_in_palm,
+            sample.R_to_palm,
             sample.twist,
             frame_id=self.model.palm_frame,
             child_frame_id=self.model.object_frame,

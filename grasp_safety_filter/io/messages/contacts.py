@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -104,7 +105,19 @@ class ContactData:
 
 def contact_entry_names(contact_names: Sequence[str]) -> list[str]:
     """Names of ``/hand/contacts`` entries: ``"<contact>/<quantity>"``, contact-major."""
-    return [f'{c}/{q}' for c in contact_names for q in CONTACT_QUANTITIES]
+    return list(_entry_names(tuple(contact_names)))
+
+
+@lru_cache(maxsize=64)
+def _entry_names(contact_names: tuple[str, ...]) -> tuple[str, ...]:
+    """:func:`contact_entry_names` of a name tuple, built once per tuple."""
+    return tuple(f'{c}/{q}' for c in contact_names for q in CONTACT_QUANTITIES)
+
+
+@lru_cache(maxsize=64)
+def _positive_inf_allowed(entry_names: tuple[str, ...]) -> tuple[bool, ...]:
+    """Per entry name, whether ``+inf`` is admissible there (``required_friction``)."""
+    return tuple(name.rsplit('/', 1)[-1] == 'required_friction' for name in entry_names)
 
 
 def contacts_to_msg(
@@ -158,7 +171,7 @@ def contacts_from_msg(
     expected = contact_entry_names(contact_names)
     order = match_names(source, msg.name, expected, 'contact entry')
     names = list(msg.name)
-    inf_ok = [name.rsplit('/', 1)[-1] == 'required_friction' for name in names]
+    inf_ok = _positive_inf_allowed(tuple(names))
     values = array_field(
         source, msg.position, 'position', names, required=True, allow_positive_inf=inf_ok
     )

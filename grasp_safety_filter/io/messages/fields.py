@@ -28,6 +28,8 @@ OBJECT_FRAME = 'object'
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
 _ROTATION_TOLERANCE = 1e-6
+_IDENTITY = np.eye(3)
+_IDENTITY.flags.writeable = False
 _NANOSECONDS_PER_SECOND = 1_000_000_000
 _INT32_MAX = 2**31 - 1
 
@@ -40,7 +42,16 @@ def seconds_to_nanoseconds(t: float) -> int:
     if not math.isfinite(t) or t < 0.0:
         raise MessageError(f'time: expected a finite number of seconds >= 0, got {t!r}')
     # Exact rational product: a float product could round a time ns / 1e9 to ns +- 1.
-    return round(Fraction(t) * _NANOSECONDS_PER_SECOND)
+    if not isinstance(t, float):
+        return round(Fraction(t) * _NANOSECONDS_PER_SECOND)
+    # A float is numerator / 2**k exactly: the same product and rounding (half to even,
+    # as round(Fraction)) in integers, without building Fractions.
+    numerator, denominator = t.as_integer_ratio()
+    ns, remainder = divmod(numerator * _NANOSECONDS_PER_SECOND, denominator)
+    twice = 2 * remainder
+    if twice > denominator or (twice == denominator and ns & 1):
+        ns += 1
+    return ns
 
 
 def nanoseconds_to_seconds(ns: int) -> float:
@@ -113,6 +124,8 @@ def check_frame(source: str, what: str, received: str, expected: str) -> None:
 def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
     """Received names as a list; raise on duplicates."""
     received = [str(n) for n in names]
+    if len(set(received)) == len(received):
+        return received
     duplicates = sorted(n for n, count in Counter(received).items() if count > 1)
     if duplicates:
         raise MessageError(
@@ -121,10 +134,36 @@ def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
     return received
 
 
+#: Name lists already matched: ``{(received, expected): index}`` (see :func:`match_names`).
+_MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
+#: Most name lists remembered (a stream sends one or two; the cache is emptied when full).
+_MAX_MATCHED = 256
+
+
 def match_names(
     source: str, received_names: Sequence[str], expected_names: Sequence[str], kind: str
 ) -> np.ndarray:
-    """Index of each expected name in the received names (any order, each exactly once)."""
+    """Index of each expected name in the received names (any order, each exactly once).
+
+    Every stream sends the same names again and again: a pair of name lists that matched
+    once gives the same (read-only) index without checking again; one that did not is
+    checked, and refused, every time.
+    """
+    key = (tuple(str(n) for n in received_names), tuple(expected_names))
+    index = _MATCHED.get(key)
+    if index is None:
+        index = _match_names(source, list(key[0]), expected_names, kind)
+        index.flags.writeable = False
+        if len(_MATCHED) >= _MAX_MATCHED:
+            _MATCHED.clear()
+        _MATCHED[key] = index
+    return index
+
+
+def _match_names(
+    source: str, received_names: Sequence[str], expected_names: Sequence[str], kind: str
+) -> np.ndarray:
+    """:func:`match_names` without the memory of name lists already matched."""
     received = checked_names(source, received_names, kind)
     index = {name: i for i, name in enumerate(received)}
     expected = set(expected_names)
@@ -173,6 +212,8 @@ def array_field(
             f'({len(names)})'
         )
     bad = ~np.isfinite(array)
+    if not bad.any():
+        return array
     if allow_positive_inf is not None:
         bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
     if bad.any():
@@ -184,10 +225,10 @@ def array_field(
 
 def finite_vector(source: str, what: str, values: Sequence[float]) -> np.ndarray:
     """Return ``values`` as a float64 array; raise :class:`MessageError` if one is not finite."""
-    array = np.array([float(v) for v in values], dtype=np.float64)
-    if not np.isfinite(array).all():
-        raise MessageError(f'{source}: {what} must be finite, got {array.tolist()}')
-    return array
+    floats = [float(v) for v in values]
+    if not all(map(math.isfinite, floats)):  # a few numbers: cheaper than numpy's
+        raise MessageError(f'{source}: {what} must be finite, got {floats}')
+    return np.array(floats, dtype=np.float64)
 
 
 def unit_quaternion(source: str, what: str, msg: Any) -> np.ndarray:
@@ -222,9 +263,10 @@ def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
 
     """
     R = shaped_array('rotation matrix', R, (3, 3))
-    if not np.isfinite(R).all():
+    error = float(np.abs(R.T @ R - _IDENTITY).max())
+    # A non-finite entry makes the error NaN or inf: checked only then.
+    if not error <= _ROTATION_TOLERANCE and not np.isfinite(R).all():
         raise MessageError(f'rotation matrix: expected finite entries, got {R.tolist()}')
-    error = float(np.abs(R.T @ R - np.eye(3)).max())
     if error > _ROTATION_TOLERANCE or np.linalg.det(R) < 0.0:
         raise MessageError(
             f'rotation matrix: expected orthonormal with det +1 (within '
@@ -240,8 +282,8 @@ def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:
 
 def quaternion_msg(msgs: MessageNamespace, R: np.ndarray) -> Any:
     """Build a ``geometry_msgs/Quaternion`` of the rotation matrix ``R``."""
-    x, y, z, w = quaternion_xyzw_from_matrix(R)
-    return msgs.Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+    x, y, z, w = quaternion_xyzw_from_matrix(R).tolist()
+    return msgs.Quaternion(x=x, y=y, z=z, w=w)
 
 
 def vector3_msg(msgs: MessageNamespace, v: np.ndarray) -> Any:
