@@ -281,7 +281,7 @@ class BoxBarrier:
             float(alpha2.gain),
         )
         self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
-        self._packed_starts: tuple[Any, tuple[int, int, int]] = (None, (0, 0, 0))
+        self._packed_starts: tuple[Any, tuple[int, int, int, int]] = (None, (0, 0, 0, 0))
 
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
         """Return the constrained coordinates x, their rates x_dot and ``u ↦ x_ddot``."""
@@ -324,7 +324,7 @@ class BoxBarrier:
         packed = getattr(state, 'packed_terms', None) if self.packed_fields else None
         if packed is not None:
             terms, layout = packed
-            x_start, x_dot_start, x_ddot_start = self._packed_field_starts(state, layout)
+            x_start, x_dot_start, x_ddot_start, d = self._packed_field_starts(state, layout)
             box_barrier_rows_packed(
                 self._index,
                 self._sign,
@@ -333,6 +333,7 @@ class BoxBarrier:
                 x_start,
                 x_dot_start,
                 x_ddot_start,
+                d,
                 self._alpha_parameters,
                 A,
                 lower,
@@ -357,13 +358,24 @@ class BoxBarrier:
             )
         self._last_h = (state, h)
 
-    def _packed_field_starts(self, state: GraspState, layout: Any) -> tuple[int, int, int]:
-        """Where :attr:`packed_fields` start in a layout's buffer (shapes checked once)."""
+    def _packed_field_starts(
+        self, state: GraspState, layout: Any
+    ) -> tuple[int, int, int, int]:
+        """Where :attr:`packed_fields` start in a layout's buffer, and x's length d.
+
+        The shapes are checked once per layout.
+        """
         known, starts = self._packed_starts
         if layout is not known:
-            self.coordinates(state)  # raises ValueError if the fields do not fit the family
+            # raises ValueError if the fields do not fit the family
+            coordinates, _, _ = self.coordinates(state)
             x, x_dot, x_ddot = self.packed_fields
-            starts = (layout.start(x), layout.start(x_dot), layout.start(x_ddot))
+            starts = (
+                layout.start(x),
+                layout.start(x_dot),
+                layout.start(x_ddot),
+                coordinates.shape[0],
+            )
             self._packed_starts = (layout, starts)
         return starts
 

@@ -118,6 +118,7 @@ def box_barrier_rows_packed(
     x_start: int,
     x_dot_start: int,
     x_ddot_start: int,
+    n_coordinates: int,
     alpha_parameters: tuple[bool, float, bool, float],
     A: np.ndarray,
     lower: np.ndarray,
@@ -125,6 +126,8 @@ def box_barrier_rows_packed(
     h: np.ndarray,
 ) -> None:
     """:func:`box_barrier_rows_into` with x, x_dot and x_ddot read from a packed buffer.
+
+    The fields are views of ``terms`` (no copy), so the rows are the same arithmetic.
 
     Args:
         index: Selected coordinate per row, (k,).
@@ -135,27 +138,27 @@ def box_barrier_rows_packed(
         x_start: Where the coordinates x (d,) start in ``terms``.
         x_dot_start: Where their rates (d,) start.
         x_ddot_start: Where ``[matrix | offset]`` of ``u ↦ x_ddot`` (d, m + 1) starts.
+        n_coordinates: d.
         alpha_parameters: As :func:`box_barrier_rows_into`'s.
         A: The stacked rows' matrix, (K, m), K ≥ start + k.
         lower: The stacked rows' lower bounds, (K,).
         start: The first row written.
         h: The barrier values, (k,).
     """
-    alpha1_cubic, alpha1_gain, alpha2_cubic, alpha2_gain = alpha_parameters
-    k = index.shape[0]
     m = A.shape[1]
-    for r in range(k):
-        j = index[r]
-        s = sign[r]
-        h_r = s * terms[x_start + j] + h_offset[r]
-        h_dot = s * terms[x_dot_start + j]
-        B = h_dot + _alpha(alpha1_cubic, alpha1_gain, h_r)
-        row = x_ddot_start + j * (m + 1)
-        lower[start + r] = -(
-            s * terms[row + m]
-            + _alpha_slope(alpha1_cubic, alpha1_gain, h_r) * h_dot
-            + _alpha(alpha2_cubic, alpha2_gain, B)
-        )
-        h[r] = h_r
-        for c in range(m):
-            A[start + r, c] = s * terms[row + c]
+    d = n_coordinates
+    x_ddot = terms[x_ddot_start:x_ddot_start + d * (m + 1)].reshape((d, m + 1))
+    box_barrier_rows_into(
+        index,
+        sign,
+        h_offset,
+        terms[x_start:x_start + d],
+        terms[x_dot_start:x_dot_start + d],
+        x_ddot[:, :m],
+        x_ddot[:, m],
+        alpha_parameters,
+        A,
+        lower,
+        start,
+        h,
+    )

@@ -92,6 +92,8 @@ def pyramid_rows_packed(
 ) -> None:
     """:func:`pyramid_rows_into` with ``[F | f_0]`` read from a packed buffer.
 
+    ``F`` and ``f_0`` are views of ``terms`` (no copy), so the rows are the same arithmetic.
+
     Args:
         negative_faces: ``N``, (n, faces, 3).
         terms: The grasp state's packed terms
@@ -102,18 +104,9 @@ def pyramid_rows_packed(
         lower: The stacked rows' lower bounds.
         start: The first row written.
     """
-    n, faces = negative_faces.shape[0], negative_faces.shape[1]
+    rows = 3 * negative_faces.shape[0]
     m = A.shape[1]
-    width = m + 1
-    for i in range(n):
-        x_row = force_start + 3 * i * width
-        y_row = x_row + width
-        z_row = y_row + width
-        for j in range(faces):
-            r = start + i * faces + j
-            N0, N1, N2 = negative_faces[i, j, 0], negative_faces[i, j, 1], negative_faces[i, j, 2]
-            for c in range(m):
-                A[r, c] = N0 * terms[x_row + c] + N1 * terms[y_row + c] + N2 * terms[z_row + c]
-            lower[r] = normal_force_margin - (
-                N0 * terms[x_row + m] + N1 * terms[y_row + m] + N2 * terms[z_row + m]
-            )
+    force = terms[force_start:force_start + rows * (m + 1)].reshape((rows, m + 1))
+    pyramid_rows_into(
+        negative_faces, force[:, :m], force[:, m], normal_force_margin, A, lower, start
+    )
