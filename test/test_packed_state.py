@@ -14,8 +14,10 @@ import dataclasses
 from grasp_states import paper_model, random_configuration
 import numpy as np
 import pytest
+from random_hands import random_hand
 
 from grasp_safety_filter.control.safety_filter import SafetyFilter
+from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.packed_state import PackedGraspState
 
@@ -38,32 +40,119 @@ def _states(model, configuration, monkeypatch):
     return packed, staged
 
 
+def _assert_same_fields(packed, staged):
+    assert isinstance(packed, PackedGraspState) and not isinstance(staged, PackedGraspState)
+    for field in dataclasses.fields(GraspState):
+        ours, theirs = getattr(packed, field.name), getattr(staged, field.name)
+        if field.name == 'xi_co_rate_terms':
+            ours, theirs = ours(), theirs()
+        elif field.name == 't':
+            assert ours == theirs
+            continue
+        elif hasattr(theirs, 'matrix'):
+            assert not ours.matrix.flags.writeable and not ours.offset.flags.writeable
+            ours, theirs = (ours.matrix, ours.offset), (theirs.matrix, theirs.offset)
+        else:
+            assert not ours.flags.writeable, field.name
+            assert ours.shape == theirs.shape, field.name
+            ours, theirs = (ours,), (theirs,)
+        for a, b in zip(ours, theirs, strict=True):
+            # The same operations in the same order: the same floating-point numbers.
+            np.testing.assert_array_equal(a, b, err_msg=field.name)
+    np.testing.assert_array_equal(packed.xi_co_ddot.matrix, staged.xi_co_ddot.matrix)
+    np.testing.assert_array_equal(packed.xi_co_ddot.offset, staged.xi_co_ddot.offset)
+
+
 @pytest.mark.parametrize('case', list(BOXES))
 def test_every_field_equals_the_staged_computation(case, monkeypatch):
     model = paper_model(**BOXES[case])
     rng = np.random.default_rng(5)
     for _ in range(4):
-        packed, staged = _states(model, random_configuration(model, rng), monkeypatch)
-        assert isinstance(packed, PackedGraspState) and not isinstance(staged, PackedGraspState)
-        for field in dataclasses.fields(GraspState):
-            ours, theirs = getattr(packed, field.name), getattr(staged, field.name)
-            if field.name == 'xi_co_rate_terms':
-                ours, theirs = ours(), theirs()
-            elif field.name == 't':
-                assert ours == theirs
-                continue
-            elif hasattr(theirs, 'matrix'):
-                assert not ours.matrix.flags.writeable and not ours.offset.flags.writeable
-                ours, theirs = (ours.matrix, ours.offset), (theirs.matrix, theirs.offset)
-            else:
-                assert not ours.flags.writeable, field.name
-                assert ours.shape == theirs.shape, field.name
-                ours, theirs = (ours,), (theirs,)
-            for a, b in zip(ours, theirs, strict=True):
-                # The same operations in the same order: the same floating-point numbers.
-                np.testing.assert_array_equal(a, b, err_msg=field.name)
-        np.testing.assert_array_equal(packed.xi_co_ddot.matrix, staged.xi_co_ddot.matrix)
-        np.testing.assert_array_equal(packed.xi_co_ddot.offset, staged.xi_co_ddot.offset)
+        _assert_same_fields(*_states(model, random_configuration(model, rng), monkeypatch))
+
+
+def test_a_hand_whose_joints_are_not_in_pinocchios_order_gives_the_same_fields(
+    tmp_path, monkeypatch
+):
+    """The compiled pass gathers J, M_h, M_h^-1, C_h dq + g and g into the model's order."""
+    permuted = 0
+    for seed in range(8):
+        hand = random_hand(seed)
+        if hand.shape != 'box':
+            continue
+        (tmp_path / str(seed)).mkdir()
+        path = hand.write(tmp_path / str(seed))
+        model = GraspModel.from_parameters(
+            {**hand.model_parameters(path), **hand.initial_parameters()}
+        )
+        permuted += not model.hand._in_pin_order
+        rng = np.random.default_rng(seed)
+        q = model.project_to_contact(
+            hand.q0 + rng.uniform(-0.02, 0.02, hand.q0.size), hand.p_object, hand.R_object
+        )
+        twist = rng.normal(0.0, 0.3, 6)
+        dq = model.rolling_joint_velocity(q, hand.p_object, hand.R_object, twist)
+        args = (0.1, q, dq, hand.p_object, hand.R_object, twist)
+        packed = model.state(*args)
+        with monkeypatch.context() as patch:
+            patch.setattr(model, '_packed_layout', None)
+            staged = model.state(*args)
+        _assert_same_fields(packed, staged)
+    assert permuted, "no box hand of these seeds has its joints out of Pinocchio's order"
+
+
+def test_a_non_finite_input_takes_the_staged_computation(monkeypatch):
+    """A system numba's solve refuses (not finite) takes the staged terms, as before."""
+    model = paper_model()
+    c = random_configuration(model, np.random.default_rng(3))
+    dq = np.array(c.dq)
+    dq[0] = np.nan
+    args = (0.0, c.q, dq, c.p_object, c.R_object, c.twist_object)
+    state = model.state(*args)
+    assert not isinstance(state, PackedGraspState)
+    with monkeypatch.context() as patch:
+        patch.setattr(model, '_packed_layout', None)
+        staged = model.state(*args)
+    np.testing.assert_array_equal(state.contact_force.offset, staged.contact_force.offset)
+    assert not np.isfinite(state.contact_force.offset).all()
+
+
+WRONG_SHAPES = {
+    'q': lambda c: (c.q[:-1], c.dq, c.p_object, c.R_object, c.twist_object),
+    'dq': lambda c: (c.q, np.append(c.dq, 0.0), c.p_object, c.R_object, c.twist_object),
+    'p_object_in_palm': lambda c: (c.q, c.dq, np.append(c.p_object, 0.0), c.R_object,
+                                   c.twist_object),
+    'R_object_to_palm': lambda c: (c.q, c.dq, c.p_object, np.eye(3, 4), c.twist_object),
+    'twist_object': lambda c: (c.q, c.dq, c.p_object, c.R_object, c.twist_object[:3]),
+}
+
+
+@pytest.mark.parametrize('name', list(WRONG_SHAPES))
+def test_an_input_of_the_wrong_shape_is_refused_by_name(name):
+    """The compiled pass writes its inputs without bounds checks: shapes are checked first."""
+    model = paper_model()
+    c = random_configuration(model, np.random.default_rng(4))
+    with pytest.raises(ValueError, match=f'{name}: expected shape'):
+        model.state(0.0, *WRONG_SHAPES[name](c))
+
+
+@pytest.mark.parametrize('packed', [True, False])
+def test_rows_into_refuses_a_block_that_does_not_fit(packed, monkeypatch):
+    model = paper_model()
+    c = random_configuration(model, np.random.default_rng(6))
+    args = (0.0, c.q, c.dq, c.p_object, c.R_object, c.twist_object)
+    if not packed:
+        monkeypatch.setattr(model, '_packed_layout', None)
+    state = model.state(*args)
+    for family in SafetyFilter.from_config(model).families:
+        k, m = family.rows(state).A.shape
+        for A, lower, start in (
+            (np.zeros((k, m)), np.zeros(k), 1),  # past the end
+            (np.zeros((k, m + 1)), np.zeros(k), 0),  # another row width
+            (np.zeros((k, m)), np.zeros(k + 1), 0),  # lower not A's rows
+        ):
+            with pytest.raises(ValueError, match=family.family):
+                family.rows_into(state, A, lower, start)
 
 
 def test_a_field_is_made_once_and_a_replaced_copy_keeps_its_changes():

@@ -118,8 +118,9 @@ class GraspState:
     xi_cf_ddot: AffineMap
     xi_co_rate_terms: Callable[[], tuple[np.ndarray, np.ndarray]]
 
-    #: ``(buffer, layout)`` when every field is a view of one read-only buffer
-    #: (:class:`~grasp_safety_filter.model.packed_state.PackedGraspState`), else None:
+    #: ``(buffer, layout)`` when the fields are views of one read-only buffer (all but
+    #: ``t``, ``M_o``, ``C_o_twist`` and ``w_e``;
+    #: :class:`~grasp_safety_filter.model.packed_state.PackedGraspState`), else None:
     #: compiled consumers may read the terms there
     #: (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout` says where). Not a
     #: dataclass field (no annotation): constructors and copies never set it.

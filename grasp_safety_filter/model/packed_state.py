@@ -206,14 +206,32 @@ def packed_state(
         sample: ``(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)``.
 
     Returns:
-        The state, or None when ``B_ho`` is singular or not finite (numba's solve refuses
-        both; the caller then runs the staged computation).
+        The state, or None when ``B_ho`` is singular or the solve's matrix or right-hand side
+        is not finite (numba's solve refuses them; the caller then runs the staged
+        computation, which reports them as it always has).
+
+    Raises:
+        ValueError: An input's shape is not the model's: q and dq (m,),
+            ``p_object_in_palm`` (3,), ``R_object_to_palm`` (3, 3), ``twist_object`` (6,).
     """
     t, q, dq, p_object_in_palm, R_object_to_palm, twist_object = sample
     q = np.ascontiguousarray(q, dtype=np.float64)
     dq = np.ascontiguousarray(dq, dtype=np.float64)
+    p_o = np.ascontiguousarray(p_object_in_palm, dtype=np.float64)
     R_o = np.ascontiguousarray(R_object_to_palm, dtype=np.float64)
     twist_o = np.ascontiguousarray(twist_object, dtype=np.float64)
+    m = layout.n_joints
+    if (
+        q.shape != (m,)
+        or dq.shape != (m,)
+        or p_o.shape != (3,)
+        or R_o.shape != (3, 3)
+        or twist_o.shape != (6,)
+    ):
+        # The compiled pass writes each input into the buffer without bounds checks.
+        _raise_shape_error(
+            m, q=q, dq=dq, p_object_in_palm=p_o, R_object_to_palm=R_o, twist_object=twist_o
+        )
     raw = hand.raw_terms(q, dq)
     object_terms = (
         rigid_object.inertia_matrix(R_o),
@@ -229,7 +247,7 @@ def packed_state(
             hand.frame_twists(raw, dq),
             q,
             dq,
-            np.ascontiguousarray(p_object_in_palm, dtype=np.float64),
+            p_o,
             R_o,
             twist_o,
             rigid_object.inverse_inertia_matrix(R_o),
@@ -240,3 +258,20 @@ def packed_state(
     except np.linalg.LinAlgError:
         return None
     return PackedGraspState.of(float(t), buffer, layout, object_terms, stack)
+
+
+def _raise_shape_error(m: int, **inputs: np.ndarray) -> None:
+    """Raise ValueError naming each input whose shape is not the model's."""
+    expected = {
+        'q': (m,),
+        'dq': (m,),
+        'p_object_in_palm': (3,),
+        'R_object_to_palm': (3, 3),
+        'twist_object': (6,),
+    }
+    wrong = [
+        f'{name}: expected shape {expected[name]}, got {array.shape}'
+        for name, array in inputs.items()
+        if array.shape != expected[name]
+    ]
+    raise ValueError('grasp state: ' + '; '.join(wrong))

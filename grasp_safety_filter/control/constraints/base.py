@@ -229,6 +229,27 @@ def check_rows(state_value: np.ndarray, rows: int, field: str) -> None:
         )
 
 
+def check_block(
+    A: np.ndarray, lower: np.ndarray, start: int, count: int, n_joints: int, family: str
+) -> None:
+    """Raise ValueError unless rows ``start:start + count`` fit in ``A`` (K, m) and ``lower``.
+
+    The compiled writers index without bounds checks: a block that does not fit would be
+    written past the arrays or, read from a packed buffer, with the wrong row width.
+    """
+    if (
+        A.ndim != 2
+        or A.shape[1] != n_joints
+        or lower.shape != (A.shape[0],)
+        or start < 0
+        or start + count > A.shape[0]
+    ):
+        raise ValueError(
+            f'{family}: expected rows {start}:{start + count} of A (K, {n_joints}) and lower '
+            f'(K,), got A {A.shape} and lower {lower.shape}'
+        )
+
+
 class BoxBarrier:
     """Relative-degree-two ZCBF rows keeping selected coordinates inside bounds.
 
@@ -325,6 +346,7 @@ class BoxBarrier:
         if packed is not None:
             terms, layout = packed
             x_start, x_dot_start, x_ddot_start, d = self._packed_field_starts(state, layout)
+            check_block(A, lower, start, h.shape[0], layout.n_joints, self.family)
             box_barrier_rows_packed(
                 self._index,
                 self._sign,
@@ -342,6 +364,7 @@ class BoxBarrier:
             )
         else:
             x, x_dot, acceleration = self.coordinates(state)
+            check_block(A, lower, start, h.shape[0], acceleration.matrix.shape[1], self.family)
             box_barrier_rows_into(
                 self._index,
                 self._sign,

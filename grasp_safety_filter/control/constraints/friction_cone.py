@@ -9,6 +9,7 @@ import numpy as np
 
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
+    check_block,
     check_rows,
     ConstraintRows,
     finite_scalar,
@@ -170,6 +171,7 @@ class FrictionPyramid:
                 )
                 self._packed_layout = layout
                 self._force_start = layout.start('contact_force_augmented')
+            check_block(A, lower, start, len(self.names), layout.n_joints, self.family)
             pyramid_rows_packed(
                 self._negative_faces,
                 terms,
@@ -182,6 +184,7 @@ class FrictionPyramid:
             return
         contact_force = state.contact_force
         check_rows(contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+        check_block(A, lower, start, len(self.names), contact_force.matrix.shape[1], self.family)
         pyramid_rows_into(
             self._negative_faces,
             contact_force.matrix,
