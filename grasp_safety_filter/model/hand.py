@@ -14,6 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from grasp_safety_filter.model.fingertips import fingertip_spheres
+from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.urdf import check_urdf_file, HandModelError
 
 __all__ = ['HandModel', 'HandModelError', 'HandTerms', 'RawHandTerms']
@@ -154,7 +155,6 @@ class HandModel:
         self.data = self.model.createData()
         # The caller's joint order is usually the URDF's: then no reordering copies are needed.
         self._in_pin_order = bool(np.array_equal(self._idx, np.arange(self.model.nv)))
-        self._idx_square = np.ix_(self._idx, self._idx)
         # Pinocchio's crba fills the upper triangle of M only.
         self._upper = np.triu(np.ones((self.model.nv, self.model.nv), dtype=bool))
         self._check_inertia(urdf_path.name)
@@ -233,18 +233,16 @@ class HandModel:
     def terms(self, q: np.ndarray, dq: np.ndarray) -> HandTerms:
         """Everything the grasp model needs from the hand at ``(q, dq)``."""
         raw = self.raw_terms(q, dq)
-        M = np.where(self._upper, raw.M_upper, raw.M_upper.T)
-        M_inv = raw.M_inverse
-        if not self._in_pin_order:
-            M, M_inv = M[self._idx_square], M_inv[self._idx_square]
-        J = self._from_pin(raw.J_frames)
+        p_f, R_f, J, M, M_inv, h_bias, gravity = hand_in_model_order(
+            raw.placements, raw.J_frames, raw.M_upper, raw.nle, raw.g, raw.M_inverse,
+            self.pinocchio_index,
+        )
         return HandTerms(
             M_h=M,
-            h_bias=self._from_pin(raw.nle.copy()),
-            gravity_torque=self._from_pin(raw.g.copy()),
-            # Contiguous copies: the compiled kernels take one memory layout.
-            p_fingertip_in_palm=np.ascontiguousarray(raw.placements[:, :3, 3]),
-            R_fingertip_to_palm=np.ascontiguousarray(raw.placements[:, :3, :3]),
+            h_bias=h_bias,
+            gravity_torque=gravity,
+            p_fingertip_in_palm=p_f,
+            R_fingertip_to_palm=R_f,
             J_fingertip=J,
             # The frame twists are J_s dq (the same as Pinocchio's frame velocities).
             twist_fingertip=self.frame_twists(raw, dq),

@@ -22,6 +22,7 @@ import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
+from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
 
 
@@ -167,33 +168,10 @@ def sphere_on_plane_terms(
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
     """
-    n = J_frames.shape[0]
-    m = joint_index.shape[0]
     # ---- The hand, in the model's joint order (HandModel.terms).
-    p_f = np.empty((n, 3))
-    R_f = np.empty((n, 3, 3))
-    J_s = np.empty((n, 6, m))
-    for i in range(n):
-        for r in range(3):
-            p_f[i, r] = placements[i, r, 3]
-            for c in range(3):
-                R_f[i, r, c] = placements[i, r, c]
-        for r in range(6):
-            for j in range(m):
-                J_s[i, r, j] = J_frames[i, r, joint_index[j]]
-    M_h = np.empty((m, m))
-    M_h_inverse = np.empty((m, m))
-    h_bias = np.empty(m)
-    gravity = np.empty(m)
-    for r in range(m):
-        a = joint_index[r]
-        h_bias[r] = nle[a]
-        gravity[r] = g[a]
-        for c in range(m):
-            b = joint_index[c]
-            # Pinocchio fills the upper triangle of M only.
-            M_h[r, c] = M_upper[a, b] if a <= b else M_upper[b, a]
-            M_h_inverse[r, c] = M_inverse_pin[a, b]
+    p_f, R_f, J_s, M_h, M_h_inverse, h_bias, gravity = hand_in_model_order(
+        placements, J_frames, M_upper, nle, g, M_inverse_pin, joint_index
+    )
     # ---- Contact geometry and rolling rates.
     contacts = sphere_on_plane_contacts(
         p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
