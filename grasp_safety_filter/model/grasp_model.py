@@ -23,15 +23,12 @@ the contact frame.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
-from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
@@ -41,6 +38,7 @@ from grasp_safety_filter.model.packed_terms import PackedLayout
 from grasp_safety_filter.model.per_contact import friction_coefficients
 from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
+from grasp_safety_filter.model.staged_state import staged_state
 from grasp_safety_filter.model.surfaces import SphereSurface
 
 __all__ = ['FingertipWorkspace', 'GraspConfigError', 'GraspModel']
@@ -336,7 +334,7 @@ class GraspModel:
         Spherical fingertips on flat faces (the paper's cube) take one compiled pass for
         everything after Pinocchio, into one buffer whose views are the fields
         (:func:`~grasp_safety_filter.model.packed_state.packed_state`); other contacts take
-        the stages below.
+        the stages of :func:`~grasp_safety_filter.model.staged_state.staged_state`.
         """
         if self._contacts is None:
             self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
@@ -352,91 +350,16 @@ class GraspModel:
             )
             if packed is not None:
                 return packed
-        m = self.n_joints
-        q = np.array(q, dtype=float)
-        dq = np.array(dq, dtype=float)
-        p_o = np.array(p_object_in_palm, dtype=float)
-        R_o = np.array(R_object_to_palm, dtype=float)
-        twist_o = np.array(twist_object, dtype=float)
-        hand = self.hand.terms(q, dq)
-        p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
-
-        # ---- contact geometry and rolling rates, (n, ...) arrays.
-        geometry, rates = self._contact_stack.kinematics(
-            p_f, R_pf, hand.twist_fingertip, p_o, R_o, twist_o
-        )
-        R_pc = geometry.R_contact_to_palm
-
-        # ---- object
-        M_o = self.object.inertia_matrix(R_o)
-        C_o_twist = self.object.bias_wrench(R_o, twist_o)
-        w_e = self.object.external_wrench()
-
-        # ---- J_h, G, their rates along the rolling motion and the torque-affine terms
-        # (module docstring; the formulas in dynamics_kernel).
-        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot = contact_dynamics(
-            J_s,
-            hand.twist_fingertip,
-            hand.J_fingertip_dot_dq,
-            p_f,
-            hand.M_h_inverse,
-            hand.h_bias,
-            p_o,
-            twist_o,
-            self.object.inverse_inertia_matrix(R_o),
-            C_o_twist,
-            w_e,
-            geometry.p_contact_in_palm,
-            R_pc,
-            rates.H_cf,
-            rates.H_cf_dot_w,
-            rates.sliding_velocity,
-            rates.frame_angular_velocity,
-        )
-
-        arrays = {
-            'q': q,
-            'dq': dq,
-            'p_object_in_palm': p_o,
-            'R_object_to_palm': R_o,
-            'twist_object': twist_o,
-            'p_fingertip_in_palm': p_f,
-            'R_fingertip_to_palm': R_pf,
-            'twist_fingertip': hand.twist_fingertip,
-            'xi_cf': geometry.xi_cf,
-            'xi_co': geometry.xi_co,
-            'psi': geometry.psi,
-            'xi_cf_dot': rates.xi_cf_dot,
-            'xi_co_dot': rates.xi_co_dot,
-            'psi_dot': rates.psi_dot,
-            'penetration': geometry.penetration,
-            'p_contact_in_palm': geometry.p_contact_in_palm,
-            'R_contact_to_palm': R_pc,
-            'M_h': hand.M_h,
-            'h_bias': hand.h_bias,
-            'gravity_torque': hand.gravity_torque,
-            'J_fingertip': J_s,
-            'J_h': J_h,
-            'G': G,
-            'Jh_dot_dq': Jh_dot_dq,
-            'G_dot_T_twist': G_dot_T_twist,
-            'M_o': M_o,
-            'C_o_twist': C_o_twist,
-            'w_e': w_e,
-            'B_ho': B_ho,
-        }
-        # Every array is handed out read-only; the augmented matrices are frozen before their
-        # column views are taken, so that the views are read-only too.
-        for array in (*arrays.values(), force, ddq, x_ddot, xi_ddot):
-            array.setflags(write=False)
-        return GraspState(
-            t=float(t),
-            **arrays,
-            contact_force=AffineMap(force[:, :m], force[:, m]),
-            joint_acceleration=AffineMap(ddq[:, :m], ddq[:, m]),
-            object_acceleration=AffineMap(x_ddot[:, :m], x_ddot[:, m]),
-            xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
-            xi_co_rate_terms=partial(self._contact_stack.object_rate_terms, geometry, rates),
+        return staged_state(
+            self.hand,
+            self.object,
+            self._contact_stack,
+            t,
+            q,
+            dq,
+            p_object_in_palm,
+            R_object_to_palm,
+            twist_object,
         )
 
 

@@ -12,8 +12,9 @@ A hard :class:`~.problem.Problem` goes through, in order, until one step gives t
 2. After an infeasible tick: the active-set method from the rows that proved it, no OSQP.
 3. OSQP (set up once with a fixed sparsity pattern, :class:`~grasp_safety_filter.control.qp.
    SafetyQP`, warm-started), without polishing. Its ``(x, y)`` is accepted when it
-   satisfies the KKT conditions to :data:`CERTIFICATE_TOLERANCE`; else the active set its
-   multipliers name is tried as in step 1.
+   satisfies the KKT conditions to :data:`~.osqp_certificate.CERTIFICATE_TOLERANCE`
+   (:mod:`~.osqp_certificate`); else the active set its multipliers name is tried as in
+   step 1.
 4. The exact active-set method (:mod:`~grasp_safety_filter.control.least_distance`) from
    OSQP's active set: optimal (``refinement_steps`` add/drop steps) or a proof of
    infeasibility, whatever OSQP said.
@@ -38,6 +39,9 @@ cost ``P = W``, ``q = -W u_nom`` and keeps the box as bounds on u; every active-
 works in ``y = R^-1 u``, where the cost is ``||y - y_nom||^2`` and the rows (the box
 included) are ``[A; B] R`` (:meth:`~.problem.Problem.least_distance_form`), and maps its
 answer back, ``u = R y``. The multipliers are the same in both variables.
+
+This module sets OSQP up, warm-starts it and orders the steps; the active-set steps are
+:mod:`~.osqp_active_set`'s, the reading of OSQP's answer :mod:`~.osqp_certificate`'s.
 """
 
 from __future__ import annotations
@@ -54,23 +58,21 @@ from grasp_safety_filter.control.least_distance import (
     solve_least_distance,
 )
 from grasp_safety_filter.control.qp import SafetyQP
-from grasp_safety_filter.control.qp_metric import to_metric_coordinates
+from grasp_safety_filter.control.qp_solvers.osqp_active_set import (
+    ACTIVE_SET_TOLERANCE,
+    ActiveSetSteps,
+)
+from grasp_safety_filter.control.qp_solvers.osqp_certificate import (
+    certified_torque,
+    duals_of,
+    osqp_duals,
+    working_set_guess,
+)
 from grasp_safety_filter.control.qp_solvers.problem import (
-    FEASIBILITY_TOLERANCE,
     Problem,
     Solution,
     SolutionStatus,
 )
-from grasp_safety_filter.control.working_set import (
-    clipped_optimum_on_working_set,
-    optimum_on_working_set,
-)
-
-#: Torque-space tolerance (N·m, per N·m of |u_nom|) of the KKT certificate of OSQP's answer.
-CERTIFICATE_TOLERANCE = 1e-10
-
-#: Distance tolerance (N·m, in torque space) of the exact active-set method.
-ACTIVE_SET_TOLERANCE = 1e-10
 
 _NO_MULTIPLIERS = np.zeros(0)
 _NO_MULTIPLIERS.setflags(write=False)
@@ -83,7 +85,7 @@ _INFEASIBLE = (
 _RELAXED_USABLE = (*_CONVERGED, osqp.SolverStatus.OSQP_MAX_ITER_REACHED)
 
 
-class OSQPBackend:
+class OSQPBackend(ActiveSetSteps):
     """The hard and relaxed problems of one filter, each with its own OSQP workspace."""
 
     name = 'osqp'
@@ -196,7 +198,9 @@ class OSQPBackend:
         hard.update(problem.A, problem.lower, u_nom, self._R)
         if self._pending is not None:
             u_start, active, multipliers = self._pending
-            self._hard.warm_start(x=u_start, y=self._osqp_duals(active, multipliers))
+            self._hard.warm_start(
+                x=u_start, y=osqp_duals(active, multipliers, hard.n_constraints, k)
+            )
             self._pending = None
         if self._R is None:
             self._hard.update(q=hard.q, l=hard.lower, Ax=hard.C_data)
@@ -206,15 +210,16 @@ class OSQPBackend:
         iterations = int(result.info.iter)
         status = result.info.status_val
         if status in _CONVERGED:
-            u = self._certified(result.x, result.y, u_nom, problem)
+            W = None if self._R is None else hard.W
+            u = certified_torque(result.x, result.y, u_nom, problem, self._u_min, self._u_max, W)
             if u is not None:
-                guess = self._working_set_guess(result.y)
+                guess = working_set_guess(result.y, k, self._m)
                 self._last_active = guess
-                multipliers = np.abs(self._duals_of(guess, result.y))
+                multipliers = np.abs(duals_of(guess, result.y, k))
                 return Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
         guess: tuple[int, ...] = ()  # y is an infeasibility certificate, not multipliers
         if status not in _INFEASIBLE and np.isfinite(result.y).all():
-            guess = self._working_set_guess(result.y)
+            guess = working_set_guess(result.y, k, self._m)
             solution = self._on_guess(problem, guess, iterations)
             if solution is not None:
                 return solution
@@ -273,7 +278,7 @@ class OSQPBackend:
             iterations = int(result.info.iter)
             y = result.y
             exact = self._relaxed_exactly(
-                u_nom, self._working_set_guess(y) if np.isfinite(y).all() else ()
+                u_nom, working_set_guess(y, self._k, m) if np.isfinite(y).all() else ()
             )
         steps = exact.iterations
         solution = None
@@ -305,195 +310,3 @@ class OSQPBackend:
         # The hard iterate may have diverged on the infeasible problem: restart it from here.
         self._pending = (solution.u, (), _NO_MULTIPLIERS)
         return solution
-
-    def _on_guess(
-        self, problem: Problem, guess: tuple[int, ...], iterations: int
-    ) -> Solution | None:
-        """Return the optimum on a guessed active set W if it satisfies the KKT conditions.
-
-        Every row and box bound holds, the rows of W with equality, and their multipliers
-        are nonnegative, to :data:`ACTIVE_SET_TOLERANCE`; stationarity holds by
-        construction (one compiled pass,
-        :func:`~grasp_safety_filter.control.working_set.optimum_on_working_set`; with the
-        identity metric, the box clip and the row check in the same pass:
-        :func:`~grasp_safety_filter.control.working_set.clipped_optimum_on_working_set`).
-        None otherwise.
-        """
-        if not guess:
-            return None
-        if self._R is None:
-            # y = u: the solve, the clip and the row check in one compiled pass.
-            outcome, u, multipliers = clipped_optimum_on_working_set(
-                self._y_nom,
-                self._rows_y,
-                self._hard_lower,
-                np.fromiter(guess, dtype=np.intp, count=len(guess)),
-                ACTIVE_SET_TOLERANCE,
-                self._u_min,
-                self._u_max,
-                problem.A,
-                problem.lower,
-                FEASIBILITY_TOLERANCE,
-            )
-            if outcome != 1:
-                return None
-            self._last_active = guess
-            self._pending = (u, guess, multipliers)
-            return Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
-        outcome, u_guess, multipliers = optimum_on_working_set(
-            self._y_nom,
-            self._rows_y,
-            self._hard_lower,
-            np.fromiter(guess, dtype=np.intp, count=len(guess)),
-            ACTIVE_SET_TOLERANCE,
-        )
-        if outcome != 1:  # y = R^-1 u with a metric
-            return None
-        u = self._clip_finite(self._to_u(u_guess))
-        if u is None:
-            return None
-        solution = Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
-        if not solution.row_violation(problem) <= FEASIBILITY_TOLERANCE:
-            return None
-        self._last_active = guess
-        self._pending = (u, guess, multipliers)
-        return solution
-
-    def _accept_exact(
-        self, problem: Problem, exact: LeastDistanceSolution, iterations: int
-    ) -> Solution | None:
-        """Return the active-set optimum, or None if a row fails the check."""
-        u = self._clip_finite(self._to_u(exact.u))
-        if u is None:
-            return None
-        solution = Solution(
-            u,
-            SolutionStatus.OPTIMAL,
-            exact.active,
-            exact.multipliers,
-            None,
-            iterations,
-            exact.iterations,
-        )
-        if not solution.row_violation(problem) <= FEASIBILITY_TOLERANCE:
-            return None
-        self._last_active = exact.active
-        self._pending = (u, exact.active, exact.multipliers)
-        return solution
-
-    def _certified(
-        self, x: np.ndarray, y: np.ndarray, u_nom: np.ndarray, problem: Problem
-    ) -> np.ndarray | None:
-        """Return OSQP's x clipped to the box if ``(x, y)`` is optimal, else None.
-
-        Optimal: the hard problem's KKT conditions to :data:`CERTIFICATE_TOLERANCE` (scaled by
-        ``1 + max |u_nom|``), in torque space, with OSQP's signs (y < 0 at a lower bound) and
-        ``n_i = ||A_i||``: every row holds (``A_i u - lower_i >= -tol n_i``); barrier
-        multipliers are <= 0; each row and box bound is held with equality or has no
-        multiplier (``min(|y_i| n_i, |slack_i| / n_i) <= tol``); and
-        ``W (u - u_nom) + A^T y_rows + y_box = 0`` to tol (W = I for the identity metric).
-        """
-        A, lower = problem.A, problem.lower
-        k = self._k
-        u = x[: self._m]
-        y_rows, y_box = y[:k], y[k:]
-        if not (np.isfinite(u).all() and np.isfinite(y).all()):
-            return None
-        tolerance = CERTIFICATE_TOLERANCE * (1.0 + float(np.abs(u_nom).max()))
-        if k:
-            norms = np.sqrt(np.einsum('ij,ij->i', A, A)) + 1e-300
-            slack = (A @ u - lower) / norms
-            if (
-                slack.min() < -tolerance
-                or y_rows.max() * norms.max() > tolerance
-                or np.minimum(np.abs(y_rows) * norms, np.abs(slack)).max() > tolerance
-            ):
-                return None
-        if np.abs(y_box).max() > tolerance:  # some torque at its bound: check which
-            to_bound = np.where(y_box < 0.0, u - self._u_min, self._u_max - u)
-            if np.minimum(np.abs(y_box), np.abs(to_bound)).max() > tolerance:
-                return None
-        gradient = u - u_nom if self._R is None else self.hard_qp.W @ (u - u_nom)
-        if np.abs(gradient + A.T @ y_rows + y_box).max() > tolerance:
-            return None
-        return np.minimum(np.maximum(u, self._u_min), self._u_max)
-
-    def _working_set_guess(self, y: np.ndarray) -> tuple[int, ...]:
-        """Return the rows OSQP's y calls active, in the problem's numbering, largest |y| first.
-
-        OSQP's constraints: barrier rows (k), the box (m, two-sided), then, relaxed, the
-        slack bounds (k); the problem's rows: barrier rows, box rows ``k + 2 j`` (lower) and
-        ``k + 2 j + 1`` (upper), slack bounds ``k + 2 m + r``. Multipliers below 1e-9 of
-        the largest are noise.
-        """
-        k, m = self._k, self._m
-        magnitude = np.abs(y)
-        threshold = 1e-9 * max(1.0, float(magnitude.max(initial=0.0)))
-        rows = []
-        for i in np.argsort(-magnitude):
-            if magnitude[i] <= threshold:
-                break
-            if k <= i < k + m:
-                rows.append(int(k + 2 * (i - k) + (1 if y[i] > 0.0 else 0)))
-            elif y[i] < 0.0:  # barrier rows and slack bounds are lower-bounded only
-                rows.append(int(i) if i < k else int(i + m))
-        return tuple(rows)
-
-    def _duals_of(self, rows: tuple[int, ...], y: np.ndarray) -> np.ndarray:
-        """Return OSQP's y of the hard problem's ``rows`` (problem numbering)."""
-        k = self._k
-        return np.array([y[r] if r < k else y[k + (r - k) // 2] for r in rows])
-
-    def _osqp_duals(self, active: tuple[int, ...], multipliers: np.ndarray) -> np.ndarray:
-        """Turn the hard problem's rows and multipliers into OSQP's y (< 0 at a lower bound)."""
-        y = np.zeros(self.hard_qp.n_constraints)
-        k = self._k
-        for row, value in zip(active, multipliers, strict=True):
-            if row < k:
-                y[row] = -value
-            else:
-                joint, upper = divmod(row - k, 2)
-                y[k + joint] += value if upper else -value
-        return y
-
-    def _relaxed_exactly(self, u_nom: np.ndarray, guess: tuple[int, ...]) -> LeastDistanceSolution:
-        """Solve the relaxed problem by the active-set method in ``(y, s~ = sqrt(w) s)``.
-
-        ``y = R^-1 u`` (u for the identity metric); the caller maps y back.
-        """
-        relaxed = self.relaxed_qp
-        k, m = self._k, self._m
-        C, b = self._relaxed_rows, self._relaxed_lower
-        if self._R is None:
-            C[:k, :m] = relaxed.A_rows
-        else:
-            C[:k, :m] = relaxed.A_rows @ self._R
-            C[k : k + 2 * m, :m] = self._box_rows @ self._R
-        np.divide(relaxed.slack_scale, self._sqrt_weights, out=self._relaxed_slack_diagonal)
-        b[:k] = relaxed.lower_rows
-        y_nom = u_nom if self._R is None else to_metric_coordinates(self._R, u_nom)
-        start = np.concatenate((y_nom, np.zeros(k)))
-        return solve_least_distance(start, C, b, tolerance=ACTIVE_SET_TOLERANCE, working_set=guess)
-
-    def _set_metric(self, R: np.ndarray | None, u_nom: np.ndarray) -> None:
-        """Take this tick's metric factor: the hard rows and u_nom in ``y = R^-1 u``.
-
-        Call after the hard rows (:attr:`_hard_rows`) hold this tick's A.
-        """
-        self._R = R
-        if R is None:
-            self._rows_y = self._hard_rows
-            self._y_nom = u_nom
-        else:
-            self._rows_y = self._hard_rows @ R
-            self._y_nom = to_metric_coordinates(R, u_nom)
-
-    def _to_u(self, y: np.ndarray) -> np.ndarray:
-        """Map the least-distance form's torque part back: ``u = R y`` (y for the identity)."""
-        return y if self._R is None else self._R @ y
-
-    def _clip_finite(self, x: np.ndarray) -> np.ndarray | None:
-        u = np.asarray(x[: self._m], dtype=float)
-        if not np.isfinite(u).all():
-            return None
-        return np.minimum(np.maximum(u, self._u_min), self._u_max)
