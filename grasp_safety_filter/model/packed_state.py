@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+import dataclasses
 from functools import partial
 from typing import Any
 
@@ -17,7 +18,11 @@ from grasp_safety_filter.model.contact_stack import (
 )
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
-from grasp_safety_filter.model.packed_terms import PackedLayout, sphere_on_plane_terms
+from grasp_safety_filter.model.packed_terms import (
+    packed_fields,
+    PackedLayout,
+    sphere_on_plane_terms,
+)
 from grasp_safety_filter.model.rigid_object import RigidObject
 
 #: GraspState's affine terms and the packed ``[matrix | offset]`` each is a view of.
@@ -27,6 +32,9 @@ _AFFINE = {
     'object_acceleration': 'object_acceleration_augmented',
     'xi_cf_ddot': 'xi_cf_ddot_augmented',
 }
+
+#: GraspState fields :meth:`PackedGraspState.of` sets (not in the buffer).
+_SET_BY_OF = ('t', 'M_o', 'C_o_twist', 'w_e')
 
 
 class _View:
@@ -59,47 +67,6 @@ class PackedGraspState(GraspState):
     with no array per term, and a consumer pays only for the fields it reads. Build with
     :meth:`of`; ``dataclasses.replace`` gives a copy with every field set.
     """
-
-    q = _View()
-    dq = _View()
-    p_object_in_palm = _View()
-    R_object_to_palm = _View()
-    twist_object = _View()
-    p_fingertip_in_palm = _View()
-    R_fingertip_to_palm = _View()
-    twist_fingertip = _View()
-    J_fingertip = _View()
-    M_h = _View()
-    h_bias = _View()
-    gravity_torque = _View()
-    xi_cf = _View()
-    xi_co = _View()
-    psi = _View()
-    penetration = _View()
-    p_contact_in_palm = _View()
-    R_contact_to_palm = _View()
-    R_contact_to_fingertip = _View()
-    xi_cf_dot = _View()
-    xi_co_dot = _View()
-    psi_dot = _View()
-    H_cf = _View()
-    H_cf_dot_w = _View()
-    sliding_velocity = _View()
-    frame_angular_velocity = _View()
-    J_h = _View()
-    G = _View()
-    Jh_dot_dq = _View()
-    G_dot_T_twist = _View()
-    B_ho = _View()
-    contact_force_augmented = _View()
-    joint_acceleration_augmented = _View()
-    object_acceleration_augmented = _View()
-    xi_cf_ddot_augmented = _View()
-    contact_force = _View()
-    joint_acceleration = _View()
-    object_acceleration = _View()
-    xi_cf_ddot = _View()
-    xi_co_rate_terms = _View()
 
     @property
     def packed_terms(self) -> tuple[np.ndarray, PackedLayout] | None:
@@ -181,6 +148,26 @@ class PackedGraspState(GraspState):
             self.frame_angular_velocity,
         )
         return partial(self._stack.object_rate_terms, geometry, rates)
+
+
+def _install_views(cls: type[PackedGraspState]) -> None:
+    """Give ``cls`` a :class:`_View` per buffer term, per affine map and for the rate terms.
+
+    The names come from :func:`~grasp_safety_filter.model.packed_terms.packed_fields`
+    (which does not depend on n and m), so the buffer's terms are listed once; every
+    GraspState field not in the buffer must be set by :meth:`PackedGraspState.of`.
+    """
+    names = [name for name, _ in packed_fields(1, 1)] + [*_AFFINE, 'xi_co_rate_terms']
+    unset = {field.name for field in dataclasses.fields(GraspState)} - set(names) - set(_SET_BY_OF)
+    if unset:
+        raise TypeError(f'PackedGraspState: no view or value for {sorted(unset)}')
+    for name in names:
+        view = _View()
+        view.__set_name__(cls, name)
+        setattr(cls, name, view)
+
+
+_install_views(PackedGraspState)
 
 
 def packed_state(
