@@ -16,6 +16,15 @@ from grasp_safety_filter.model.compiled import kernel
 
 
 @kernel
+def row_dot(A: np.ndarray, r: int, u: np.ndarray) -> float:
+    """``A[r] · u``, summed from the first column on (every check here sums the same way)."""
+    total = 0.0
+    for c in range(u.shape[0]):
+        total += A[r, c] * u[c]
+    return total
+
+
+@kernel
 def all_finite(first: np.ndarray, second: np.ndarray) -> bool:
     """Whether every entry of both 1-D arrays is finite (neither inf nor NaN)."""
     for value in first:
@@ -36,10 +45,7 @@ def inside(
     A NaN anywhere counts as not satisfied.
     """
     for r in range(A.shape[0]):
-        total = 0.0
-        for c in range(u.shape[0]):
-            total += A[r, c] * u[c]
-        if not total >= lower[r]:
+        if not row_dot(A, r, u) >= lower[r]:
             return False
     for j in range(u.shape[0]):
         if not (u[j] >= u_min[j] and u[j] <= u_max[j]):
@@ -60,10 +66,7 @@ def residuals(A: np.ndarray, lower: np.ndarray, u: np.ndarray, out: np.ndarray) 
     smallest = math.inf
     not_a_number = False
     for r in range(A.shape[0]):
-        total = 0.0
-        for c in range(u.shape[0]):
-            total += A[r, c] * u[c]
-        value = total - lower[r]
+        value = row_dot(A, r, u) - lower[r]
         out[r] = value
         if value != value:
             not_a_number = True

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 
+from grasp_safety_filter.control.row_checks import row_dot
 from grasp_safety_filter.model.compiled import kernel
 
 #: Norm floor of a row in the check (a null row: all zero coefficients).
@@ -129,10 +130,7 @@ def clipped_optimum_on_working_set(
         u[j] = min(max(y[j], u_min[j]), u_max[j])
     worst = 0.0
     for r in range(A.shape[0]):
-        residual = 0.0
-        for c in range(m):
-            residual += A[r, c] * u[c]
-        shortfall = lower[r] - residual
+        shortfall = lower[r] - row_dot(A, r, u)
         if not shortfall <= worst:  # NaN counts as violated
             worst = shortfall if shortfall == shortfall else math.inf
     return (1 if worst <= feasibility_tolerance else 0), u, multipliers

@@ -72,13 +72,14 @@ class ActiveSetSteps:
         """
         if not guess:
             return None
+        working_set = np.fromiter(guess, dtype=np.intp, count=len(guess))
         if self._R is None:
             # y = u: the solve, the clip and the row check in one compiled pass.
             outcome, u, multipliers = clipped_optimum_on_working_set(
                 self._y_nom,
                 self._rows_y,
                 self._hard_lower,
-                np.fromiter(guess, dtype=np.intp, count=len(guess)),
+                working_set,
                 ACTIVE_SET_TOLERANCE,
                 self._u_min,
                 self._u_max,
@@ -88,48 +89,49 @@ class ActiveSetSteps:
             )
             if outcome != 1:
                 return None
-            self._last_active = guess
-            self._pending = (u, guess, multipliers)
-            return Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
-        outcome, u_guess, multipliers = optimum_on_working_set(
-            self._y_nom,
-            self._rows_y,
-            self._hard_lower,
-            np.fromiter(guess, dtype=np.intp, count=len(guess)),
-            ACTIVE_SET_TOLERANCE,
+            return self._keep(
+                Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
+            )
+        # y = R^-1 u with a metric
+        outcome, y, multipliers = optimum_on_working_set(
+            self._y_nom, self._rows_y, self._hard_lower, working_set, ACTIVE_SET_TOLERANCE
         )
-        if outcome != 1:  # y = R^-1 u with a metric
+        if outcome != 1:
             return None
-        u = self._clip_finite(self._to_u(u_guess))
-        if u is None:
-            return None
-        solution = Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, iterations)
-        if not solution.row_violation(problem) <= FEASIBILITY_TOLERANCE:
-            return None
-        self._last_active = guess
-        self._pending = (u, guess, multipliers)
-        return solution
+        return self._keep_if_rows_hold(problem, y, guess, multipliers, iterations)
 
     def _accept_exact(
         self, problem: Problem, exact: LeastDistanceSolution, iterations: int
     ) -> Solution | None:
         """Return the active-set optimum, or None if a row fails the check."""
-        u = self._clip_finite(self._to_u(exact.u))
+        return self._keep_if_rows_hold(
+            problem, exact.u, exact.active, exact.multipliers, iterations, exact.iterations
+        )
+
+    def _keep_if_rows_hold(
+        self,
+        problem: Problem,
+        y: np.ndarray,
+        active: tuple[int, ...],
+        multipliers: np.ndarray,
+        iterations: int,
+        refinement_steps: int = 0,
+    ) -> Solution | None:
+        """Keep the optimum ``u = R y`` clipped to the box if finite and its rows hold."""
+        u = self._clip_finite(self._to_u(y))
         if u is None:
             return None
         solution = Solution(
-            u,
-            SolutionStatus.OPTIMAL,
-            exact.active,
-            exact.multipliers,
-            None,
-            iterations,
-            exact.iterations,
+            u, SolutionStatus.OPTIMAL, active, multipliers, None, iterations, refinement_steps
         )
         if not solution.row_violation(problem) <= FEASIBILITY_TOLERANCE:
             return None
-        self._last_active = exact.active
-        self._pending = (u, exact.active, exact.multipliers)
+        return self._keep(solution)
+
+    def _keep(self, solution: Solution) -> Solution:
+        """Remember an accepted optimum's active set (next tick's guess) and its answer."""
+        self._last_active = solution.active
+        self._pending = (solution.u, solution.active, solution.multipliers)
         return solution
 
     def _relaxed_exactly(self, u_nom: np.ndarray, guess: tuple[int, ...]) -> LeastDistanceSolution:
