@@ -23,7 +23,6 @@ from random_hands import random_hand
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.hand import HandModel
 
-
 #: Terms equal to rounding only (see the module's docstring), and their tolerance relative
 #: to each row's largest entry; rnea's C dq + g is computeAllTerms' by another recursion.
 ROUNDING = {'twist_fingertip': 1e-14, 'J_fingertip_dot_dq': 1e-14, 'h_bias': 1e-12}
