@@ -29,7 +29,7 @@ ROUNDING = {'twist_fingertip': 1e-14, 'J_fingertip_dot_dq': 1e-14, 'h_bias': 1e-
 
 
 def _pinocchio_terms(hand: HandModel, q: np.ndarray, dq: np.ndarray) -> dict[str, np.ndarray]:
-    """The fingertip terms by Pinocchio's frame calls, one per frame, in the model's order."""
+    """Return the fingertip terms by Pinocchio's frame calls, in the model's joint order."""
     model, data = hand.model, hand.data
     pin.computeAllTerms(model, data, hand._to_pin(q), hand._to_pin(dq))
     pin.updateFramePlacements(model, data)
