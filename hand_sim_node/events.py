@@ -32,6 +32,7 @@ import numpy as np
 
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.scenario import object_face_half_widths
+from hand_sim_node.margin_kernel import flat_margins
 
 FINGERTIP_WORKSPACE = 'fingertip_workspace'
 JOINT_LIMITS = 'joint_limits'
@@ -182,6 +183,10 @@ def _per_contact(value: Any, n: int, name: str, shape: tuple[int, ...]) -> np.nd
     return array.copy()
 
 
+#: ``xi_co`` and face half widths when unknown (the object-face margins are then NaN).
+_NO_FACES = np.zeros((0, 2))
+
+
 def _violated(values: np.ndarray, closed: np.ndarray) -> np.ndarray:
     """``values <= 0`` where ``closed``, ``values < 0`` elsewhere (NaN: not violated)."""
     return (values < 0.0) | (closed & (values == 0.0))
@@ -318,42 +323,45 @@ class EventMonitor:
                 f'EventMonitor.margins_at: expected {len(self.contact_names)} contacts, got '
                 f'coordinates of {n} and forces of {forces.shape[0]}'
             )
-        values = np.empty(size)
-        workspace = values[:workspace_end].reshape(n, 4)
-        joints = values[workspace_end:joint_end].reshape(m, 2)
-        workspace_sides = workspace.reshape(n, 2, 2)  # (contact, a or b, lower or upper)
-        np.subtract(a_b, self.workspace_low, out=workspace_sides[:, :, 0])
-        np.subtract(self.workspace_high, a_b, out=workspace_sides[:, :, 1])
         q = np.asarray(q, dtype=float)
-        np.subtract(q, self.joint_lower_limits, out=joints[:, 0])
-        np.subtract(self.joint_upper_limits, q, out=joints[:, 1])
-        normal = forces[:, 2]
-        # beta = |f_t| / f_n where f_n > 0, inf where f_n <= 0, and NaN where the force is
-        # unknown (the dynamics could not be evaluated): unknown forces flag nothing.
-        known = np.isfinite(normal)
-        beta = np.where(known, np.inf, np.nan)
-        np.divide(
-            np.hypot(forces[:, 0], forces[:, 1]), normal, out=beta, where=known & (normal > 0.0)
+        faces = self.object_face_half_widths
+        no_faces = xi_co is None or faces is None
+        xi_co = None if no_faces else np.asarray(xi_co, dtype=float)
+        # The compiled pass reads its inputs without bounds checks.
+        wrong = [
+            f'{name} of shape {array.shape}, expected {shape}'
+            for name, array, shape in (
+                ('xi_cf', a_b, (n, 2)),
+                ('q', q, (m,)),
+                ('xi_co', _NO_FACES if xi_co is None else xi_co, (0, 2) if no_faces else (n, 2)),
+            )
+            if array.shape != shape
+        ]
+        if wrong:
+            raise ValueError(f'EventMonitor.margins_at: got {"; ".join(wrong)}')
+        values, beta, violated = flat_margins(
+            a_b,
+            forces,
+            q,
+            _NO_FACES if xi_co is None else xi_co,
+            self.workspace_low,
+            self.workspace_high,
+            self.joint_lower_limits,
+            self.joint_upper_limits,
+            self.friction_coefficient,
+            _NO_FACES if no_faces else faces,
+            self._closed,
         )
-        friction = values[joint_end:slip_end]
-        np.subtract(self.friction_coefficient, beta, out=friction)
-        values[slip_end:separation_end] = normal
-        object_face = values[separation_end:]
-        if xi_co is None or self.object_face_half_widths is None:
-            object_face.fill(np.nan)
-        else:
-            inside = self.object_face_half_widths - np.abs(np.asarray(xi_co, dtype=float))
-            np.min(inside, axis=1, out=object_face)
         return ConstraintMargins(
             t=float(t),
-            fingertip_workspace=workspace,
-            joint_limits=joints,
+            fingertip_workspace=values[:workspace_end].reshape(n, 4),
+            joint_limits=values[workspace_end:joint_end].reshape(m, 2),
             required_friction=beta,
-            friction=friction,
+            friction=values[joint_end:slip_end],
             normal_force=values[slip_end:separation_end],
-            object_face=object_face,
+            object_face=values[separation_end:],
             values=values,
-            violated_mask=_violated(values, self._closed),
+            violated_mask=violated,
         )
 
     def events(self, margins: ConstraintMargins) -> tuple[Event, ...]:

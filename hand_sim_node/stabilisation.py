@@ -30,6 +30,7 @@ from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
+from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.quaternion import quaternion_derivative
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
 
@@ -198,13 +199,20 @@ def stabilised_rate(
 
 @kernel
 def _sphere_on_plane_stage_system(
-    J_fingertip: np.ndarray,
-    twist_fingertip: np.ndarray,
-    J_fingertip_dot_dq: np.ndarray,
-    p_fingertip_in_palm: np.ndarray,
-    R_fingertip_to_palm: np.ndarray,
-    M_h_inverse: np.ndarray,
-    h_bias: np.ndarray,
+    frame_placements: np.ndarray,
+    joint_placements: np.ndarray,
+    joint_velocities: np.ndarray,
+    joint_accelerations: np.ndarray,
+    J_joints: np.ndarray,
+    M_upper: np.ndarray,
+    nle: np.ndarray,
+    g: np.ndarray,
+    M_inverse_pin: np.ndarray,
+    frame_index: np.ndarray,
+    parent_joint: np.ndarray,
+    offset_in_parent: np.ndarray,
+    support: np.ndarray,
+    joint_index: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
     R_object_to_palm: np.ndarray,
@@ -218,11 +226,19 @@ def _sphere_on_plane_stage_system(
     position_gain: float,
     velocity_gain: float,
 ) -> tuple[np.ndarray, ...]:
-    """Run the model's contact kinematics and first dynamics pass, then ``s``.
+    """Run the model's hand terms, contact kinematics and first dynamics pass, then ``s``.
 
     Returns ``B_ho``, the right-hand sides of ``B_ho [F | f_0] = force_rhs`` and of
     ``B_ho c = s``, and what the second pass reads.
     """
+    (
+        p_fingertip_in_palm, R_fingertip_to_palm, J_fingertip, twist_fingertip,
+        J_fingertip_dot_dq, _, M_h_inverse, h_bias, _,
+    ) = hand_in_model_order(
+        frame_placements, joint_placements, joint_velocities, joint_accelerations, J_joints,
+        M_upper, nle, g, M_inverse_pin, frame_index, parent_joint, offset_in_parent, support,
+        joint_index, dq,
+    )
     contacts = sphere_on_plane_contacts(
         p_fingertip_in_palm,
         R_fingertip_to_palm,
@@ -263,7 +279,7 @@ def _sphere_on_plane_stage_system(
     )
     return (
         B_ho, force_rhs, stabilisation, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
-        w_relative, R_pc, H_cf, H_cf_dot_w,
+        w_relative, R_pc, H_cf, H_cf_dot_w, J_fingertip, J_fingertip_dot_dq,
     )
 
 
@@ -288,6 +304,7 @@ def _sphere_on_plane_stage_rate(
     effort: np.ndarray,
     dq: np.ndarray,
     twist_object: np.ndarray,
+    quaternion_xyzw: np.ndarray,
 ) -> np.ndarray:
     """From ``[F | f_0]`` and ``c``: the model's second pass, then the module's formulas."""
     m = ddq.shape[0]
@@ -299,11 +316,13 @@ def _sphere_on_plane_stage_rate(
         force[:, :m], force[:, m], joints[:, :m], joints[:, m], body[:, :m], body[:, m],
         effort, stabilisation, correction, M_o_inverse, G, dq, twist_object,
     )
+    x_dot[2 * m + 3 : 2 * m + 7] = quaternion_derivative(quaternion_xyzw, twist_object[3:])
     return x_dot
 
 
 def sphere_on_plane_stage_rate(
     hand: Any,
+    q: np.ndarray,
     surface_arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -323,10 +342,13 @@ def sphere_on_plane_stage_rate(
     :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`) and
     :func:`stabilised_rate`'s formulas, in two compiled calls around one LAPACK solve of
     ``B_ho`` (for ``[F | f_0]``, as the model's, and for ``c``): the same arithmetic, bit
-    for bit, without a Python round trip per kernel.
+    for bit, without a Python round trip per kernel. The hand's terms are formed in the
+    first call from Pinocchio's (:func:`~grasp_safety_filter.model.hand_kernel.
+    hand_in_model_order`, as :meth:`HandModel.terms` forms them).
 
     Args:
-        hand: The hand's terms at the stage (``HandModel.terms``).
+        hand: The hand (a :class:`~grasp_safety_filter.model.hand.HandModel`).
+        q: Joint angles (m,), rad.
         surface_arrays: The faces' origins, frames and the fingertip radii
             (``SphereOnPlaneStack.surface_arrays``).
         dq: Joint velocities (m,), rad/s.
@@ -347,15 +369,11 @@ def sphere_on_plane_stage_rate(
     plane_origin, plane_frame, radius = surface_arrays
     (
         B_ho, force_rhs, stabilisation, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
-        w_relative, R_pc, H_cf, H_cf_dot_w,
+        w_relative, R_pc, H_cf, H_cf_dot_w, J_fingertip, J_fingertip_dot_dq,
     ) = _sphere_on_plane_stage_system(
-        hand.J_fingertip,
-        hand.twist_fingertip,
-        hand.J_fingertip_dot_dq,
-        hand.p_fingertip_in_palm,
-        hand.R_fingertip_to_palm,
-        hand.M_h_inverse,
-        hand.h_bias,
+        *hand.raw_terms(q, dq),
+        *hand.fingertip_frames,
+        hand.pinocchio_index,
         dq,
         p_object_in_palm,
         R_object_to_palm,
@@ -373,9 +391,7 @@ def sphere_on_plane_stage_rate(
     force, correction = _solve(B_ho, force_rhs), _solve(B_ho, stabilisation)
     x_dot = _sphere_on_plane_stage_rate(
         force, stabilisation, correction, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
-        w_relative, hand.J_fingertip, hand.J_fingertip_dot_dq, R_pc, H_cf, H_cf_dot_w, M_o_inverse,
-        effort, dq, twist_object,
+        w_relative, J_fingertip, J_fingertip_dot_dq, R_pc, H_cf, H_cf_dot_w, M_o_inverse,
+        effort, dq, twist_object, quaternion_xyzw,
     )
-    m = effort.shape[0]
-    x_dot[2 * m + 3 : 2 * m + 7] = quaternion_derivative(quaternion_xyzw, twist_object[3:])
     return x_dot

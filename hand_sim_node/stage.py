@@ -162,18 +162,20 @@ class PlantRate:
         quaternion = x[2 * m + 3 : 2 * m + 7]
         twist_o = x[2 * m + 7 :]
         R_o = _rotation_matrix(quaternion)
-        hand = self._hand.terms(x[:m], dq)
-        p_f = hand.p_fingertip_in_palm
         stack = self._contacts()
         rigid_object = self._object
         M_o_inv = rigid_object.inverse_inertia_matrix(R_o)
         C_o_twist = rigid_object.bias_wrench(R_o, twist_o)
         if isinstance(stack, SphereOnPlaneStack):
-            # The same kernels in one compiled call before and one after the solve.
+            # The same kernels, the hand's terms included, in one compiled call before and
+            # one after the solve.
             return sphere_on_plane_stage_rate(
-                hand, stack.surface_arrays, dq, p_o, R_o, twist_o, quaternion, M_o_inv,
-                C_o_twist, rigid_object.external_wrench(), effort, position_gain, velocity_gain,
+                self._hand, x[:m], stack.surface_arrays, dq, p_o, R_o, twist_o, quaternion,
+                M_o_inv, C_o_twist, rigid_object.external_wrench(), effort, position_gain,
+                velocity_gain,
             )
+        hand = self._hand.terms(x[:m], dq)
+        p_f = hand.p_fingertip_in_palm
         geometry, rates = stack.kinematics(
             p_f, hand.R_fingertip_to_palm, hand.twist_fingertip, p_o, R_o, twist_o
         )

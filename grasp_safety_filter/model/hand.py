@@ -8,16 +8,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
+from numpy.lib.stride_tricks import as_strided
 import pinocchio as pin
 
 from grasp_safety_filter.model.fingertips import fingertip_spheres
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.urdf import check_urdf_file, HandModelError
 
-__all__ = ['HandModel', 'HandModelError', 'HandTerms', 'RawHandTerms']
+__all__ = ['FingertipFrames', 'HandModel', 'HandModelError', 'HandTerms', 'RawHandTerms']
 
 
 @dataclass(frozen=True)
@@ -50,23 +51,83 @@ class HandTerms:
 class RawHandTerms(NamedTuple):
     """Pinocchio's terms at one ``(q, dq)``, in its joint order (see :meth:`HandModel.raw_terms`).
 
+    All but ``M_inverse`` are read-only views of Pinocchio's buffers, overwritten by its next
+    call on the hand's data (placements: rows of 12, the rotation column by column then the
+    translation; motions: rows of 6, ``(linear, angular)``).
+
     Attributes:
-        placements: Fingertip frame placements, homogeneous, (n, 4, 4).
-        J_frames: Fingertip frame Jacobians (LOCAL_WORLD_ALIGNED), (n, 6, nv).
-        J_frames_dot_dq: Their classical accelerations at ddq = 0, ``J_s_dot dq``, (n, 6).
-        M_upper: Joint-space inertia, upper triangle only (a view of Pinocchio's buffer).
-        nle: ``C_h dq + g(q)``, (nv,) (a view of Pinocchio's buffer).
-        g: ``g(q)``, (nv,) (a view of Pinocchio's buffer).
-        M_inverse: ``M_h^-1``, (nv, nv), full.
+        frame_placements: Every frame's placement in the palm (``oMf``), (nframes, 12).
+        joint_placements: Every joint's placement in the palm (``oMi``), (njoints, 12).
+        joint_velocities: Every joint's velocity in its own frame (``v``), (njoints, 6).
+        joint_accelerations: Every joint's acceleration at ddq = 0, own frame (``a``),
+            (njoints, 6).
+        J_joints: The joint Jacobian in the world frame (``J``), (6, nv).
+        M_upper: Joint-space inertia, upper triangle only, (nv, nv).
+        nle: ``C_h dq + g(q)``, (nv,).
+        g: ``g(q)``, (nv,).
+        M_inverse: ``M_h^-1``, (nv, nv), full (a new array).
     """
 
-    placements: np.ndarray
-    J_frames: np.ndarray
-    J_frames_dot_dq: np.ndarray
+    frame_placements: np.ndarray
+    joint_placements: np.ndarray
+    joint_velocities: np.ndarray
+    joint_accelerations: np.ndarray
+    J_joints: np.ndarray
     M_upper: np.ndarray
     nle: np.ndarray
     g: np.ndarray
     M_inverse: np.ndarray
+
+
+class FingertipFrames(NamedTuple):
+    """Where the fingertip frames hang in Pinocchio's model (constants of the hand).
+
+    Attributes:
+        frame_index: Each fingertip's frame, (n,).
+        parent_joint: Each one's parent joint, (n,).
+        offset_in_parent: Each one's origin in its parent joint's frame, (n, 3), m.
+        support: Whether Pinocchio's velocity column k moves fingertip i, (n, nv).
+    """
+
+    frame_index: np.ndarray
+    parent_joint: np.ndarray
+    offset_in_parent: np.ndarray
+    support: np.ndarray
+
+
+def _rows_view(elements: Any, attribute: str, width: int) -> np.ndarray:
+    """Return a read-only (len, width) view of a Pinocchio vector of SE3 (12) or Motion (6).
+
+    Pinocchio keeps ``data.oMi``, ``data.v`` etc. as contiguous C++ vectors, allocated once
+    by ``createData``; each element's ``rotation``/``vector`` is a view of its memory. The
+    whole vector is viewed as rows starting at element 0's, after checking that every
+    element lies where the rows say (else Pinocchio's layout is not the one assumed).
+    """
+    first = getattr(elements[0], attribute)
+    count = len(elements)
+    stride = getattr(elements[1], attribute).ctypes.data - first.ctypes.data if count > 1 else 0
+    tail = 'translation' if width == 12 else 'angular'
+    tail_at = 9 if width == 12 else 3
+    for k in range(count):
+        element = elements[k]
+        head, rest = getattr(element, attribute), getattr(element, tail)
+        if (
+            head.ctypes.data != first.ctypes.data + k * stride
+            or head.strides[0] != 8
+            or rest.ctypes.data != head.ctypes.data + 8 * tail_at
+            or stride < 8 * width
+        ):
+            raise HandModelError(
+                f"Pinocchio's data.{attribute} vector is not laid out as expected"
+            )
+    return as_strided(first, shape=(count, width), strides=(stride, 8), writeable=False)
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """Return a read-only view of ``array`` (its memory stays shared)."""
+    view = array.view()
+    view.setflags(write=False)
+    return view
 
 
 class HandModel:
@@ -153,11 +214,46 @@ class HandModel:
         gravity = np.asarray(gravity, dtype=float)
         self.model.gravity = pin.Motion(gravity, np.zeros(3))
         self.data = self.model.createData()
+        #: The fingertip frames' places in Pinocchio's model (for :func:`hand_in_model_order`).
+        self.fingertip_frames = self._fingertip_frames()
+        # Views of Pinocchio's buffers, which its calls overwrite in place (raw_terms).
+        self._buffers = tuple(
+            _read_only(array)
+            for array in (
+                _rows_view(self.data.oMf, 'rotation', 12),
+                _rows_view(self.data.oMi, 'rotation', 12),
+                _rows_view(self.data.v, 'vector', 6),
+                _rows_view(self.data.a, 'vector', 6),
+                self.data.J,
+                self.data.M,
+                self.data.nle,
+                self.data.g,
+            )
+        )
         # The caller's joint order is usually the URDF's: then no reordering copies are needed.
         self._in_pin_order = bool(np.array_equal(self._idx, np.arange(self.model.nv)))
         # Pinocchio's crba fills the upper triangle of M only.
         self._upper = np.triu(np.ones((self.model.nv, self.model.nv), dtype=bool))
         self._check_inertia(urdf_path.name)
+
+    def _fingertip_frames(self) -> FingertipFrames:
+        """Return the fingertip frames' parents, offsets and supporting velocity columns."""
+        model = self.model
+        parents = [model.frames[f].parentJoint for f in self.frame_ids]
+        support = np.zeros((len(parents), model.nv), dtype=np.bool_)
+        for i, parent in enumerate(parents):
+            for joint in list(model.supports[parent])[1:]:  # [0] is the universe
+                start = model.joints[joint].idx_v
+                support[i, start:start + model.joints[joint].nv] = True
+        tables = FingertipFrames(
+            frame_index=np.array(self.frame_ids, dtype=np.intp),
+            parent_joint=np.array(parents, dtype=np.intp),
+            offset_in_parent=np.array(
+                [model.frames[f].placement.translation for f in self.frame_ids]
+            ).reshape(-1, 3),
+            support=support,
+        )
+        return FingertipFrames(*(_read_only(table) for table in tables))
 
     def _check_inertia(self, urdf_name: str) -> None:
         """Refuse a hand whose M_h is singular at the middle of the joint ranges.
@@ -197,45 +293,24 @@ class HandModel:
         """Pinocchio's hand terms at ``(q, dq)``, as Pinocchio gives them (its joint order).
 
         One recursive pass gives M (upper triangle), C dq + g, g, the joint Jacobians and
-        the kinematics with ddq = 0, whose frame accelerations are then J_s_dot dq; M^-1
-        comes from Pinocchio's Cholesky factor of M, which follows the kinematic tree. The
-        few per-frame reads are the only Python loop: :meth:`terms` and the compiled grasp
-        terms (:mod:`grasp_safety_filter.model.packed_terms`) do the rest.
+        the kinematics with ddq = 0; M^-1 comes from Pinocchio's Cholesky factor of M, which
+        follows the kinematic tree. Four calls; everything else is read from views of
+        Pinocchio's buffers, from which :func:`hand_in_model_order` forms the fingertip
+        terms (:meth:`terms`, and the compiled grasp terms of
+        :mod:`grasp_safety_filter.model.packed_terms`).
         """
         model, data = self.model, self.data
         pin.computeAllTerms(model, data, self._to_pin(q), self._to_pin(dq))
         pin.updateFramePlacements(model, data)
-        world_aligned = pin.LOCAL_WORLD_ALIGNED
-        placements, jacobians, accelerations = [], [], []
-        for f in self.frame_ids:
-            placements.append(data.oMf[f].homogeneous)
-            jacobians.append(pin.getFrameJacobian(model, data, f, world_aligned))
-            accelerations.append(
-                pin.getFrameClassicalAcceleration(model, data, f, world_aligned).vector
-            )
         pin.cholesky.decompose(model, data)
-        # data.M, data.nle and data.g are views of Pinocchio's buffers (overwritten by its
-        # next call); computeMinv returns a new, full symmetric array.
-        return RawHandTerms(
-            placements=np.array(placements),
-            J_frames=np.array(jacobians),
-            J_frames_dot_dq=np.array(accelerations),
-            M_upper=data.M,
-            nle=data.nle,
-            g=data.g,
-            M_inverse=pin.cholesky.computeMinv(model, data),
-        )
-
-    def frame_twists(self, raw: RawHandTerms, dq: np.ndarray) -> np.ndarray:
-        """Return the fingertip frame twists ``J_s dq``, (n, 6), as :meth:`terms` has them."""
-        return self._from_pin(raw.J_frames) @ dq
+        return RawHandTerms(*self._buffers, pin.cholesky.computeMinv(model, data))
 
     def terms(self, q: np.ndarray, dq: np.ndarray) -> HandTerms:
         """Everything the grasp model needs from the hand at ``(q, dq)``."""
+        dq = np.ascontiguousarray(dq, dtype=np.float64)
         raw = self.raw_terms(q, dq)
-        p_f, R_f, J, M, M_inv, h_bias, gravity = hand_in_model_order(
-            raw.placements, raw.J_frames, raw.M_upper, raw.nle, raw.g, raw.M_inverse,
-            self.pinocchio_index,
+        p_f, R_f, J, twist, J_dot_dq, M, M_inv, h_bias, gravity = hand_in_model_order(
+            *raw, *self.fingertip_frames, self.pinocchio_index, dq
         )
         return HandTerms(
             M_h=M,
@@ -244,9 +319,8 @@ class HandModel:
             p_fingertip_in_palm=p_f,
             R_fingertip_to_palm=R_f,
             J_fingertip=J,
-            # The frame twists are J_s dq (the same as Pinocchio's frame velocities).
-            twist_fingertip=self.frame_twists(raw, dq),
-            J_fingertip_dot_dq=raw.J_frames_dot_dq,
+            twist_fingertip=twist,
+            J_fingertip_dot_dq=J_dot_dq,
             M_h_inverse=M_inv,
         )
 

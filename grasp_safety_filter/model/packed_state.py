@@ -230,8 +230,8 @@ def packed_state(
         sphere_on_plane_terms(
             buffer,
             *raw,
+            *hand.fingertip_frames,
             hand.pinocchio_index,
-            hand.frame_twists(raw, dq),
             q,
             dq,
             p_o,

@@ -1,7 +1,9 @@
 """Every model term of a tick in one compiled pass, written into one flat buffer.
 
 For spherical fingertips on flat faces (the paper's cube), :func:`sphere_on_plane_terms`
-takes Pinocchio's raw hand terms (:meth:`~grasp_safety_filter.model.hand.HandModel.raw_terms`)
+takes Pinocchio's raw hand terms (:meth:`~grasp_safety_filter.model.hand.HandModel.raw_terms`: the
+:class:`~grasp_safety_filter.model.hand.RawHandTerms` and
+:class:`~grasp_safety_filter.model.hand.FingertipFrames` arguments)
 and the object's, and runs in one call what :meth:`HandModel.terms
 <grasp_safety_filter.model.hand.HandModel.terms>`, the contact kinematics
 (:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`) and the contact
@@ -117,15 +119,20 @@ def _put(out: np.ndarray, start: int, values: np.ndarray) -> int:
 @kernel
 def sphere_on_plane_terms(
     out: np.ndarray,
-    placements: np.ndarray,
-    J_frames: np.ndarray,
-    J_frames_dot_dq: np.ndarray,
+    frame_placements: np.ndarray,
+    joint_placements: np.ndarray,
+    joint_velocities: np.ndarray,
+    joint_accelerations: np.ndarray,
+    J_joints: np.ndarray,
     M_upper: np.ndarray,
     nle: np.ndarray,
     g: np.ndarray,
     M_inverse_pin: np.ndarray,
+    frame_index: np.ndarray,
+    parent_joint: np.ndarray,
+    offset_in_parent: np.ndarray,
+    support: np.ndarray,
     joint_index: np.ndarray,
-    twist_f: np.ndarray,
     q: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -142,17 +149,21 @@ def sphere_on_plane_terms(
 
     Args:
         out: The buffer, (:attr:`PackedLayout.size`,).
-        placements: Fingertip frame placements, homogeneous, (n, 4, 4), m.
-        J_frames: Fingertip frame Jacobians (LOCAL_WORLD_ALIGNED, Pinocchio's order), (n, 6, nv).
-        J_frames_dot_dq: Their classical accelerations at ddq = 0, (n, 6).
+        frame_placements: Every frame's placement (``oMf``), (nframes, 12).
+        joint_placements: Every joint's placement (``oMi``), (njoints, 12).
+        joint_velocities: Every joint's velocity, own frame (``v``), (njoints, 6).
+        joint_accelerations: Every joint's acceleration at ddq = 0, own frame (``a``),
+            (njoints, 6).
+        J_joints: The joint Jacobian, world frame (Pinocchio's order), (6, nv).
         M_upper: M_h, upper triangle (Pinocchio's order), (nv, nv), kg·m².
         nle: ``C_h dq + g`` (Pinocchio's order), (nv,), N·m.
         g: ``g(q)`` (Pinocchio's order), (nv,), N·m.
         M_inverse_pin: ``M_h^-1`` (Pinocchio's order), (nv, nv).
+        frame_index: Each fingertip's frame, (n,).
+        parent_joint: Each fingertip frame's parent joint, (n,).
+        offset_in_parent: Each fingertip frame's origin in its parent's frame, (n, 3), m.
+        support: Whether Pinocchio's velocity column k moves fingertip i, (n, nv).
         joint_index: Pinocchio's index of each of the model's joints, (m,).
-        twist_f: The fingertip frame twists ``J_s dq``, (n, 6)
-            (:meth:`~grasp_safety_filter.model.hand.HandModel.frame_twists`: numpy's product,
-            whose rounding the staged computation has).
         q: Joint angles, (m,), rad.
         dq: Joint velocities, (m,), rad/s.
         p_object_in_palm: Object centre of mass, (3,), m.
@@ -169,8 +180,12 @@ def sphere_on_plane_terms(
         numpy.linalg.LinAlgError: B_ho is singular.
     """
     # ---- The hand, in the model's joint order (HandModel.terms).
-    p_f, R_f, J_s, M_h, M_h_inverse, h_bias, gravity = hand_in_model_order(
-        placements, J_frames, M_upper, nle, g, M_inverse_pin, joint_index
+    p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = (
+        hand_in_model_order(
+            frame_placements, joint_placements, joint_velocities, joint_accelerations,
+            J_joints, M_upper, nle, g, M_inverse_pin, frame_index, parent_joint,
+            offset_in_parent, support, joint_index, dq,
+        )
     )
     # ---- Contact geometry and rolling rates.
     contacts = sphere_on_plane_contacts(
