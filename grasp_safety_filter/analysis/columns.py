@@ -29,6 +29,13 @@ class Column:
         self._data = np.empty((INITIAL_ROWS, *self.shape), dtype=dtype)
         self._size = 0
 
+    @classmethod
+    def of(cls, rows: np.ndarray) -> Column:
+        """Return a column holding ``rows`` (shape ``(rows, *shape)``; not copied)."""
+        column = cls(rows.shape[1:], rows.dtype)
+        column._data, column._size = rows, len(rows)
+        return column
+
     def __len__(self) -> int:
         """Return the number of rows appended."""
         return self._size
