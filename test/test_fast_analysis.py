@@ -72,10 +72,14 @@ def assert_same_run(fast: RunData, parsed: RunData) -> None:
             assert a == b, entry.name
 
 
-def edited_copy(source: Path, target: Path, edit) -> None:
-    """Copy a bag, each ``/hand/contacts`` message (and its index) through ``edit``."""
+def edited_copy(source: Path, target: Path, edit, left_out: tuple[str, ...] = ()) -> None:
+    """Copy a bag but ``left_out``, each ``/hand/contacts`` message through ``edit``."""
     with Reader(source) as reader:
-        records = [(c.topic, c.msgtype, t, bytes(d)) for c, t, d in reader.messages()]
+        records = [
+            (c.topic, c.msgtype, t, bytes(d))
+            for c, t, d in reader.messages()
+            if c.topic not in left_out
+        ]
     with Writer(target, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connections = {}
         index = 0
@@ -110,6 +114,14 @@ def test_reordered_contact_entries_are_read_by_the_parsers(bag, tmp_path, reader
     run = load_run(tmp_path / 'reordered')
     assert readers_made == [True, False]  # packed refused the topic: parsed again
     assert_same_run(run, parsed_load(bag))
+
+
+def test_a_bag_without_commands_is_read_packed(bag, tmp_path, readers_made):
+    edited_copy(bag, tmp_path / 'nominal', lambda index, msg: None, (topics.EFFORT_COMMAND,))
+    run = load_run(tmp_path / 'nominal')
+    assert readers_made == [True]
+    assert run.t_command.shape == (0,) and run.u_command.shape == (0, len(run.joint_names))
+    assert_same_run(run, parsed_load(tmp_path / 'nominal'))
 
 
 def test_a_non_finite_contact_value_raises_the_parsers_error(bag, tmp_path, readers_made):

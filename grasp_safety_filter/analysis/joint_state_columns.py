@@ -105,8 +105,11 @@ class JointStateColumns:
             UnusualMessagesError: The messages are not all as the parsers take them.
 
         """
-        if self.unusual or self.names is None or self.fields is None:
+        if self.unusual:
             raise UnusualMessagesError(self.source)
+        if self.names is None or self.fields is None:  # no message: no rows
+            empty = np.zeros((0, len(self.expected_names)))
+            return np.zeros(0, np.int64), [empty, empty, empty]
         try:
             order = match_names(self.source, self.names, self.expected_names, self.kind)
         except MessageError:
