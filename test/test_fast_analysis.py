@@ -67,7 +67,10 @@ def assert_same_run(fast: RunData, parsed: RunData) -> None:
         elif entry.name == 'filter_statuses':
             for part in fields(a):
                 x, y = getattr(a, part.name), getattr(b, part.name)
-                assert np.array_equal(x, y, equal_nan=True) if isinstance(x, np.ndarray) else x == y
+                if isinstance(x, np.ndarray):
+                    assert np.array_equal(x, y, equal_nan=True), part.name
+                else:
+                    assert x == y, part.name
         else:
             assert a == b, entry.name
 

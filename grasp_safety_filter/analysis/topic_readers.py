@@ -43,9 +43,9 @@ from grasp_safety_filter.io.messages import (
 from grasp_safety_filter.io.messages.contacts import _positive_inf_allowed
 from grasp_safety_filter.io.sim_diagnostic_keys import PlantEvents, SIM_DIAGNOSTIC, SimKey
 
-#: Topics read in the forked child (the object's two odometry streams: about half of a
-#: run's reading time); the others are read by the caller.
-CHILD_TOPICS = TRACKING_TOPICS
+#: Topics read in the forked child (the object's two odometry streams and the margins:
+#: about half of a run's reading time); the others are read by the caller.
+CHILD_TOPICS = (*TRACKING_TOPICS, topics.MARGINS)
 #: The JointState topics packed (:class:`JointStateColumns`): name kind and, per field
 #: (position, velocity, effort), whether the parser requires one entry per name.
 PACKED_TOPICS = {
@@ -204,12 +204,14 @@ class TopicReaders:
         self.packed = {}
 
 
-def _child_half(bag: Path, scenario: dict[str, Any], wanted: list[str]) -> TrackingReader:
-    """Read the topics of :data:`CHILD_TOPICS` ``wanted`` (in the child): their reader."""
-    readers = TopicReaders(scenario, margins=False)
+def _child_half(
+    bag: Path, scenario: dict[str, Any], margins: bool, wanted: list[str]
+) -> tuple[TrackingReader, BarrierReader | None]:
+    """Read the topics of :data:`CHILD_TOPICS` ``wanted`` (in the child): their readers."""
+    readers = TopicReaders(scenario, margins)
     with open_bag(bag) as opened:  # its own: a file offset is shared across a fork
         readers.read(opened, wanted)
-    return readers.tracking
+    return readers.tracking, readers.barriers
 
 
 def read_topics(
@@ -229,9 +231,9 @@ def read_topics(
     readers = TopicReaders(scenario, margins, packed=True)
     try:
         if count >= MIN_SPLIT_MESSAGES and child and own:
-            with ForkedCall(partial(_child_half, bag, scenario, child)) as forked:
+            with ForkedCall(partial(_child_half, bag, scenario, margins, child)) as forked:
                 readers.read(opened, own)
-                readers.tracking = forked.result()
+                readers.tracking, readers.barriers = forked.result()
         else:
             readers.read(opened, wanted)
         return readers
