@@ -8,7 +8,10 @@ The bag is streamed, one message at a time: of each tick only its numbers are ke
 filter's statuses and margins only what the summary reads
 (:mod:`~grasp_safety_filter.analysis.filter_statuses`,
 :mod:`~grasp_safety_filter.analysis.barriers`). Memory is a few hundred bytes per tick,
-not the messages (kilobytes per tick: a 15 s run's bag would take hundreds of MB).
+not the messages (kilobytes per tick: a 15 s run's bag would take hundreds of MB). The
+topics are read by :mod:`~grasp_safety_filter.analysis.topic_readers`: the JointState ones
+packed and checked once, and on two cores (the object's odometry and the margins in a
+forked child), with the same result and errors as a one-pass, message-by-message read.
 
 A recorder that subscribed late misses the start of the run: every analysed topic whose
 first message is stamped after the run's start (:data:`RUN_START`, the simulator's t_0) is
