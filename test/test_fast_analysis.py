@@ -27,7 +27,7 @@ TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory) -> Path:
-    """The start of the paper's filtered run (some 400 messages)."""
+    """Record the start of the paper's filtered run (some 400 messages)."""
     path = tmp_path_factory.mktemp('fast') / 'bag'
     record_run(RunOptions(CONFIG, 'filtered', duration=0.05), path)
     return path
