@@ -29,6 +29,14 @@ class Column:
         self._data = np.empty((INITIAL_ROWS, *self.shape), dtype=dtype)
         self._size = 0
 
+    @classmethod
+    def of(cls, rows: np.ndarray) -> Column:
+        """Return a column holding ``rows`` (shape ``(rows, *shape)``; not copied)."""
+        column = cls.__new__(cls)
+        column.shape = tuple(rows.shape[1:])
+        column._data, column._size = rows, len(rows)
+        return column
+
     def __len__(self) -> int:
         """Return the number of rows appended."""
         return self._size
@@ -41,7 +49,8 @@ class Column:
 
         """
         if self._size == len(self._data):
-            grown = np.empty((2 * len(self._data), *self.shape), dtype=self._data.dtype)
+            rows = max(2 * len(self._data), INITIAL_ROWS)
+            grown = np.empty((rows, *self.shape), dtype=self._data.dtype)
             grown[: self._size] = self._data
             self._data = grown
         self._data[self._size] = row

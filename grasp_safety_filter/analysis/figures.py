@@ -12,7 +12,7 @@ under 1000 pixels nothing visible is lost, spikes (one relaxed tick) included.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 import io
 from pathlib import Path
 
@@ -20,6 +20,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 import numpy as np
 
+from grasp_safety_filter.analysis.forked import ForkedCall
 from grasp_safety_filter.analysis.object_figure import object_figure
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.files import write_file
@@ -33,6 +34,9 @@ INFEASIBLE = {'color': '0.85', 'zorder': 0}
 LINE_STYLES = ('-', '--', ':', '-.')
 #: Most samples drawn per line (a 15 s run at 1 kHz has 15 001).
 MAX_POINTS = 4000
+#: The figures :func:`plot_run` draws in a forked child while it draws the others
+#: (:mod:`~grasp_safety_filter.analysis.forked`): about half of the drawing time.
+FORKED_FIGURES = ('joints.png', 'object.png')
 #: Most joint panels in a row of the joint and torque figures (a longer finger wraps).
 MAX_COLUMNS = 4
 
@@ -251,16 +255,28 @@ def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = Non
 
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    paths = [
-        plot_contacts(run, out_dir / 'contacts.png'),
-        plot_joints(run, out_dir / 'joints.png', fingers),
-        plot_friction(run, out_dir / 'friction.png'),
-    ]
+    drawings: dict[str, Callable[[], Path]] = {
+        'contacts.png': lambda: plot_contacts(run, out_dir / 'contacts.png'),
+        'joints.png': lambda: plot_joints(run, out_dir / 'joints.png', fingers),
+        'friction.png': lambda: plot_friction(run, out_dir / 'friction.png'),
+    }
     if run.t_command.size:
-        paths.append(plot_torques(run, out_dir / 'torques.png', fingers))
+        drawings['torques.png'] = lambda: plot_torques(run, out_dir / 'torques.png', fingers)
     if run.tracking is not None:
-        paths.append(_save(object_figure(run), out_dir / 'object.png'))
-    return paths
+        drawings['object.png'] = lambda: _save(object_figure(run), out_dir / 'object.png')
+    # Two halves of about the same drawing time, one in a forked child (FORKED_FIGURES).
+    forked = [name for name in drawings if name in FORKED_FIGURES]
+    paths: dict[str, Path] = {}
+    failed = False
+    with ForkedCall(lambda: [drawings[name]() for name in forked]) as child:
+        try:
+            paths.update((name, draw()) for name, draw in drawings.items() if name not in forked)
+            paths.update(zip(forked, child.result(), strict=True))
+        except Exception:  # ForkedCallError, or a figure failed
+            failed = True
+    if failed:  # the child stopped: all again, in order (the same files or error)
+        paths = {name: draw() for name, draw in drawings.items()}
+    return [paths[name] for name in drawings]
 
 
 def _save(figure: Figure, path: Path) -> Path:

@@ -8,7 +8,10 @@ The bag is streamed, one message at a time: of each tick only its numbers are ke
 filter's statuses and margins only what the summary reads
 (:mod:`~grasp_safety_filter.analysis.filter_statuses`,
 :mod:`~grasp_safety_filter.analysis.barriers`). Memory is a few hundred bytes per tick,
-not the messages (kilobytes per tick: a 15 s run's bag would take hundreds of MB).
+not the messages (kilobytes per tick: a 15 s run's bag would take hundreds of MB). The
+topics are read by :mod:`~grasp_safety_filter.analysis.topic_readers`: the JointState ones
+packed and checked once, and on two cores (the object's odometry and the margins in a
+forked child), with the same result and errors as a one-pass, message-by-message read.
 
 A recorder that subscribed late misses the start of the run: every analysed topic whose
 first message is stamped after the run's start (:data:`RUN_START`, the simulator's t_0) is
@@ -18,7 +21,6 @@ listed in :attr:`RunData.missed_start`, and the run is analysed from where its d
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,22 +28,13 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.analysis.barriers import BarrierReader
-from grasp_safety_filter.analysis.columns import Column
-from grasp_safety_filter.analysis.filter_statuses import FilterStatuses, FilterStatusReader
-from grasp_safety_filter.analysis.tracking import ObjectTracking, TRACKING_TOPICS, TrackingReader
+from grasp_safety_filter.analysis.filter_statuses import FilterStatuses
+from grasp_safety_filter.analysis.topic_readers import Diagnostics, read_topics, Series
+from grasp_safety_filter.analysis.tracking import ObjectTracking, TRACKING_TOPICS
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagReadError, iter_bag, open_bag, OpenBag
-from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
-from grasp_safety_filter.io.messages import (
-    contacts_from_msg,
-    diagnostics_from_msg,
-    effort_from_msg,
-    header_stamp_ns,
-    joint_state_from_msg,
-    MessageError,
-    nanoseconds_to_seconds,
-)
-from grasp_safety_filter.io.sim_diagnostic_keys import PlantEvents, SIM_DIAGNOSTIC, SimKey
+from grasp_safety_filter.io.messages import MessageError, nanoseconds_to_seconds
+from grasp_safety_filter.io.sim_diagnostic_keys import PlantEvents
 from grasp_safety_filter.nodes.scenario import (
     OBJECT_FACES_KEY,
     scenario_from_msg,
@@ -222,56 +215,6 @@ ANALYSED_TOPICS = (
 )
 
 
-class _Series:
-    """Per-tick numbers of a run, packed as the bag streams (module docstring)."""
-
-    def __init__(self, m: int, n: int) -> None:
-        self.joint_stamps = Column((), np.int64)
-        self.q = Column((m,))
-        self.contact_stamps = Column((), np.int64)
-        self.contact_t = Column(())
-        self.xi_cf = Column((n, 2))
-        self.xi_co = Column((n, 2))
-        self.force = Column((n, 3))
-        self.required_friction = Column((n,))
-        self.effort_stamps = {
-            topics.EFFORT_NOMINAL: Column((), np.int64),
-            topics.EFFORT_COMMAND: Column((), np.int64),
-        }
-        self.efforts = {topics.EFFORT_NOMINAL: Column((m,)), topics.EFFORT_COMMAND: Column((m,))}
-
-
-class _Diagnostics:
-    """What the analysis keeps of ``/diagnostics``, read in bag order."""
-
-    def __init__(self, contact_names: list[str]) -> None:
-        self.contact_names = contact_names
-        self.plant_events: PlantEvents | None = None
-        self.filter = FilterStatusReader()
-        self.watchdog: Counter[str] = Counter()
-        self.watchdog_after_end = 0
-        self.stop_reason: str | None = None
-        self.t_end: float | None = None
-
-    def add(self, msg: Any) -> None:
-        for report in diagnostics_from_msg(msg).reports:
-            values = report.values
-            if report.name == FILTER_DIAGNOSTIC and Key.STATUS in values:
-                if values.get(Key.INPUT_WATCHDOG) == 'true' and self.stop_reason is not None:
-                    self.watchdog_after_end += 1
-                elif values.get(Key.INPUT_WATCHDOG) == 'true':
-                    self.watchdog[values[Key.STATUS]] += 1
-                else:
-                    self.filter.add(header_stamp_ns(msg), values)
-            elif report.name == SIM_DIAGNOSTIC:
-                events = PlantEvents.from_values(values, self.contact_names)
-                if events is not None:
-                    self.plant_events = events
-                if SimKey.RUN_STOP_REASON in values:
-                    self.stop_reason = values[SimKey.RUN_STOP_REASON]
-                    self.t_end = float(values[SimKey.RUN_T_END])
-
-
 def _first_per_stamp(stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sorted distinct stamps and the index of each one's first message."""
     return np.unique(stamps, return_index=True)
@@ -321,38 +264,12 @@ def _read_run(bag: Path, opened: OpenBag) -> RunData:
                 f'{topics.topic_spec(name).msgtype}'
             )
     scenario = _read_scenario(bag, opened)
-    joint_names, contact_names = scenario['joint_names'], scenario['contact_names']
-    m = len(joint_names)
-    series = _Series(m, len(contact_names))
-    diagnostics = _Diagnostics(list(contact_names))
-    tracking = TrackingReader()
-    barriers = None
     wanted = [name for name in ANALYSED_TOPICS if name != topics.SCENARIO]
     margins = recorded.get(topics.MARGINS)
     if margins is not None and margins.msgtype == topics.topic_spec(topics.MARGINS).msgtype:
-        barriers = BarrierReader()
         wanted.append(topics.MARGINS)
-    for topic, _, msg in opened.messages(topics=wanted):
-        if topic == topics.JOINT_STATES:
-            series.joint_stamps.append(header_stamp_ns(msg))
-            series.q.append(joint_state_from_msg(msg, joint_names, source=topic).position)
-        elif topic == topics.CONTACTS:
-            contact = contacts_from_msg(msg, contact_names)
-            series.contact_stamps.append(header_stamp_ns(msg))
-            series.contact_t.append(contact.t)
-            series.xi_cf.append(contact.xi_cf)
-            series.xi_co.append(contact.xi_co)
-            series.force.append(contact.force)
-            series.required_friction.append(contact.required_friction)
-        elif topic in series.efforts:
-            series.effort_stamps[topic].append(header_stamp_ns(msg))
-            series.efforts[topic].append(effort_from_msg(msg, joint_names, source=topic).effort)
-        elif topic == topics.DIAGNOSTICS:
-            diagnostics.add(msg)
-        elif topic in TRACKING_TOPICS:
-            tracking.add(topic, msg)
-        elif barriers is not None:
-            barriers.add(msg, topic)
+    readers = read_topics(bag, opened, scenario, wanted)
+    series, diagnostics, barriers = readers.series, readers.diagnostics, readers.barriers
     for topic, column in (
         (topics.CONTACTS, series.contact_stamps),
         (topics.JOINT_STATES, series.joint_stamps),
@@ -360,15 +277,15 @@ def _read_run(bag: Path, opened: OpenBag) -> RunData:
         if not len(column):
             raise RunDataError(f'{bag}: no messages on {topic}; the analysis needs it')
     run = _assemble(bag, scenario, series, diagnostics, barriers)
-    run.tracking = tracking.finish()
+    run.tracking = readers.tracking.finish()
     return run
 
 
 def _assemble(
     bag: Path,
     scenario: dict[str, Any],
-    series: _Series,
-    diagnostics: _Diagnostics,
+    series: Series,
+    diagnostics: Diagnostics,
     barriers: BarrierReader | None,
 ) -> RunData:
     """Align the streamed series on the simulator's steps (one joint state per contact)."""
