@@ -15,7 +15,7 @@ from grasp_safety_filter.control.constraints import (
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
 from grasp_safety_filter.control.margins import Margins, RowValues
 from grasp_safety_filter.control.qp_solvers import FEASIBILITY_TOLERANCE
-from grasp_safety_filter.control.row_checks import residuals
+from grasp_safety_filter.control.row_checks import box_margins, residuals
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
@@ -66,9 +66,12 @@ class ResultAssembler:
 
     def margins(self, state: GraspState, u: np.ndarray) -> Margins:
         """Barrier values h per row name (families then actuator limits) at torque u."""
+        u = np.asarray(u, dtype=float)
+        if u.shape != self._u_min.shape:
+            raise ValueError(f'u: expected shape {self._u_min.shape}, got {u.shape}')
         values = np.empty(len(self.names))
         with np.errstate(all='ignore'):
-            self._write_margins(state, np.asarray(u, dtype=float), values, None)
+            self._write_margins(state, u, values, None)
         return Margins(self.names, values, self._index)
 
     def result(
@@ -145,5 +148,4 @@ class ResultAssembler:
 
     def _write_box(self, u: np.ndarray, out: np.ndarray) -> None:
         """Write the box rows, joint by joint: ``u_j - u_min,j`` then ``u_max,j - u_j`` (N·m)."""
-        np.subtract(u, self._u_min, out=out[0::2])
-        np.subtract(self._u_max, u, out=out[1::2])
+        box_margins(u, self._u_min, self._u_max, out)

@@ -73,3 +73,18 @@ def residuals(A: np.ndarray, lower: np.ndarray, u: np.ndarray, out: np.ndarray) 
         elif value < smallest:
             smallest = value
     return math.nan if not_a_number else smallest
+
+
+@kernel
+def box_margins(u: np.ndarray, u_min: np.ndarray, u_max: np.ndarray, out: np.ndarray) -> None:
+    """Write the box rows' margins joint by joint: ``u_j - u_min,j`` then ``u_max,j - u_j`` (N·m).
+
+    Args:
+        u: The torque, (m,), N·m.
+        u_min: Lower bounds, (m,), N·m.
+        u_max: Upper bounds, (m,), N·m.
+        out: Shape (2 m,): joint j's lower margin at 2 j, its upper margin at 2 j + 1.
+    """
+    for j in range(u.shape[0]):
+        out[2 * j] = u[j] - u_min[j]
+        out[2 * j + 1] = u_max[j] - u[j]

@@ -183,13 +183,19 @@ class SafetyFilter:
             metric_factor=self.hard_qp.metric_factor,
         )
         self.relaxed_problem = self.problem.with_slack(weights)
-        # Per family, what writes its rows into the stacked buffer: rows_into where the
-        # family has it (no array per tick), else its rows() copied in.
+        # Per family, what writes its rows into the stacked buffer from row ``start`` on:
+        # rows_into where the family has it (no array per tick), else its rows() copied in.
         self._row_writers = tuple(
-            partial(family.rows_into, A=self.problem.A, lower=self.problem.lower, start=rows.start)
-            if hasattr(family, 'rows_into')
-            else partial(_copy_rows, family, self.problem.A, self.problem.lower, rows)
+            (
+                family.rows_into if hasattr(family, 'rows_into') else partial(_copy_rows, family),
+                rows.start,
+            )
             for family, rows in zip(self.families, self._results.slices, strict=True)
+        )
+        # Whether every writer runs compiled code only on a packed state: no numpy warning
+        # to silence then (entering np.errstate costs a few µs a tick).
+        self._rows_compiled = all(
+            getattr(family, 'compiled_packed_rows', False) for family in self.families
         )
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
         self._last_good_u: np.ndarray | None = None
@@ -356,10 +362,14 @@ class SafetyFilter:
                 f'state: expected {self.n_joints} joints and {len(self.contact_names)} '
                 f'contacts, got {state.n_joints} and {state.n_contacts}'
             )
-        lower = self.problem.lower
-        with np.errstate(all='ignore'):
-            for write in self._row_writers:
-                write(state)
+        A, lower = self.problem.A, self.problem.lower
+        if self._rows_compiled and getattr(state, 'packed_terms', None) is not None:
+            for write, start in self._row_writers:
+                write(state, A, lower, start)
+        else:
+            with np.errstate(all='ignore'):
+                for write, start in self._row_writers:
+                    write(state, A, lower, start)
         metric_ok = True
         if self.problem.metric_factor is not None:
             try:
@@ -404,9 +414,10 @@ class SafetyFilter:
 
 
 def _copy_rows(
-    family: ConstraintFamily, A: np.ndarray, lower: np.ndarray, rows: slice, state: GraspState
+    family: ConstraintFamily, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int
 ) -> None:
-    """Copy a family's rows at ``state`` into rows ``rows`` of the stacked A and lower."""
+    """Copy a family's rows at ``state`` into rows ``start:`` of the stacked A and lower."""
     block = family.rows(state)
+    rows = slice(start, start + len(family.names))
     A[rows] = block.A
     lower[rows] = block.lower

@@ -107,7 +107,10 @@ class ConstraintFamily(Protocol):
 
     A family may also have ``rows_into(state, A, lower, start)``, writing :meth:`rows`
     into rows ``start:`` of the filter's stacked ``A`` (K, m) and ``lower`` (K,) with no
-    array of its own; the filter then calls it instead of :meth:`rows`.
+    array of its own; the filter then calls it instead of :meth:`rows`. A family whose
+    ``rows_into`` runs compiled code only on a packed state (``state.packed_terms``), so
+    that no numpy floating-point warning can come from it, says so with a true
+    ``compiled_packed_rows``.
 
     Attributes:
         family: Family name, the first component of every row name (e.g. ``"no_slip"``).
@@ -250,6 +253,30 @@ def check_block(
         )
 
 
+class CheckedBlock:
+    """:func:`check_block` for a packed state's rows, done once for the same buffers.
+
+    A filter writes into the same stacked ``A`` and ``lower`` from the same ``start`` on
+    every tick; they (by identity) and the packed layout are checked the first time only.
+    """
+
+    __slots__ = ('_last',)
+
+    def __init__(self) -> None:
+        """Nothing checked yet."""
+        self._last: tuple[Any, Any, Any, int] = (None, None, None, -1)
+
+    def check(
+        self, A: np.ndarray, lower: np.ndarray, start: int, count: int, layout: Any, family: str
+    ) -> None:
+        """:func:`check_block` with the layout's number of joints, unless just passed."""
+        last = self._last
+        if last[0] is A and last[1] is lower and last[2] is layout and last[3] == start:
+            return
+        check_block(A, lower, start, count, layout.n_joints, family)
+        self._last = (A, lower, layout, start)
+
+
 class BoxBarrier:
     """Relative-degree-two ZCBF rows keeping selected coordinates inside bounds.
 
@@ -303,6 +330,12 @@ class BoxBarrier:
         )
         self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
         self._packed_starts: tuple[Any, tuple[int, int, int, int]] = (None, (0, 0, 0, 0))
+        self._block = CheckedBlock()
+
+    @property
+    def compiled_packed_rows(self) -> bool:
+        """Whether :meth:`rows_into` reads a packed state in compiled code only."""
+        return self.packed_fields is not None
 
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
         """Return the constrained coordinates x, their rates x_dot and ``u ↦ x_ddot``."""
@@ -346,7 +379,7 @@ class BoxBarrier:
         if packed is not None:
             terms, layout = packed
             x_start, x_dot_start, x_ddot_start, d = self._packed_field_starts(state, layout)
-            check_block(A, lower, start, h.shape[0], layout.n_joints, self.family)
+            self._block.check(A, lower, start, h.shape[0], layout, self.family)
             box_barrier_rows_packed(
                 self._index,
                 self._sign,
