@@ -15,7 +15,7 @@ from grasp_safety_filter.control.constraints import (
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
 from grasp_safety_filter.control.margins import Margins, RowValues
 from grasp_safety_filter.control.qp_solvers import FEASIBILITY_TOLERANCE
-from grasp_safety_filter.control.row_checks import box_margins, residuals
+from grasp_safety_filter.control.row_checks import box_margins, residuals, violations
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
@@ -96,11 +96,13 @@ class ResultAssembler:
         worst = 0.0
         # The minimum is NaN when a row is: NaN rows count as violated, as in the test below.
         if k and not smallest >= -FEASIBILITY_TOLERANCE:
-            violated = ~(residual >= -FEASIBILITY_TOLERANCE)
+            violated = np.zeros(len(self.families), dtype=np.bool_)
+            worst = violations(residual, self._row_family, FEASIBILITY_TOLERANCE, violated)
             relaxed_families = tuple(
-                self.families[i].family for i in np.unique(self._row_family[violated])
+                family.family
+                for family, bad in zip(self.families, violated.tolist(), strict=True)
+                if bad
             )
-            worst = float(np.max(-residual))
         # The torque-rate rows move with the next tick's u*: keep this tick's.
         rate_rows = self._torque_rate.rows(state) if self._torque_rate is not None else None
 

@@ -88,3 +88,30 @@ def box_margins(u: np.ndarray, u_min: np.ndarray, u_max: np.ndarray, out: np.nda
     for j in range(u.shape[0]):
         out[2 * j] = u[j] - u_min[j]
         out[2 * j + 1] = u_max[j] - u[j]
+
+
+@kernel
+def violations(
+    residual: np.ndarray, group: np.ndarray, tolerance: float, violated: np.ndarray
+) -> float:
+    """Flag the groups with a row ``residual_r < -tolerance``; return ``max_r -residual_r``.
+
+    A NaN residual counts as violated, and makes the maximum NaN (as ``np.max``).
+
+    Args:
+        residual: ``A u - lower`` per row, (k,).
+        group: Each row's group (its family's index), (k,).
+        tolerance: The feasibility tolerance, >= 0, in the rows' units.
+        violated: One flag per group, all False on entry; set True where a row violates.
+    """
+    worst = -math.inf
+    not_a_number = False
+    for r in range(residual.shape[0]):
+        value = residual[r]
+        if not value >= -tolerance:
+            violated[group[r]] = True
+        if value != value:
+            not_a_number = True
+        elif -value > worst:
+            worst = -value
+    return math.nan if not_a_number else worst
