@@ -9,9 +9,6 @@ import numpy as np
 
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
-    check_block,
-    check_rows,
-    CheckedBlock,
     ConstraintRows,
     finite_scalar,
     finite_vector,
@@ -21,6 +18,11 @@ from grasp_safety_filter.control.constraints.pyramid_kernel import (
     pyramid_rows,
     pyramid_rows_into,
     pyramid_rows_packed,
+)
+from grasp_safety_filter.control.constraints.shape_checks import (
+    check_block,
+    check_rows,
+    CheckedBlock,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
 
