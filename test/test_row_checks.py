@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grasp_safety_filter.control.row_checks import all_finite, inside, residuals
+from grasp_safety_filter.control.row_checks import (
+    all_finite,
+    box_margins,
+    inside,
+    residuals,
+    violations,
+)
 
 
 def _rows(rng, k=20, m=9):
@@ -49,3 +55,34 @@ def test_all_finite_finds_inf_and_nan_in_either_array():
             array[1] = bad
             assert not all_finite(a, b)
             array[1] = 0.5
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_box_margins_are_the_numpy_subtractions_bit_for_bit(seed):
+    rng = np.random.default_rng(20 + seed)
+    u = rng.normal(size=9)
+    u_min, u_max = -np.abs(rng.normal(2.0, 1.0, 9)), np.abs(rng.normal(2.0, 1.0, 9))
+    out = np.full(2 * u.size + 1, 7.0)
+    box_margins(u, u_min, u_max, out[1:])
+    assert out[0] == 7.0
+    assert np.array_equal(out[1::2], u - u_min)
+    assert np.array_equal(out[2::2], u_max - u)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_violations_flag_the_groups_numpy_finds_and_the_worst_row(seed):
+    rng = np.random.default_rng(30 + seed)
+    tolerance = 1e-6
+    group = np.repeat(np.arange(4, dtype=np.intp), [6, 5, 1, 8])
+    for _ in range(50):
+        residual = rng.normal(size=group.size) * rng.choice([1e-7, 1.0], size=group.size)
+        flags = np.zeros(4, dtype=np.bool_)
+        worst = violations(residual, group, tolerance, flags)
+        expected = np.zeros(4, dtype=bool)
+        expected[np.unique(group[~(residual >= -tolerance)])] = True
+        assert np.array_equal(flags, expected)
+        assert worst == np.max(-residual)
+    residual[3] = np.nan
+    flags = np.zeros(4, dtype=np.bool_)
+    assert np.isnan(violations(residual, group, tolerance, flags))
+    assert flags[0]

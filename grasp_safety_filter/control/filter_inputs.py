@@ -6,6 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from grasp_safety_filter.control.row_checks import all_finite
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -18,6 +19,9 @@ MEASURED_STATE_FIELDS: tuple[str, ...] = (
     'R_object_to_palm',
     'twist_object',
 )
+
+
+_NO_VALUES = np.zeros(0)
 
 
 def checked_torque(u_nom: object, joint_names: Sequence[str]) -> np.ndarray:
@@ -33,7 +37,7 @@ def checked_torque(u_nom: object, joint_names: Sequence[str]) -> np.ndarray:
         raise ValueError(f'u_nom: expected {m} numbers, got {u_nom!r}') from None
     if u.shape != (m,):
         raise ValueError(f'u_nom: expected shape ({m},), got {u.shape}')
-    if not np.isfinite(u).all():
+    if not all_finite(u, _NO_VALUES):  # compiled: np.isfinite(u).all() costs ~2 µs a tick
         bad = np.flatnonzero(~np.isfinite(u))
         raise ValueError(f'u_nom: non-finite value {u[bad[0]]} for joint {joint_names[bad[0]]!r}')
     return u

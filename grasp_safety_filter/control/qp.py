@@ -122,6 +122,7 @@ class SafetyQP:
         self.W = np.eye(m)
         self.nominal = np.zeros(m)
         self.q = np.zeros(self.n_variables)
+        self._q_torques = self.q[:m]  # the torques' part of q, a view
         if metric:
             # Torque column j: rows 0..j (upper triangle); slack column r: its diagonal.
             self._P_indices = np.concatenate(
@@ -201,9 +202,9 @@ class SafetyQP:
         """Set the nominal torque: ``q = (-u_nom, 0)``, or ``(-W u_nom, 0)`` with a metric."""
         self.nominal[:] = u_nom
         if self.metric_factor is None:
-            np.negative(u_nom, out=self.q[: self.n_torques])
+            np.negative(u_nom, out=self._q_torques)
         else:
-            np.matmul(self.W, -self.nominal, out=self.q[: self.n_torques])
+            np.matmul(self.W, -self.nominal, out=self._q_torques)
 
     def normalise_slacks(self) -> None:
         """Set the slack columns ``d_r = ||A_r||``, or ``||R^T A_r||`` with a metric.

@@ -15,7 +15,7 @@ from grasp_safety_filter.control.constraints import (
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
 from grasp_safety_filter.control.margins import Margins, RowValues
 from grasp_safety_filter.control.qp_solvers import FEASIBILITY_TOLERANCE
-from grasp_safety_filter.control.row_checks import residuals
+from grasp_safety_filter.control.row_checks import box_margins, residuals, violations
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: A row counts as active when ``A u - lower <= ACTIVE_TOLERANCE`` (and the actuator bound
@@ -66,9 +66,12 @@ class ResultAssembler:
 
     def margins(self, state: GraspState, u: np.ndarray) -> Margins:
         """Barrier values h per row name (families then actuator limits) at torque u."""
+        u = np.asarray(u, dtype=float)
+        if u.shape != self._u_min.shape:
+            raise ValueError(f'u: expected shape {self._u_min.shape}, got {u.shape}')
         values = np.empty(len(self.names))
         with np.errstate(all='ignore'):
-            self._write_margins(state, np.asarray(u, dtype=float), values, None)
+            self._write_margins(state, u, values, None)
         return Margins(self.names, values, self._index)
 
     def result(
@@ -93,11 +96,13 @@ class ResultAssembler:
         worst = 0.0
         # The minimum is NaN when a row is: NaN rows count as violated, as in the test below.
         if k and not smallest >= -FEASIBILITY_TOLERANCE:
-            violated = ~(residual >= -FEASIBILITY_TOLERANCE)
+            violated = np.zeros(len(self.families), dtype=np.bool_)
+            worst = violations(residual, self._row_family, FEASIBILITY_TOLERANCE, violated)
             relaxed_families = tuple(
-                self.families[i].family for i in np.unique(self._row_family[violated])
+                family.family
+                for family, bad in zip(self.families, violated.tolist(), strict=True)
+                if bad
             )
-            worst = float(np.max(-residual))
         # The torque-rate rows move with the next tick's u*: keep this tick's.
         rate_rows = self._torque_rate.rows(state) if self._torque_rate is not None else None
 
@@ -145,5 +150,4 @@ class ResultAssembler:
 
     def _write_box(self, u: np.ndarray, out: np.ndarray) -> None:
         """Write the box rows, joint by joint: ``u_j - u_min,j`` then ``u_max,j - u_j`` (N·m)."""
-        np.subtract(u, self._u_min, out=out[0::2])
-        np.subtract(self._u_max, u, out=out[1::2])
+        box_margins(u, self._u_min, self._u_max, out)

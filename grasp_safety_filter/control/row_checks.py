@@ -73,3 +73,45 @@ def residuals(A: np.ndarray, lower: np.ndarray, u: np.ndarray, out: np.ndarray) 
         elif value < smallest:
             smallest = value
     return math.nan if not_a_number else smallest
+
+
+@kernel
+def box_margins(u: np.ndarray, u_min: np.ndarray, u_max: np.ndarray, out: np.ndarray) -> None:
+    """Write the box rows' margins joint by joint: ``u_j - u_min,j`` then ``u_max,j - u_j`` (N·m).
+
+    Args:
+        u: The torque, (m,), N·m.
+        u_min: Lower bounds, (m,), N·m.
+        u_max: Upper bounds, (m,), N·m.
+        out: Shape (2 m,): joint j's lower margin at 2 j, its upper margin at 2 j + 1.
+    """
+    for j in range(u.shape[0]):
+        out[2 * j] = u[j] - u_min[j]
+        out[2 * j + 1] = u_max[j] - u[j]
+
+
+@kernel
+def violations(
+    residual: np.ndarray, group: np.ndarray, tolerance: float, violated: np.ndarray
+) -> float:
+    """Flag the groups with a row ``residual_r < -tolerance``; return ``max_r -residual_r``.
+
+    A NaN residual counts as violated, and makes the maximum NaN (as ``np.max``).
+
+    Args:
+        residual: ``A u - lower`` per row, (k,).
+        group: Each row's group (its family's index), (k,).
+        tolerance: The feasibility tolerance, >= 0, in the rows' units.
+        violated: One flag per group, all False on entry; set True where a row violates.
+    """
+    worst = -math.inf
+    not_a_number = False
+    for r in range(residual.shape[0]):
+        value = residual[r]
+        if not value >= -tolerance:
+            violated[group[r]] = True
+        if value != value:
+            not_a_number = True
+        elif -value > worst:
+            worst = -value
+    return math.nan if not_a_number else worst

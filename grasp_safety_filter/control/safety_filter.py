@@ -53,7 +53,7 @@ than letting a contact roll towards the fingertip's edge.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import partial
+from contextlib import nullcontext
 import time
 from typing import Any
 
@@ -66,7 +66,11 @@ from grasp_safety_filter.control.constraints import (
     ObjectWorkspaceBarrier,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
-from grasp_safety_filter.control.filter_families import enabled_families
+from grasp_safety_filter.control.filter_families import (
+    enabled_families,
+    row_writers,
+    rows_compiled,
+)
 from grasp_safety_filter.control.filter_inputs import (
     checked_torque,
     MEASURED_STATE_FIELDS,
@@ -100,6 +104,7 @@ __all__ = [
 
 _FALLBACK = frozenset((FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL))
 _RELAXED_USABLE = (SolutionStatus.OPTIMAL, SolutionStatus.INACCURATE)
+_NO_CONTEXT = nullcontext()
 
 
 class SafetyFilter:
@@ -183,14 +188,9 @@ class SafetyFilter:
             metric_factor=self.hard_qp.metric_factor,
         )
         self.relaxed_problem = self.problem.with_slack(weights)
-        # Per family, what writes its rows into the stacked buffer: rows_into where the
-        # family has it (no array per tick), else its rows() copied in.
-        self._row_writers = tuple(
-            partial(family.rows_into, A=self.problem.A, lower=self.problem.lower, start=rows.start)
-            if hasattr(family, 'rows_into')
-            else partial(_copy_rows, family, self.problem.A, self.problem.lower, rows)
-            for family, rows in zip(self.families, self._results.slices, strict=True)
-        )
+        starts = [rows.start for rows in self._results.slices]
+        self._row_writers = tuple(zip(row_writers(self.families), starts, strict=True))
+        self._rows_compiled = rows_compiled(self.families)
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
         self._last_good_u: np.ndarray | None = None
 
@@ -356,10 +356,12 @@ class SafetyFilter:
                 f'state: expected {self.n_joints} joints and {len(self.contact_names)} '
                 f'contacts, got {state.n_joints} and {state.n_contacts}'
             )
-        lower = self.problem.lower
-        with np.errstate(all='ignore'):
-            for write in self._row_writers:
-                write(state)
+        A, lower = self.problem.A, self.problem.lower
+        # Compiled writers on a packed state raise no numpy warning: no np.errstate (µs).
+        quiet = self._rows_compiled and getattr(state, 'packed_terms', None) is not None
+        with _NO_CONTEXT if quiet else np.errstate(all='ignore'):
+            for write, start in self._row_writers:
+                write(state, A, lower, start)
         metric_ok = True
         if self.problem.metric_factor is not None:
             try:
@@ -401,12 +403,3 @@ class SafetyFilter:
         return self._results.result(
             state, u, status, rows, solve_time, iterations, active_set_steps
         )
-
-
-def _copy_rows(
-    family: ConstraintFamily, A: np.ndarray, lower: np.ndarray, rows: slice, state: GraspState
-) -> None:
-    """Copy a family's rows at ``state`` into rows ``rows`` of the stacked A and lower."""
-    block = family.rows(state)
-    A[rows] = block.A
-    lower[rows] = block.lower

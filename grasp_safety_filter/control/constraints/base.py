@@ -26,6 +26,7 @@ from grasp_safety_filter.control.constraints.box_kernel import (
     box_barrier_rows_into,
     box_barrier_rows_packed,
 )
+from grasp_safety_filter.control.constraints.shape_checks import check_block, CheckedBlock
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -107,7 +108,10 @@ class ConstraintFamily(Protocol):
 
     A family may also have ``rows_into(state, A, lower, start)``, writing :meth:`rows`
     into rows ``start:`` of the filter's stacked ``A`` (K, m) and ``lower`` (K,) with no
-    array of its own; the filter then calls it instead of :meth:`rows`.
+    array of its own; the filter then calls it instead of :meth:`rows`. A family whose
+    ``rows_into`` runs compiled code only on a packed state (``state.packed_terms``), so
+    that no numpy floating-point warning can come from it, says so with a true
+    ``compiled_packed_rows``.
 
     Attributes:
         family: Family name, the first component of every row name (e.g. ``"no_slip"``).
@@ -220,36 +224,6 @@ def check_limits_ordered(
         )
 
 
-def check_rows(state_value: np.ndarray, rows: int, field: str) -> None:
-    """Raise ValueError if a state array does not have ``rows`` leading entries."""
-    if state_value.shape[0] != rows:
-        raise ValueError(
-            f"state.{field}: expected {rows} rows for this filter's joints/contacts, "
-            f'got shape {state_value.shape}'
-        )
-
-
-def check_block(
-    A: np.ndarray, lower: np.ndarray, start: int, count: int, n_joints: int, family: str
-) -> None:
-    """Raise ValueError unless rows ``start:start + count`` fit in ``A`` (K, m) and ``lower``.
-
-    The compiled writers index without bounds checks: a block that does not fit would be
-    written past the arrays or, read from a packed buffer, with the wrong row width.
-    """
-    if (
-        A.ndim != 2
-        or A.shape[1] != n_joints
-        or lower.shape != (A.shape[0],)
-        or start < 0
-        or start + count > A.shape[0]
-    ):
-        raise ValueError(
-            f'{family}: expected rows {start}:{start + count} of A (K, {n_joints}) and lower '
-            f'(K,), got A {A.shape} and lower {lower.shape}'
-        )
-
-
 class BoxBarrier:
     """Relative-degree-two ZCBF rows keeping selected coordinates inside bounds.
 
@@ -303,6 +277,12 @@ class BoxBarrier:
         )
         self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
         self._packed_starts: tuple[Any, tuple[int, int, int, int]] = (None, (0, 0, 0, 0))
+        self._block = CheckedBlock()
+
+    @property
+    def compiled_packed_rows(self) -> bool:
+        """Whether :meth:`rows_into` reads a packed state in compiled code only."""
+        return self.packed_fields is not None
 
     def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
         """Return the constrained coordinates x, their rates x_dot and ``u ↦ x_ddot``."""
@@ -346,7 +326,7 @@ class BoxBarrier:
         if packed is not None:
             terms, layout = packed
             x_start, x_dot_start, x_ddot_start, d = self._packed_field_starts(state, layout)
-            check_block(A, lower, start, h.shape[0], layout.n_joints, self.family)
+            self._block.check(A, lower, start, h.shape[0], layout, self.family)
             box_barrier_rows_packed(
                 self._index,
                 self._sign,

@@ -9,8 +9,6 @@ import numpy as np
 
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
-    check_block,
-    check_rows,
     ConstraintRows,
     finite_scalar,
     finite_vector,
@@ -20,6 +18,11 @@ from grasp_safety_filter.control.constraints.pyramid_kernel import (
     pyramid_rows,
     pyramid_rows_into,
     pyramid_rows_packed,
+)
+from grasp_safety_filter.control.constraints.shape_checks import (
+    check_block,
+    check_rows,
+    CheckedBlock,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -72,6 +75,8 @@ class FrictionPyramid:
 
     family = 'no_slip'
     state_fields = ('contact_force',)
+    #: :meth:`rows_into` reads a packed state in compiled code only.
+    compiled_packed_rows = True
 
     def __init__(
         self,
@@ -131,6 +136,7 @@ class FrictionPyramid:
         face[:, :, 2] = -apothem[:, np.newaxis]
         self._negative_faces = -face
         self._packed_layout: object = None
+        self._block = CheckedBlock()
         self._force_start = 0
         self.names = tuple(
             f'{self.family}/{contact}/face{j}'
@@ -171,7 +177,7 @@ class FrictionPyramid:
                 )
                 self._packed_layout = layout
                 self._force_start = layout.start('contact_force_augmented')
-            check_block(A, lower, start, len(self.names), layout.n_joints, self.family)
+            self._block.check(A, lower, start, len(self.names), layout, self.family)
             pyramid_rows_packed(
                 self._negative_faces,
                 terms,
@@ -198,5 +204,14 @@ class FrictionPyramid:
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Margins ``h_ij`` (N) at the contact forces ``f_c(u)`` the torque u produces."""
         n = len(self.contact_names)
-        forces = state.contact_force(u).reshape(n, 3, 1)
+        packed = getattr(state, 'packed_terms', None)
+        if packed is None:
+            forces = state.contact_force(u)
+        else:
+            # f_c(u) from the packed [F | f_0] (the views state.contact_force is made of,
+            # without building that AffineMap: most of this call's time on a fresh state).
+            m = packed[1].n_joints
+            augmented = state.contact_force_augmented
+            forces = augmented[:, :m] @ u + augmented[:, m]
+        forces = forces.reshape(n, 3, 1)
         return BarrierValues(np.matmul(self._negative_faces, forces).reshape(-1), self.names)

@@ -56,6 +56,7 @@ class ActiveSetSteps:
     _y_nom: np.ndarray
     _last_active: tuple[int, ...] | None
     _pending: tuple[np.ndarray, tuple[int, ...], np.ndarray] | None
+    _working_set: tuple[tuple[int, ...] | None, np.ndarray]
 
     def _on_guess(
         self, problem: Problem, guess: tuple[int, ...], iterations: int
@@ -72,7 +73,11 @@ class ActiveSetSteps:
         """
         if not guess:
             return None
-        working_set = np.fromiter(guess, dtype=np.intp, count=len(guess))
+        # The same guess tick after tick (the last optimum's active set): its array is kept.
+        known, working_set = self._working_set
+        if guess is not known:
+            working_set = np.fromiter(guess, dtype=np.intp, count=len(guess))
+            self._working_set = (guess, working_set)
         if self._R is None:
             # y = u: the solve, the clip and the row check in one compiled pass.
             outcome, u, multipliers = clipped_optimum_on_working_set(

@@ -76,6 +76,7 @@ from grasp_safety_filter.control.qp_solvers.problem import (
 
 _NO_MULTIPLIERS = np.zeros(0)
 _NO_MULTIPLIERS.setflags(write=False)
+_NO_ROWS = np.zeros(0, dtype=np.intp)
 
 _CONVERGED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 _INFEASIBLE = (
@@ -146,6 +147,8 @@ class OSQPBackend(ActiveSetSteps):
         # This tick's: the hard attempt and the relaxed guess, read by the relaxed solve.
         self._attempt: LeastDistanceSolution | None = None
         self._relaxed_guess: tuple[int, ...] | None = None
+        # The last guess tried on the hard problem and its rows as an index array.
+        self._working_set: tuple[tuple[int, ...] | None, np.ndarray] = (None, _NO_ROWS)
         m, k = self._m, self._k
         self._hard.warm_start(x=np.zeros(m), y=np.zeros(k + m))
         self._relaxed.warm_start(x=np.zeros(m + k), y=np.zeros(2 * k + m))
