@@ -28,8 +28,6 @@ OBJECT_FRAME = 'object'
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
 _ROTATION_TOLERANCE = 1e-6
-_IDENTITY = np.eye(3)
-_IDENTITY.flags.writeable = False
 _NANOSECONDS_PER_SECOND = 1_000_000_000
 _INT32_MAX = 2**31 - 1
 
@@ -263,16 +261,35 @@ def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
 
     """
     R = shaped_array('rotation matrix', R, (3, 3))
-    error = float(np.abs(R.T @ R - _IDENTITY).max())
-    # A non-finite entry makes the error NaN or inf: checked only then.
-    if not error <= _ROTATION_TOLERANCE and not np.isfinite(R).all():
-        raise MessageError(f'rotation matrix: expected finite entries, got {R.tolist()}')
-    if error > _ROTATION_TOLERANCE or np.linalg.det(R) < 0.0:
+    entries = R.tolist()
+    if not all(map(math.isfinite, entries[0] + entries[1] + entries[2])):
+        raise MessageError(f'rotation matrix: expected finite entries, got {entries}')
+    error, det = _orthonormality(entries)
+    if error > _ROTATION_TOLERANCE or det < 0.0:
         raise MessageError(
             f'rotation matrix: expected orthonormal with det +1 (within '
-            f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {np.linalg.det(R):.6g}'
+            f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {det:.6g}'
         )
     return from_rotation_matrix(R)
+
+
+def _orthonormality(entries: list[list[float]]) -> tuple[float, float]:
+    """Return ``max |R^T R - I|`` and ``det R`` of a 3x3 matrix given as rows of floats.
+
+    Written out on Python floats: for one 3x3 matrix a message, numpy's calls cost more
+    than the arithmetic (``(R^T R)_jk`` is the dot product of columns j and k).
+    """
+    (a, b, c), (d, e, f), (g, h, i) = entries
+    error = max(
+        abs(a * a + d * d + g * g - 1.0),
+        abs(b * b + e * e + h * h - 1.0),
+        abs(c * c + f * f + i * i - 1.0),
+        abs(a * b + d * e + g * h),
+        abs(a * c + d * f + g * i),
+        abs(b * c + e * f + h * i),
+    )
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return error, det
 
 
 def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:
