@@ -99,7 +99,7 @@ class _InterruptState:
 
 
 def _in_main_thread() -> bool:
-    return threading.current_thread() is threading.main_thread()
+    return threading.get_ident() == threading.main_thread().ident
 
 
 def importing(frame: FrameType | None) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 from fractions import Fraction
+from functools import lru_cache
 import math
 from typing import Any
 
@@ -119,6 +120,16 @@ def check_frame(source: str, what: str, received: str, expected: str) -> None:
         raise MessageError(f'{source}: {what} must be {expected!r}, got {got}')
 
 
+def unique_names(source: str, names: Sequence[str], kind: str) -> tuple[str, ...]:
+    """:func:`checked_names` as a tuple, checked once per name tuple (a producer's names)."""
+    return _unique_names(source, tuple(names), kind)
+
+
+@lru_cache(maxsize=64)
+def _unique_names(source: str, names: tuple[str, ...], kind: str) -> tuple[str, ...]:
+    return tuple(checked_names(source, names, kind))
+
+
 def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
     """Received names as a list; raise on duplicates."""
     received = [str(n) for n in names]
@@ -147,7 +158,7 @@ def match_names(
     once gives the same (read-only) index without checking again; one that did not is
     checked, and refused, every time.
     """
-    key = (tuple(str(n) for n in received_names), tuple(expected_names))
+    key = (tuple(map(str, received_names)), tuple(expected_names))
     index = _MATCHED.get(key)
     if index is None:
         index = _match_names(source, list(key[0]), expected_names, kind)
@@ -209,9 +220,13 @@ def array_field(
             f"{source}: '{field_name}' has {array.size} entries, expected {expectation} "
             f'({len(names)})'
         )
+    # Any NaN or inf entry makes the sum non-finite (a finite sum is all finite): one
+    # reduction for the usual case; the entries are looked at only when it is not finite.
+    if math.isfinite(np.add.reduce(array)):
+        return array
     bad = ~np.isfinite(array)
     if not bad.any():
-        return array
+        return array  # finite entries whose sum overflowed
     if allow_positive_inf is not None:
         bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
     if bad.any():
@@ -310,7 +325,10 @@ def vector3_msg(msgs: MessageNamespace, v: np.ndarray) -> Any:
 
 def twist_msg(msgs: MessageNamespace, twist: np.ndarray) -> Any:
     """Build a ``geometry_msgs/Twist`` of ``(v, w)``, shape (6,)."""
-    return msgs.Twist(linear=vector3_msg(msgs, twist[:3]), angular=vector3_msg(msgs, twist[3:]))
+    vx, vy, vz, wx, wy, wz = np.asarray(twist, dtype=np.float64).tolist()
+    return msgs.Twist(
+        linear=msgs.Vector3(x=vx, y=vy, z=vz), angular=msgs.Vector3(x=wx, y=wy, z=wz)
+    )
 
 
 def twist_from_msg(source: str, what: str, msg: Any) -> np.ndarray:
