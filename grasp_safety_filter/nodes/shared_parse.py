@@ -15,7 +15,6 @@ are made read-only, so that no subscriber can change what another one reads.
 from __future__ import annotations
 
 from collections.abc import Callable, Hashable
-import dataclasses
 from typing import Any, TypeVar
 
 import numpy as np
@@ -46,8 +45,7 @@ class SharedParse:
         if last is not None and last[0] is msg:
             return last[1]
         result = parser(msg, *args)
-        for field in dataclasses.fields(result):
-            value = getattr(result, field.name)
+        for value in vars(result).values():  # a parse's result: a dataclass of arrays
             if isinstance(value, np.ndarray):
                 value.flags.writeable = False
         # The message is kept with its result: its id cannot be reused while remembered.
