@@ -60,6 +60,7 @@ from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
 from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
+from grasp_safety_filter.nodes.shared_parse import SharedParse
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
 from hand_sim_node.events import EventLog
@@ -234,9 +235,14 @@ def _subscribers(
 
 
 def build_endpoints(
-    options: RunOptions, msgs: MessageNamespace
+    options: RunOptions, msgs: MessageNamespace, parse: SharedParse | None = None
 ) -> tuple[HandSimEndpoint, NominalControllerEndpoint, SafetyFilterEndpoint]:
-    """Build the three nodes' endpoints, each with its own model, as the launch file does."""
+    """Build the three nodes' endpoints, each with its own model, as the launch file does.
+
+    ``parse``: shared by the nominal controller and the safety filter (a runner that hands
+    both the same message objects, unchanged: :mod:`~grasp_safety_filter.nodes.shared_parse`);
+    None: each parses its inputs itself, as in a ROS graph.
+    """
     params = {
         node: load_node_parameters(
             options.config,
@@ -268,6 +274,7 @@ def build_endpoints(
         NominalConfig.from_parameters(nominal_params),
         msgs,
         GraspCheckConfig.from_parameters(nominal_params),
+        parse=parse,
     )
     filter_params = params[SAFETY_FILTER_NODE]
     safety_filter = SafetyFilterEndpoint(
@@ -278,6 +285,7 @@ def build_endpoints(
         enabled=options.mode == 'filtered',
         publication_rate_config=PublicationRateConfig.from_parameters(filter_params),
         grasp_check_config=GraspCheckConfig.from_parameters(filter_params),
+        parse=parse,
     )
     return sim, nominal, safety_filter
 
@@ -315,7 +323,8 @@ def record_run(
     typestore = get_typestore(Stores.ROS2_JAZZY)
     msgs = MessageNamespace.from_typestore(typestore)
     # Bad parameters fail here, before an earlier bag is replaced.
-    sim, nominal, safety_filter = build_endpoints(options, msgs)
+    # _record hands each message to its subscribers unchanged: they may share its parse.
+    sim, nominal, safety_filter = build_endpoints(options, msgs, SharedParse())
     with interrupt_on_signals():
         with deferred_interrupts():
             for path in (*replaces, bag_path):

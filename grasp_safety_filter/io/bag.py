@@ -179,8 +179,9 @@ class BagRecorder:
         msgtype = getattr(msg, '__msgtype__', spec.msgtype)
         if msgtype != spec.msgtype:
             raise TypeError(f'topic {topic!r} carries {spec.msgtype}, got a {msgtype}')
+        _check_stamp(stamp_ns)
         data = self.typestore.serialize_cdr(msg, spec.msgtype)
-        self.write_cdr(topic, stamp_ns, data)
+        self._append(self._writer, topic, stamp_ns, data)
         return data
 
     def write_cdr(self, topic: str, stamp_ns: int, data: bytes) -> None:
@@ -196,10 +197,13 @@ class BagRecorder:
             raise RuntimeError(f'bag {self.path} is not open')
         if topic not in self.topics:
             raise KeyError(f'topic {topic!r} is not registered; registered: {list(self.topics)}')
-        if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int) or stamp_ns < 0:
-            raise ValueError(f'stamp_ns: expected an integer >= 0 ns, got {stamp_ns!r}')
+        _check_stamp(stamp_ns)
+        self._append(self._writer, topic, stamp_ns, data)
+
+    def _append(self, writer: DurableWriter, topic: str, stamp_ns: int, data: bytes) -> None:
+        """Append checked CDR bytes to a registered topic, interrupts deferred meanwhile."""
         with critical_section():
-            self._writer.write(self._connections[topic], stamp_ns, data)
+            writer.write(self._connections[topic], stamp_ns, data)
             self.counts[topic] += 1
 
     def set_custom_data(self, key: str, value: str) -> None:
@@ -237,3 +241,9 @@ class BagRecorder:
         traceback: TracebackType | None,
     ) -> None:
         self.close(raise_pending_interrupt=exc_type is None)
+
+
+def _check_stamp(stamp_ns: Any) -> None:
+    """Raise ValueError unless ``stamp_ns`` is an integer >= 0 (a bag timestamp, ns)."""
+    if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int) or stamp_ns < 0:
+        raise ValueError(f'stamp_ns: expected an integer >= 0 ns, got {stamp_ns!r}')

@@ -99,7 +99,7 @@ class _InterruptState:
 
 
 def _in_main_thread() -> bool:
-    return threading.current_thread() is threading.main_thread()
+    return threading.get_ident() == threading.main_thread().ident
 
 
 def importing(frame: FrameType | None) -> bool:
@@ -256,27 +256,40 @@ def interrupt_on_signals(
         raise SignalInterrupt(held)
 
 
-@contextmanager
-def critical_section(raise_pending: bool = True) -> Iterator[None]:
+class critical_section(AbstractContextManager[None]):  # noqa: N801 (used as a function)
     """Defer :func:`interrupt_on_signals` interrupts until the block is done.
+
+    A class rather than a generator: a bag enters one per message written, and a
+    generator's context manager costs several times as much to enter and leave.
 
     Args:
         raise_pending: Raise a deferred interrupt after the block (when it completed);
             else drop it (the caller is already stopping).
 
     """
-    if not _in_main_thread():
-        yield
-        return
-    _InterruptState.critical_depth += 1
-    try:
-        yield
-    finally:
+
+    __slots__ = ('_counted', '_raise_pending')
+
+    def __init__(self, raise_pending: bool = True) -> None:
+        self._raise_pending = raise_pending
+        self._counted = False
+
+    def __enter__(self) -> None:
+        if _in_main_thread():
+            _InterruptState.critical_depth += 1
+            self._counted = True
+
+    def __exit__(self, exc_type: Any, exc_value: Any, traceback: Any) -> None:
+        if not self._counted:
+            return
+        self._counted = False
         _InterruptState.critical_depth -= 1
-    if _InterruptState.critical_depth == 0 and _InterruptState.pending is not None:
-        signum, _InterruptState.pending = _InterruptState.pending, None
-        if raise_pending:
-            raise SignalInterrupt(signum)
+        if exc_type is not None:
+            return  # the block's own exception propagates; a deferred interrupt waits
+        if _InterruptState.critical_depth == 0 and _InterruptState.pending is not None:
+            signum, _InterruptState.pending = _InterruptState.pending, None
+            if self._raise_pending:
+                raise SignalInterrupt(signum)
 
 
 def deferred_interrupts(raise_pending: bool = True) -> AbstractContextManager[None]:

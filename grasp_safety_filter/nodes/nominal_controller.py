@@ -88,6 +88,7 @@ from grasp_safety_filter.nodes.grasp_watch import (
     LogLine,
 )
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
 
 #: Name of the nominal controller's ``DiagnosticStatus``.
 DIAGNOSTIC_NAME = NOMINAL_DIAGNOSTIC
@@ -104,6 +105,8 @@ class NominalControllerEndpoint:
         nominal_config: Gains and reference choice.
         msgs: Message classes to build (rclpy or rosbags).
         grasp_check_config: ``grasp_check.gap_tolerance`` (default: the start-up check's).
+        parse: The joint state and odometry parses, shared with the safety filter in
+            process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
 
     Attributes:
         controller: The nominal controller core.
@@ -119,8 +122,10 @@ class NominalControllerEndpoint:
         nominal_config: NominalConfig,
         msgs: MessageNamespace,
         grasp_check_config: GraspCheckConfig | None = None,
+        parse: SharedParse | None = None,
     ) -> None:
         self.model = model
+        self._parse = parse_directly if parse is None else parse
         self.grasp = GraspWatch(model, grasp_check_config)
         self.msgs = msgs
         self.config = nominal_config
@@ -128,6 +133,7 @@ class NominalControllerEndpoint:
         self.reference: ReferenceSource | None = None
         self.last_output: NominalOutput | None = None
         self._joint_names = list(model.joint_names)
+        self._joint_name_tuple = tuple(self._joint_names)
         self._initial_pose: Pose | None = None
         self._t0: float | None = None
         self._trajectory: ReferenceTrajectory | None = None
@@ -139,7 +145,7 @@ class NominalControllerEndpoint:
     def on_joint_states(self, msg: Any) -> list[Outgoing]:
         """Handle ``/hand/joint_states``; tick if the odometry of its stamp is in hand."""
         try:
-            data = joint_state_from_msg(msg, self._joint_names, source=JOINT_STATES)
+            data = self._parse(joint_state_from_msg, msg, self._joint_name_tuple, JOINT_STATES)
             stamp = seconds_to_nanoseconds(data.t)
         except MessageError as error:
             return self._rejected(error)
@@ -149,8 +155,8 @@ class NominalControllerEndpoint:
     def on_odom(self, msg: Any) -> list[Outgoing]:
         """Handle ``/object/odom``; tick if the joint state of its stamp is in hand."""
         try:
-            data = odometry_from_msg(
-                msg, self.model.palm_frame, self.model.object_frame, source=OBJECT_ODOM
+            data = self._parse(
+                odometry_from_msg, msg, self.model.palm_frame, self.model.object_frame, OBJECT_ODOM
             )
             stamp = seconds_to_nanoseconds(data.t)
         except MessageError as error:

@@ -78,6 +78,7 @@ from grasp_safety_filter.nodes.held_commands import HeldCommands
 from grasp_safety_filter.nodes.input_watchdog import InputWatchdog, WAITING_REPORT_PERIOD
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 from grasp_safety_filter.nodes.publication_rate import PublicationRate, PublicationRateConfig
+from grasp_safety_filter.nodes.shared_parse import SharedParse
 from grasp_safety_filter.nodes.tick_inputs import (
     INPUTS,
     MAX_PENDING,
@@ -115,6 +116,8 @@ class SafetyFilterEndpoint:
         publication_rate_config: How often steady statuses and the margins go out
             (default: every tick).
         grasp_check_config: ``grasp_check.gap_tolerance`` (default: the start-up check's).
+        parse: The joint state and odometry parses, shared with the nominal controller in
+            process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
 
     Attributes:
         filter: The safety filter core.
@@ -138,6 +141,7 @@ class SafetyFilterEndpoint:
         enabled: bool = True,
         publication_rate_config: PublicationRateConfig | None = None,
         grasp_check_config: GraspCheckConfig | None = None,
+        parse: SharedParse | None = None,
     ) -> None:
         self.model = model
         self.msgs = msgs
@@ -147,7 +151,7 @@ class SafetyFilterEndpoint:
         self.hold = HoldPolicy.from_config(
             input_policy_config, model.n_joints, -effort_limits, effort_limits
         )
-        self.inputs = TickAssembler(input_policy_config.max_age, model)
+        self.inputs = TickAssembler(input_policy_config.max_age, model, parse)
         self.rate = PublicationRate(publication_rate_config)
         self.margin_stream = MarginEncoder()
         self.grasp = GraspWatch(model, grasp_check_config)

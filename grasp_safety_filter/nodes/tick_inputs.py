@@ -35,6 +35,7 @@ from grasp_safety_filter.io.messages import (
 )
 from grasp_safety_filter.io.topics import EFFORT_NOMINAL, JOINT_STATES, OBJECT_ODOM
 from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
 
 #: Incomplete input sets kept waiting for their other inputs (older ones are dropped).
 MAX_PENDING = 64
@@ -73,6 +74,8 @@ class TickAssembler:
     Args:
         max_age: ``input.max_age``, s.
         model: The ``GraspModel`` whose ``state(...)`` gives a tick's model terms.
+        parse: The joint state and odometry parses, shared with the nominal controller in
+            process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
 
     Attributes:
         guard: Stale and out-of-order stamp checks, per input topic.
@@ -80,11 +83,13 @@ class TickAssembler:
 
     """
 
-    def __init__(self, max_age: float, model: Any) -> None:
+    def __init__(self, max_age: float, model: Any, parse: SharedParse | None = None) -> None:
         self.guard = StampGuard(max_age)
+        self._parse = parse_directly if parse is None else parse
         self.last_tick_ns: int | None = None
         self.model = model
         self._joint_names = list(model.joint_names)
+        self._joint_name_tuple = tuple(self._joint_names)
         self._pending: dict[int, dict[str, Any]] = {}
         self._states: dict[int, TimedState] = {}
         self._replay: dict[str, Any] = {}
@@ -98,9 +103,9 @@ class TickAssembler:
         """
         if topic == OBJECT_ODOM:
             frames = (self.model.palm_frame, self.model.object_frame)
-            return odometry_from_msg(msg, *frames, source=OBJECT_ODOM)
+            return self._parse(odometry_from_msg, msg, *frames, OBJECT_ODOM)
         if topic == JOINT_STATES:
-            return joint_state_from_msg(msg, self._joint_names, JOINT_STATES)
+            return self._parse(joint_state_from_msg, msg, self._joint_name_tuple, JOINT_STATES)
         return effort_from_msg(msg, self._joint_names, EFFORT_NOMINAL)
 
     def timed_state(self, joint_states: JointStateData, odometry: ObjectStateData) -> TimedState:

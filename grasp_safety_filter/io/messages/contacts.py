@@ -11,10 +11,10 @@ import numpy as np
 
 from grasp_safety_filter.io.messages.fields import (
     array_field,
-    checked_names,
     match_names,
     shaped_array,
     time_from_msg,
+    unique_names,
 )
 from grasp_safety_filter.io.messages.joint_states import joint_state_to_msg
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
@@ -136,8 +136,8 @@ def contacts_to_msg(
     - ``velocity`` holds the rate for ``a, b, u, v, psi`` and 0.0 for the others;
     - ``effort`` is empty; ``header.frame_id`` is empty (each value is in its own frame).
     """
-    n = len(contact_names)
-    checked_names('contacts', contact_names, 'contact')
+    names = unique_names('contacts', contact_names, 'contact')
+    n = len(names)
     shapes = {
         'xi_cf': (n, 2),
         'xi_co': (n, 2),
@@ -153,7 +153,7 @@ def contacts_to_msg(
         shaped_array(f'contacts {name}', getattr(data, name), shape)
     values, rates = data._columns()
     return joint_state_to_msg(
-        msgs, data.t, contact_entry_names(contact_names), values.ravel(), rates.ravel(), None
+        msgs, data.t, _entry_names(names), values.ravel(), rates.ravel(), None
     )
 
 

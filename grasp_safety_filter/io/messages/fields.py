@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 from fractions import Fraction
+from functools import lru_cache
 import math
 from typing import Any
 
@@ -28,8 +29,6 @@ OBJECT_FRAME = 'object'
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
 _ROTATION_TOLERANCE = 1e-6
-_IDENTITY = np.eye(3)
-_IDENTITY.flags.writeable = False
 _NANOSECONDS_PER_SECOND = 1_000_000_000
 _INT32_MAX = 2**31 - 1
 
@@ -121,6 +120,16 @@ def check_frame(source: str, what: str, received: str, expected: str) -> None:
         raise MessageError(f'{source}: {what} must be {expected!r}, got {got}')
 
 
+def unique_names(source: str, names: Sequence[str], kind: str) -> tuple[str, ...]:
+    """:func:`checked_names` as a tuple, checked once per name tuple (a producer's names)."""
+    return _unique_names(source, tuple(names), kind)
+
+
+@lru_cache(maxsize=64)
+def _unique_names(source: str, names: tuple[str, ...], kind: str) -> tuple[str, ...]:
+    return tuple(checked_names(source, names, kind))
+
+
 def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
     """Received names as a list; raise on duplicates."""
     received = [str(n) for n in names]
@@ -149,7 +158,7 @@ def match_names(
     once gives the same (read-only) index without checking again; one that did not is
     checked, and refused, every time.
     """
-    key = (tuple(str(n) for n in received_names), tuple(expected_names))
+    key = (tuple(map(str, received_names)), tuple(expected_names))
     index = _MATCHED.get(key)
     if index is None:
         index = _match_names(source, list(key[0]), expected_names, kind)
@@ -211,9 +220,13 @@ def array_field(
             f"{source}: '{field_name}' has {array.size} entries, expected {expectation} "
             f'({len(names)})'
         )
+    # Any NaN or inf entry makes the sum non-finite (a finite sum is all finite): one
+    # reduction for the usual case; the entries are looked at only when it is not finite.
+    if math.isfinite(np.add.reduce(array)):
+        return array
     bad = ~np.isfinite(array)
     if not bad.any():
-        return array
+        return array  # finite entries whose sum overflowed
     if allow_positive_inf is not None:
         bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
     if bad.any():
@@ -263,16 +276,35 @@ def quaternion_xyzw_from_matrix(R: np.ndarray) -> np.ndarray:
 
     """
     R = shaped_array('rotation matrix', R, (3, 3))
-    error = float(np.abs(R.T @ R - _IDENTITY).max())
-    # A non-finite entry makes the error NaN or inf: checked only then.
-    if not error <= _ROTATION_TOLERANCE and not np.isfinite(R).all():
-        raise MessageError(f'rotation matrix: expected finite entries, got {R.tolist()}')
-    if error > _ROTATION_TOLERANCE or np.linalg.det(R) < 0.0:
+    entries = R.tolist()
+    if not all(map(math.isfinite, entries[0] + entries[1] + entries[2])):
+        raise MessageError(f'rotation matrix: expected finite entries, got {entries}')
+    error, det = _orthonormality(entries)
+    if error > _ROTATION_TOLERANCE or det < 0.0:
         raise MessageError(
             f'rotation matrix: expected orthonormal with det +1 (within '
-            f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {np.linalg.det(R):.6g}'
+            f'{_ROTATION_TOLERANCE}), got |R^T R - I| = {error:.3g}, det {det:.6g}'
         )
     return from_rotation_matrix(R)
+
+
+def _orthonormality(entries: list[list[float]]) -> tuple[float, float]:
+    """Return ``max |R^T R - I|`` and ``det R`` of a 3x3 matrix given as rows of floats.
+
+    Written out on Python floats: for one 3x3 matrix a message, numpy's calls cost more
+    than the arithmetic (``(R^T R)_jk`` is the dot product of columns j and k).
+    """
+    (a, b, c), (d, e, f), (g, h, i) = entries
+    error = max(
+        abs(a * a + d * d + g * g - 1.0),
+        abs(b * b + e * e + h * h - 1.0),
+        abs(c * c + f * f + i * i - 1.0),
+        abs(a * b + d * e + g * h),
+        abs(a * c + d * f + g * i),
+        abs(b * c + e * f + h * i),
+    )
+    det = a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+    return error, det
 
 
 def matrix_from_quaternion_xyzw(quaternion: np.ndarray) -> np.ndarray:
@@ -293,7 +325,10 @@ def vector3_msg(msgs: MessageNamespace, v: np.ndarray) -> Any:
 
 def twist_msg(msgs: MessageNamespace, twist: np.ndarray) -> Any:
     """Build a ``geometry_msgs/Twist`` of ``(v, w)``, shape (6,)."""
-    return msgs.Twist(linear=vector3_msg(msgs, twist[:3]), angular=vector3_msg(msgs, twist[3:]))
+    vx, vy, vz, wx, wy, wz = np.asarray(twist, dtype=np.float64).tolist()
+    return msgs.Twist(
+        linear=msgs.Vector3(x=vx, y=vy, z=vz), angular=msgs.Vector3(x=wx, y=wy, z=wz)
+    )
 
 
 def twist_from_msg(source: str, what: str, msg: Any) -> np.ndarray:

@@ -11,10 +11,10 @@ import numpy as np
 from grasp_safety_filter.io.messages.errors import MessageError
 from grasp_safety_filter.io.messages.fields import (
     array_field,
-    checked_names,
     header_msg,
     match_names,
     time_from_msg,
+    unique_names,
 )
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
 
@@ -52,14 +52,11 @@ class EffortData:
     effort: np.ndarray
 
 
-def _check_names_and_lengths(names: Sequence[str], **arrays: np.ndarray | None) -> None:
-    checked_names('message', names, 'entry')
-    for field_name, values in arrays.items():
-        if values is not None and np.asarray(values).size != len(names):
-            raise MessageError(
-                f"message: '{field_name}' has {np.asarray(values).size} entries, expected "
-                f'{len(names)} (one per name)'
-            )
+_EMPTY = np.zeros(0)
+_EMPTY.flags.writeable = False
+
+#: The float fields of a JointState, in message order.
+_FIELDS = ('position', 'velocity', 'effort')
 
 
 def joint_state_to_msg(
@@ -83,15 +80,20 @@ def joint_state_to_msg(
         frame_id: Header frame (empty for joint states by ROS convention).
 
     """
-    _check_names_and_lengths(names, position=position, velocity=velocity, effort=effort)
-    empty = np.zeros(0)
-    return msgs.JointState(
-        header=header_msg(msgs, t, frame_id),
-        name=[str(n) for n in names],
-        position=msgs.float_array(empty if position is None else position),
-        velocity=msgs.float_array(empty if velocity is None else velocity),
-        effort=msgs.float_array(empty if effort is None else effort),
-    )
+    name = unique_names('message', names, 'entry')
+    fields = {}
+    for field_name, values in zip(_FIELDS, (position, velocity, effort), strict=True):
+        if values is None:
+            fields[field_name] = msgs.float_array(_EMPTY)
+            continue
+        array = msgs.float_array(values)
+        if len(array) != len(name):
+            raise MessageError(
+                f"message: '{field_name}' has {len(array)} entries, expected "
+                f'{len(name)} (one per name)'
+            )
+        fields[field_name] = array
+    return msgs.JointState(header=header_msg(msgs, t, frame_id), name=list(name), **fields)
 
 
 def joint_state_from_msg(

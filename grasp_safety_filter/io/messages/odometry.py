@@ -23,6 +23,10 @@ from grasp_safety_filter.io.messages.fields import (
 )
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
 
+#: Covariance of the exact simulator state (a copy goes into each message).
+_ZERO_COVARIANCE = np.zeros(36)
+_ZERO_COVARIANCE.flags.writeable = False
+
 
 @dataclass(frozen=True)
 class ObjectStateData:
@@ -73,19 +77,19 @@ def odometry_to_msg(
     R = shaped_array('R_object_to_palm', R_object_to_palm, (3, 3))
     twist = shaped_array('twist_object', twist_object, (6,))
     twist_in_object = np.concatenate((R.T @ twist[:3], R.T @ twist[3:]))
-    covariance = msgs.float_array(np.zeros(36))
+    x, y, z = p.tolist()
     return msgs.Odometry(
         header=header_msg(msgs, t, frame_id),
         child_frame_id=child_frame_id,
         pose=msgs.PoseWithCovariance(
             pose=msgs.Pose(
-                position=msgs.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])),
-                orientation=quaternion_msg(msgs, R),
+                position=msgs.Point(x=x, y=y, z=z), orientation=quaternion_msg(msgs, R)
             ),
-            covariance=covariance,
+            covariance=msgs.float_array(_ZERO_COVARIANCE),
         ),
         twist=msgs.TwistWithCovariance(
-            twist=twist_msg(msgs, twist_in_object), covariance=msgs.float_array(np.zeros(36))
+            twist=twist_msg(msgs, twist_in_object),
+            covariance=msgs.float_array(_ZERO_COVARIANCE),
         ),
     )
 
