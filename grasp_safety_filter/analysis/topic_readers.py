@@ -40,7 +40,7 @@ from grasp_safety_filter.io.messages import (
     header_stamp_ns,
     joint_state_from_msg,
 )
-from grasp_safety_filter.io.messages.contacts import _positive_inf_allowed
+from grasp_safety_filter.io.messages.contacts import positive_inf_allowed
 from grasp_safety_filter.io.sim_diagnostic_keys import PlantEvents, SIM_DIAGNOSTIC, SimKey
 
 #: Topics read in the forked child (the object's two odometry streams and the margins:
@@ -190,7 +190,7 @@ class TopicReaders:
             series.effort_stamps[topic] = Column.of(stamps)
             series.efforts[topic] = Column.of(effort)
         contacts = self.packed[topics.CONTACTS]
-        allowed = _positive_inf_allowed(tuple(contacts.names or ()))
+        allowed = positive_inf_allowed(tuple(contacts.names or ()))
         stamps, (values, _, _) = contacts.rows(allowed)
         n = len(self.contact_names)
         values = values.reshape(len(stamps), n, len(CONTACT_QUANTITIES))

@@ -115,7 +115,7 @@ def _entry_names(contact_names: tuple[str, ...]) -> tuple[str, ...]:
 
 
 @lru_cache(maxsize=64)
-def _positive_inf_allowed(entry_names: tuple[str, ...]) -> tuple[bool, ...]:
+def positive_inf_allowed(entry_names: tuple[str, ...]) -> tuple[bool, ...]:
     """Per entry name, whether ``+inf`` is admissible there (``required_friction``)."""
     return tuple(name.rsplit('/', 1)[-1] == 'required_friction' for name in entry_names)
 
@@ -171,7 +171,7 @@ def contacts_from_msg(
     expected = contact_entry_names(contact_names)
     order = match_names(source, msg.name, expected, 'contact entry')
     names = list(msg.name)
-    inf_ok = _positive_inf_allowed(tuple(names))
+    inf_ok = positive_inf_allowed(tuple(names))
     values = array_field(
         source, msg.position, 'position', names, required=True, allow_positive_inf=inf_ok
     )
