@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import fields
 import os
 from pathlib import Path
+import time
 
 import numpy as np
 import pytest
@@ -155,6 +156,15 @@ def test_a_forked_call_gives_its_result_or_fails_cleanly():
         call.result()
     with ForkedCall(lambda: os._exit(3)) as call, pytest.raises(ForkedCallError):
         call.result()
+
+
+def test_a_forked_call_that_hangs_is_given_up_and_killed(monkeypatch):
+    monkeypatch.setattr(ForkedCall, 'least_wait', 0.5)
+    started = time.monotonic()
+    with ForkedCall(lambda: time.sleep(60)) as call:
+        with pytest.raises(ForkedCallError, match='no result in'):
+            call.result()
+    assert time.monotonic() - started < 10.0
 
 
 def test_figures_drawn_beside_are_the_figures_drawn_alone(bag, tmp_path, monkeypatch):

@@ -20,6 +20,7 @@ from collections.abc import Callable
 import multiprocessing
 from multiprocessing.connection import Connection
 import signal
+import time
 from typing import Any, Generic, TypeVar
 
 Result = TypeVar('Result')
@@ -52,8 +53,12 @@ class ForkedCall(Generic[Result]):
     caller leaves before taking its result.
     """
 
+    #: Least time the caller waits for the child's result, s (see :meth:`result`).
+    least_wait = 30.0
+
     def __init__(self, work: Callable[[], Result]) -> None:
         """Fork a child that runs ``work`` (nothing starts where fork is unavailable)."""
+        self._started = time.monotonic()
         self._process: Any = None
         self._receiver: Connection | None = None
         self._start_error: str | None = None
@@ -71,13 +76,22 @@ class ForkedCall(Generic[Result]):
     def result(self) -> Result:
         """Wait for the child's result.
 
+        The caller asks once its own half is done, which took about as long as the child's:
+        it waits twice that since the fork, and at least :attr:`least_wait`, for a child
+        that may have hung (a lock another thread held at the fork), then does the work
+        itself.
+
         Raises:
-            ForkedCallError: The child could not start, raised, or died without a result.
+            ForkedCallError: The child could not start, raised, died without a result, or
+                gave none in time (it is then killed).
 
         """
         if self._receiver is None:
             raise ForkedCallError(self._start_error or 'no child process')
+        wait = max(self.least_wait, 2.0 * (time.monotonic() - self._started))
         try:
+            if not self._receiver.poll(wait):
+                raise ForkedCallError(f'child gave no result in {wait:.0f} s')
             ok, value = self._receiver.recv()
         except (EOFError, OSError) as error:
             raise ForkedCallError(f'child ended without a result ({error!r})') from None
