@@ -22,12 +22,10 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.analysis.columns import Column
-from grasp_safety_filter.io.messages import match_names, MessageError
+from grasp_safety_filter.io.messages import match_names, MessageError, NANOSECONDS_PER_SECOND
 
 #: The fields of a JointState, in message order.
 FIELDS = ('position', 'velocity', 'effort')
-#: Nanoseconds per second (stamps are ``sec * NANOSECONDS_PER_SECOND + nanosec``).
-NANOSECONDS_PER_SECOND = 1_000_000_000
 
 
 class UnusualMessagesError(Exception):

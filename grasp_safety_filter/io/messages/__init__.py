@@ -70,6 +70,7 @@ from grasp_safety_filter.io.messages.fields import (  # noqa: F401
     header_stamp_ns,
     match_names,
     matrix_from_quaternion_xyzw,
+    NANOSECONDS_PER_SECOND,
     nanoseconds_to_seconds,
     OBJECT_FRAME,
     PALM_FRAME,

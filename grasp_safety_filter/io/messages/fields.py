@@ -29,7 +29,8 @@ OBJECT_FRAME = 'object'
 
 _QUATERNION_NORM_TOLERANCE = 1e-6
 _ROTATION_TOLERANCE = 1e-6
-_NANOSECONDS_PER_SECOND = 1_000_000_000
+NANOSECONDS_PER_SECOND = 1_000_000_000
+"""Nanoseconds per second (a stamp is ``sec * NANOSECONDS_PER_SECOND + nanosec``)."""
 _INT32_MAX = 2**31 - 1
 
 # ----------------------------------------------------------------------------------------
@@ -42,11 +43,11 @@ def seconds_to_nanoseconds(t: float) -> int:
         raise MessageError(f'time: expected a finite number of seconds >= 0, got {t!r}')
     # Exact rational product: a float product could round a time ns / 1e9 to ns +- 1.
     if not isinstance(t, float):
-        return round(Fraction(t) * _NANOSECONDS_PER_SECOND)
+        return round(Fraction(t) * NANOSECONDS_PER_SECOND)
     # A float is numerator / 2**k exactly: the same product and rounding (half to even,
     # as round(Fraction)) in integers, without building Fractions.
     numerator, denominator = t.as_integer_ratio()
-    ns, remainder = divmod(numerator * _NANOSECONDS_PER_SECOND, denominator)
+    ns, remainder = divmod(numerator * NANOSECONDS_PER_SECOND, denominator)
     twice = 2 * remainder
     if twice > denominator or (twice == denominator and ns & 1):
         ns += 1
@@ -55,12 +56,12 @@ def seconds_to_nanoseconds(t: float) -> int:
 
 def nanoseconds_to_seconds(ns: int) -> float:
     """Time in integer ns to s, correctly rounded (int / int true division)."""
-    return int(ns) / _NANOSECONDS_PER_SECOND
+    return int(ns) / NANOSECONDS_PER_SECOND
 
 
 def _sec_nanosec(t: float, what: str) -> tuple[int, int]:
     ns = seconds_to_nanoseconds(t)
-    sec, nanosec = divmod(ns, _NANOSECONDS_PER_SECOND)
+    sec, nanosec = divmod(ns, NANOSECONDS_PER_SECOND)
     if sec > _INT32_MAX:
         raise MessageError(f'{what}: {t!r} s does not fit builtin_interfaces (int32 seconds)')
     return sec, nanosec
@@ -81,11 +82,11 @@ def time_msg_to_nanoseconds(msg: Any, what: str = 'time') -> int:
 
     """
     sec, nanosec = int(msg.sec), int(msg.nanosec)
-    if not 0 <= nanosec < _NANOSECONDS_PER_SECOND:
+    if not 0 <= nanosec < NANOSECONDS_PER_SECOND:
         raise MessageError(f'{what}: nanosec must be in [0, 1e9), got {nanosec}')
     if sec < 0:
         raise MessageError(f'{what}: sec must be >= 0, got {sec}')
-    return sec * _NANOSECONDS_PER_SECOND + nanosec
+    return sec * NANOSECONDS_PER_SECOND + nanosec
 
 
 def time_from_msg(msg: Any, what: str = 'time') -> float:
