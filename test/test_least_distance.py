@@ -144,3 +144,49 @@ def test_the_metric_factor_refuses_an_inertia_that_is_not_positive_definite():
         write_inertia_factor(np.diag([1.0, -1.0, 1.0]), R)
     with pytest.raises(ValueError, match='M_h: expected a finite'):
         write_inertia_factor(np.diag([1.0, np.nan, 1.0]), R)
+
+
+def _identity_problems(rng):
+    """Random problems like the filter's: hard and relaxed, feasible and not, nearly dependent."""
+    for _ in range(400):
+        m = int(rng.choice([2, 3, 9, 16, 28]))
+        k = int(rng.integers(0, 3 * m + 8))
+        C = rng.normal(size=(k, m)) * 10.0 ** rng.uniform(-2.0, 2.0, size=(k, 1))
+        if k >= 4 and rng.random() < 0.5:
+            # Rows in a low-dimensional span, some nearly repeated, and a null row.
+            rank = int(rng.integers(1, m + 1))
+            C[: k // 2] = rng.normal(size=(k // 2, rank)) @ rng.normal(size=(rank, m))
+            C[1] = C[0] * (1.0 + 1e-10 * rng.normal()) + 1e-12 * rng.normal(size=m)
+            C[2] = 0.0
+        centre = rng.normal(size=m)
+        b = C @ centre - rng.uniform(-0.5, 2.0, size=k) * np.linalg.norm(C, axis=1)
+        if k:
+            b[rng.random(k) < 0.05] = 0.0
+            b[np.linalg.norm(C, axis=1) == 0.0] = -1.0 if rng.random() < 0.9 else 1.0
+        u0 = rng.normal(scale=5.0, size=m)
+        guesses = [(), tuple(rng.integers(0, max(k, 1), size=min(k, 5)))] if k else [()]
+        yield u0, C, b, guesses
+
+
+def test_the_compiled_solver_is_the_numpy_formulation_bit_for_bit():
+    """Every field of every solution equals the numpy formulation's (least_distance_oracle)."""
+    import least_distance_oracle
+
+    rng = np.random.default_rng(11)
+    statuses = set()
+    for u0, C, b, guesses in _identity_problems(rng):
+        cold = least_distance_oracle.solve_least_distance(u0, C, b)
+        guesses.append(cold.active)
+        for guess in guesses:
+            for max_iter in (None, 2):
+                expected = least_distance_oracle.solve_least_distance(
+                    u0, C, b, max_iter=max_iter, working_set=guess
+                )
+                found = solve_least_distance(u0, C, b, max_iter=max_iter, working_set=guess)
+                statuses.add(expected.status)
+                assert found.status is expected.status
+                assert found.active == expected.active
+                assert found.iterations == expected.iterations
+                assert found.u.tobytes() == expected.u.tobytes()
+                assert found.multipliers.tobytes() == expected.multipliers.tobytes()
+    assert statuses == set(LeastDistanceStatus)
