@@ -168,8 +168,15 @@ def _identity_problems(rng):
         yield u0, C, b, guesses
 
 
-def test_the_compiled_solver_is_the_numpy_formulation_bit_for_bit():
-    """Every field of every solution equals the numpy formulation's (least_distance_oracle)."""
+def test_the_compiled_solver_is_the_numpy_formulation():
+    """Every field of every solution equals the numpy formulation's (least_distance_oracle).
+
+    The kernel calls scipy's BLAS and LAPACK, the oracle numpy's; where both libraries run the
+    same kernels (the machines this is measured on) the solutions are equal to the bit. The
+    comparison allows 1e-12 of the problem's scale in u and the multipliers so that a BLAS
+    build whose kernels round differently does not fail it; statuses, active sets and
+    iteration counts must be equal.
+    """
     import least_distance_oracle
 
     rng = np.random.default_rng(11)
@@ -187,6 +194,12 @@ def test_the_compiled_solver_is_the_numpy_formulation_bit_for_bit():
                 assert found.status is expected.status
                 assert found.active == expected.active
                 assert found.iterations == expected.iterations
-                assert found.u.tobytes() == expected.u.tobytes()
-                assert found.multipliers.tobytes() == expected.multipliers.tobytes()
+                scale = 1.0 + np.abs(expected.u).max(initial=0.0)
+                np.testing.assert_allclose(found.u, expected.u, rtol=0.0, atol=1e-12 * scale)
+                np.testing.assert_allclose(
+                    found.multipliers,
+                    expected.multipliers,
+                    rtol=1e-12,
+                    atol=1e-12 * (1.0 + np.abs(expected.multipliers).max(initial=0.0)),
+                )
     assert statuses == set(LeastDistanceStatus)
