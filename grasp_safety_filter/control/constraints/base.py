@@ -359,7 +359,7 @@ class BoxBarrier:
                 start,
                 h,
             )
-        self.remember_barrier(state, h)
+        self._last_h = (state, h)
 
     def packed_rows_arguments(self, state: GraspState, layout: Any) -> tuple[Any, ...]:
         """``(index, sign, h_offset, (x_start, x_dot_start, x_ddot_start, d), alpha_parameters)``.

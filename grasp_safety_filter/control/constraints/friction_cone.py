@@ -171,9 +171,18 @@ class FrictionPyramid:
         packed = getattr(state, 'packed_terms', None)
         if packed is not None:
             terms, layout = packed
-            faces, force_start, margin = self.packed_rows_arguments(state, layout)
+            if layout is not self._packed_layout:
+                self.packed_rows_arguments(state, layout)  # checks the shapes once
             self._block.check(A, lower, start, len(self.names), layout, self.family)
-            pyramid_rows_packed(faces, terms, force_start, margin, A, lower, start)
+            pyramid_rows_packed(
+                self._negative_faces,
+                terms,
+                self._force_start,
+                self.normal_force_margin,
+                A,
+                lower,
+                start,
+            )
             return
         contact_force = state.contact_force
         check_rows(contact_force.offset, 3 * len(self.contact_names), 'contact_force')
