@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import time
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TYPE_CHECKING
 
 import numpy as np
 
@@ -38,12 +38,22 @@ from grasp_safety_filter.control.constraints import ConstraintFamily, FrictionPy
 from grasp_safety_filter.control.constraints.box_kernel import box_barrier_rows_packed
 from grasp_safety_filter.control.constraints.pyramid_kernel import pyramid_rows_packed
 from grasp_safety_filter.control.filter_result import FilterStatus
-from grasp_safety_filter.control.qp_solvers import FEASIBILITY_TOLERANCE, Solution, SolutionStatus
+from grasp_safety_filter.control.qp import SafetyQP
+from grasp_safety_filter.control.qp_solvers import (
+    FEASIBILITY_TOLERANCE,
+    Problem,
+    Solution,
+    SolutionStatus,
+)
 from grasp_safety_filter.control.qp_solvers.osqp_active_set import ACTIVE_SET_TOLERANCE
 from grasp_safety_filter.control.row_checks import all_finite, inside, residuals
 from grasp_safety_filter.control.working_set import clipped_optimum_on_working_set
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.grasp_state import GraspState
+
+if TYPE_CHECKING:
+    from grasp_safety_filter.control.qp_solvers.osqp_backend import OSQPBackend
+    from grasp_safety_filter.control.safety_filter import SafetyFilter
 
 #: :func:`packed_tick`'s outcomes.
 NOT_FINITE, NOT_SETTLED, SETTLED_ON_GUESS, NOMINAL = -1, 0, 1, 2
@@ -167,9 +177,9 @@ class FusedTick:
         self,
         families: Sequence[ConstraintFamily],
         starts: Sequence[int],
-        problem: Any,
-        hard_qp: Any,
-        backend: Any,
+        problem: Problem,
+        hard_qp: SafetyQP,
+        backend: OSQPBackend,
         n_names: int,
         n_contacts: int,
     ) -> None:
@@ -200,7 +210,7 @@ class FusedTick:
         self._h_size = 0
 
     @classmethod
-    def of(cls, safety_filter: Any) -> FusedTick | None:
+    def of(cls, safety_filter: SafetyFilter) -> FusedTick | None:
         """Return a :class:`SafetyFilter`'s fused tick, or None where it does not apply."""
         families, problem = safety_filter.families, safety_filter.problem
         backend = safety_filter.backend
