@@ -19,7 +19,8 @@ residuals. :func:`packed_tick` runs the same kernels in the same order in one ca
 so its answers are those of the unfused step, to the bit. Whatever is unusual (a family
 without packed rows, a staged state, a metric, another backend) is not fused at all; a
 tick whose u_nom or rows are not finite is done again by the unfused step (which raises or
-falls back); a tick whose guess is not optimal continues with the backend's solve.
+falls back); a tick whose guess is not optimal continues with the backend's solve (without
+trying the guess again).
 
 On a tick the pass settles with the guess, the result's ``solve_time`` is the wall time of
 the whole pass (rows, checks and the solve on the guess), as the solve alone is not timed
@@ -263,6 +264,8 @@ class FusedTick:
         if outcome == SETTLED_ON_GUESS:
             solution = self._backend.accept_guess(u, u_star, multipliers)
             return FusedOutcome(u, solution.u, FilterStatus.SOLVED, elapsed, computed)
+        if guess[0].shape[0]:
+            self._backend.guess_rejected()  # the same rows, the same answer: not tried twice
         return FusedOutcome(u, None, None, 0.0, computed)
 
     def _prepare(self, state: GraspState, layout: Any) -> None:

@@ -149,6 +149,8 @@ class OSQPBackend(ActiveSetSteps):
         self._relaxed_guess: tuple[int, ...] | None = None
         # The last guess tried on the hard problem and its rows as an index array.
         self._working_set: tuple[tuple[int, ...] | None, np.ndarray] = (None, _NO_ROWS)
+        # Step 1 already failed this tick in a compiled pass (guess_rejected): not again.
+        self._guess_rejected = False
         m, k = self._m, self._k
         self._hard.warm_start(x=np.zeros(m), y=np.zeros(k + m))
         self._relaxed.warm_start(x=np.zeros(m + k), y=np.zeros(2 * k + m))
@@ -197,6 +199,10 @@ class OSQPBackend(ActiveSetSteps):
         guess = self._last_active
         return self._keep(Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, 0))
 
+    def guess_rejected(self) -> None:
+        """Skip step 1 in the next hard solve: a compiled pass found the guess not optimal."""
+        self._guess_rejected = True
+
     def solve(self, problem: Problem) -> Solution:
         """Solve the hard or the relaxed problem (relaxed: right after its hard problem)."""
         return self._solve_relaxed(problem) if problem.relaxed else self._solve_hard(problem)
@@ -212,7 +218,8 @@ class OSQPBackend(ActiveSetSteps):
         u_nom = -problem.g
         self._set_metric(problem.metric_factor, u_nom)
         C, y_nom = self._rows_y, self._y_nom
-        if self._last_active:
+        rejected, self._guess_rejected = self._guess_rejected, False
+        if self._last_active and not rejected:
             solution = self._on_guess(problem, self._last_active, 0)
             if solution is not None:
                 return solution
