@@ -68,7 +68,8 @@ class Replay:
         filter_iterations: OSQP iterations inside the filter per tick (0 when none ran).
         active_set_steps: Add/drop steps of the filter's active-set method per tick.
         filter_qp_solve_time: The filter's own solve time per tick (``FilterResult.solve_time``:
-            OSQP and the active-set step; 0 on ``nominal`` ticks), s.
+            OSQP and the active-set step; 0 on ``nominal`` ticks; on a tick the fused pass
+            settles, that pass with the rows and checks), s.
         qps: The hard QP of the ticks in ``qp_ticks``.
         qp_ticks: Indices (into the replayed ticks) of :attr:`qps`.
         max_replay_deviation: ``max |u*_replay - u*_recorded|``, N·m (0 when the replay

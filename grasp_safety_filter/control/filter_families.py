@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -91,6 +92,27 @@ def enabled_families(
         )
         chosen.append((torque_rate, config.torque_rate_weight))
     return chosen, contacts, torque_rate
+
+
+def object_workspace_of(
+    grasp_model: Any, config: SafetyFilterConfig
+) -> ObjectWorkspaceBarrier | None:
+    """Return a ``GraspModel``'s object-workspace family, None unless enabled in ``config``.
+
+    Its contacts' object surfaces (:meth:`ObjectWorkspaceBarrier.for_model`).
+    """
+    if not config.object_workspace_enabled:
+        return None
+    return ObjectWorkspaceBarrier.for_model(
+        grasp_model,
+        config.object_workspace_margin,
+        (
+            config.object_workspace_sphere_a_half_width,
+            config.object_workspace_sphere_b_half_width,
+        ),
+        config.alpha1,
+        config.alpha2,
+    )
 
 
 def row_writers(families: Sequence[ConstraintFamily]) -> tuple[RowWriter, ...]:

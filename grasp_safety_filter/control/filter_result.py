@@ -49,7 +49,9 @@ class FilterResult:
             included) and of the actuator bounds u* touches. ``margins`` and ``active``
             are properties, computed the first time they are read, then kept.
         solve_time: Wall time spent in the QP backend (the hard problem, the relaxed one
-            when needed), s; 0 when no QP was solved.
+            when needed), s; 0 when no QP was solved. A tick solved on the previous
+            active set by the fused pass (:mod:`~grasp_safety_filter.control.fused_tick`):
+            that whole pass's time, the rows and checks included.
         iterations: The backend's solver iterations (both QPs when relaxed); 0 when it was
             not called (no QP solved; OSQP: the previous tick's active set certified).
         active_set_steps: Add/drop steps of an exact active-set refinement after the

@@ -83,14 +83,21 @@ class ResultAssembler:
         solve_time: float,
         iterations: int,
         active_set_steps: int = 0,
+        computed: tuple[np.ndarray, float] | None = None,
     ) -> FilterResult:
-        """Return the result for u* (made read-only) on this tick's rows ``(A, lower)``."""
+        """Return the result for u* (made read-only) on this tick's rows ``(A, lower)``.
+
+        ``computed``: ``(slack, smallest)`` as :func:`residuals` gives them (``slack`` of
+        :attr:`names`' length), when a compiled pass already computed them at u*.
+        """
         u.setflags(write=False)
         k = len(self.row_names)
         # Residuals then (when read) box margins, side by side, for the active-row test.
-        slack = np.empty(len(self.names))
-        A, lower = rows
-        smallest = residuals(A, lower, u, slack)  # slack[:k] = A u - lower
+        if computed is None:
+            slack = np.empty(len(self.names))
+            smallest = residuals(*rows, u, slack)  # slack[:k] = A u - lower
+        else:
+            slack, smallest = computed
         residual = slack[:k]
         relaxed_families: tuple[str, ...] = ()
         worst = 0.0

@@ -36,11 +36,9 @@ instead, :mod:`~grasp_safety_filter.control.qp_metric`; the tick's M_h gives W.)
    ``max_violation`` is inf when a row is not finite.
 
 Torque rate (``torque_rate.enabled``, off by default): rows ``|u_j - u_prev,j| <= du_max``
-with u_prev the u* of the previous tick (:class:`~grasp_safety_filter.control.constraints.
-TorqueRateBound`); vacuous on the first tick, after :meth:`SafetyFilter.reset` and after a
-fallback. They are rows like the others, relaxed with ``relaxation.torque_rate_weight`` (at
-most every safety weight, so a safety row is never given up for the rate); a tick where only
-they had to give is ``relaxed`` with ``relaxed_families == ("torque_rate",)``.
+around the previous u* (:class:`~grasp_safety_filter.control.constraints.TorqueRateBound`;
+vacuous after :meth:`SafetyFilter.reset` or a fallback), relaxed before any safety row: a
+tick where only they gave is ``relaxed`` with ``relaxed_families == ("torque_rate",)``.
 
 Relaxation priorities (defaults): slack weights 1e6 on no-slip and joint-limit rows, 1e3 on
 fingertip-workspace rows. Slacks are normalised to torque-space distance (N·m; the
@@ -68,6 +66,7 @@ from grasp_safety_filter.control.constraints import (
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.control.filter_families import (
     enabled_families,
+    object_workspace_of,
     row_writers,
     rows_compiled,
 )
@@ -77,6 +76,7 @@ from grasp_safety_filter.control.filter_inputs import (
     raise_if_measured_not_finite,
 )
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
+from grasp_safety_filter.control.fused_tick import FusedOutcome, FusedTick
 from grasp_safety_filter.control.margins import Margins
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_metric import INVERSE_INERTIA, write_inertia_factor
@@ -192,6 +192,7 @@ class SafetyFilter:
         self._row_writers = tuple(zip(row_writers(self.families), starts, strict=True))
         self._rows_compiled = rows_compiled(self.families)
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
+        self._fused = FusedTick.of(self)
         self._last_good_u: np.ndarray | None = None
 
     @classmethod
@@ -211,20 +212,6 @@ class SafetyFilter:
         """
         effort = np.asarray(grasp_model.effort_limits, dtype=float)
         config = config if config is not None else SafetyFilterConfig()
-        object_workspace = (
-            ObjectWorkspaceBarrier.for_model(
-                grasp_model,
-                config.object_workspace_margin,
-                (
-                    config.object_workspace_sphere_a_half_width,
-                    config.object_workspace_sphere_b_half_width,
-                ),
-                config.alpha1,
-                config.alpha2,
-            )
-            if config.object_workspace_enabled
-            else None
-        )
         return cls(
             config,
             joint_names=grasp_model.joint_names,
@@ -235,7 +222,7 @@ class SafetyFilter:
             u_max=effort,
             mu=grasp_model.friction_coefficient,
             workspace=tuple(grasp_model.fingertip_workspace),
-            object_workspace=object_workspace,
+            object_workspace=object_workspace_of(grasp_model, config),
         )
 
     @property
@@ -311,19 +298,29 @@ class SafetyFilter:
         return result
 
     def _solve_tick(self, state: GraspState, u_nom: np.ndarray) -> FilterResult:
-        """Run steps 1-6 of the module docstring for one tick (see :meth:`solve`)."""
-        u_nom, rows_finite = self.assemble(state, u_nom)
-        if not rows_finite:
-            # A finite state whose rows overflowed (absurd magnitudes): no QP can help.
-            self.backend.warm_start(None)
-            return self._fallback(state, u_nom, 0.0, 0, 0)
+        """Run steps 1-6 of the module docstring for one tick (see :meth:`solve`).
+
+        Steps 1-3 of a usual tick: one compiled pass, the same answers (:mod:`.fused_tick`).
+        """
         problem = self.problem
-        # Rows first: u_nom violates one on almost every tick that reaches this test.
-        if inside(problem.A, problem.lower, u_nom, self._u_min, self._u_max):
-            self._last_good_u = u_nom
-            # u_nom is the optimum, with no active row (zero multipliers).
-            self.backend.warm_start(Solution(u_nom, SolutionStatus.OPTIMAL))
-            return self._result(state, u_nom, FilterStatus.NOMINAL, 0.0, 0)
+        fused = self._fused.run(state, u_nom) if self._fused is not None else None
+        if fused is None:
+            u_nom, rows_finite = self.assemble(state, u_nom)
+            if not rows_finite:
+                # A finite state whose rows overflowed (absurd magnitudes): no QP can help.
+                self.backend.warm_start(None)
+                return self._fallback(state, u_nom, 0.0, 0, 0)
+            # Rows first: u_nom violates one on almost every tick that reaches this test.
+            if inside(problem.A, problem.lower, u_nom, self._u_min, self._u_max):
+                self._last_good_u = u_nom
+                # u_nom is the optimum, with no active row (zero multipliers).
+                self.backend.warm_start(Solution(u_nom, SolutionStatus.OPTIMAL))
+                return self._result(state, u_nom, FilterStatus.NOMINAL, 0.0, 0)
+        elif fused.u is not None:  # nominal, or solved on the last active set
+            self._last_good_u = fused.u
+            return self._result(state, fused.u, fused.status, fused.solve_time, 0, 0, fused)
+        else:
+            u_nom = fused.u_nom
 
         start = time.perf_counter()
         hard = self.backend.solve(problem)
@@ -397,9 +394,11 @@ class SafetyFilter:
         solve_time: float,
         iterations: int,
         active_set_steps: int = 0,
+        fused: FusedOutcome | None = None,
     ) -> FilterResult:
         """Return the result for u* on this tick's rows (margins and active rows when read)."""
         rows = (self.problem.A, self.problem.lower)
+        computed = fused.computed if fused is not None else None
         return self._results.result(
-            state, u, status, rows, solve_time, iterations, active_set_steps
+            state, u, status, rows, solve_time, iterations, active_set_steps, computed
         )

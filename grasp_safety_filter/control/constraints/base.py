@@ -361,6 +361,19 @@ class BoxBarrier:
             )
         self._last_h = (state, h)
 
+    def packed_rows_arguments(self, state: GraspState, layout: Any) -> tuple[Any, ...]:
+        """``(index, sign, h_offset, (x_start, x_dot_start, x_ddot_start, d), alpha_parameters)``.
+
+        :func:`box_barrier_rows_packed`'s arguments for a packed layout, its shapes checked
+        once per layout (ValueError naming the field).
+        """
+        starts = self._packed_field_starts(state, layout)
+        return self._index, self._sign, self._h_offset, starts, self._alpha_parameters
+
+    def remember_barrier(self, state: GraspState, h: np.ndarray) -> None:
+        """Keep the barrier values h written with the rows at ``state``, for :meth:`values`."""
+        self._last_h = (state, h)
+
     def _packed_field_starts(
         self, state: GraspState, layout: Any
     ) -> tuple[int, int, int, int]:

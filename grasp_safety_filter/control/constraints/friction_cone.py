@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import math
+from typing import Any
 
 import numpy as np
 
@@ -171,12 +172,7 @@ class FrictionPyramid:
         if packed is not None:
             terms, layout = packed
             if layout is not self._packed_layout:
-                # The shapes, checked once per layout.
-                check_rows(
-                    state.contact_force.offset, 3 * len(self.contact_names), 'contact_force'
-                )
-                self._packed_layout = layout
-                self._force_start = layout.start('contact_force_augmented')
+                self.packed_rows_arguments(state, layout)  # checks the shapes once
             self._block.check(A, lower, start, len(self.names), layout, self.family)
             pyramid_rows_packed(
                 self._negative_faces,
@@ -200,6 +196,20 @@ class FrictionPyramid:
             lower,
             start,
         )
+
+    def packed_rows_arguments(
+        self, state: GraspState, layout: Any
+    ) -> tuple[np.ndarray, int, float]:
+        """``(negative_faces, force_start, normal_force_margin)`` for a packed layout.
+
+        :func:`pyramid_rows_packed`'s arguments besides the buffers; ``contact_force``'s
+        shape is checked once per layout (ValueError naming it).
+        """
+        if layout is not self._packed_layout:
+            check_rows(state.contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+            self._packed_layout = layout
+            self._force_start = layout.start('contact_force_augmented')
+        return self._negative_faces, self._force_start, self.normal_force_margin
 
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Margins ``h_ij`` (N) at the contact forces ``f_c(u)`` the torque u produces."""

@@ -73,11 +73,7 @@ class ActiveSetSteps:
         """
         if not guess:
             return None
-        # The same guess tick after tick (the last optimum's active set): its array is kept.
-        known, working_set = self._working_set
-        if guess is not known:
-            working_set = np.fromiter(guess, dtype=np.intp, count=len(guess))
-            self._working_set = (guess, working_set)
+        working_set = self._working_set_array(guess)
         if self._R is None:
             # y = u: the solve, the clip and the row check in one compiled pass.
             outcome, u, multipliers = clipped_optimum_on_working_set(
@@ -104,6 +100,14 @@ class ActiveSetSteps:
         if outcome != 1:
             return None
         return self._keep_if_rows_hold(problem, y, guess, multipliers, iterations)
+
+    def _working_set_array(self, guess: tuple[int, ...]) -> np.ndarray:
+        """Return a guess as an index array (kept while the guess is the same tuple)."""
+        known, working_set = self._working_set
+        if guess is not known:
+            working_set = np.fromiter(guess, dtype=np.intp, count=len(guess))
+            self._working_set = (guess, working_set)
+        return working_set
 
     def _accept_exact(
         self, problem: Problem, exact: LeastDistanceSolution, iterations: int

@@ -149,6 +149,8 @@ class OSQPBackend(ActiveSetSteps):
         self._relaxed_guess: tuple[int, ...] | None = None
         # The last guess tried on the hard problem and its rows as an index array.
         self._working_set: tuple[tuple[int, ...] | None, np.ndarray] = (None, _NO_ROWS)
+        # Step 1 already failed this tick in a compiled pass (guess_rejected): not again.
+        self._guess_rejected = False
         m, k = self._m, self._k
         self._hard.warm_start(x=np.zeros(m), y=np.zeros(k + m))
         self._relaxed.warm_start(x=np.zeros(m + k), y=np.zeros(2 * k + m))
@@ -167,6 +169,40 @@ class OSQPBackend(ActiveSetSteps):
         self._last_active = solution.active
         self._pending = (solution.u, solution.active, solution.multipliers)
 
+    def last_active_guess(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """Return what a compiled pass needs to try step 1 itself (identity metric only).
+
+        Returns:
+            The previous tick's active set as an index array (empty when there is no guess)
+            and the hard least-distance form's rows ``C`` and ``b``, whose first k rows the
+            pass overwrites with the tick's ``A`` and ``lower``; None with a metric.
+        """
+        if self.hard_qp.metric_factor is not None:
+            return None
+        guess = self._last_active
+        working_set = self._working_set_array(guess) if guess else _NO_ROWS
+        return working_set, self._hard_rows, self._hard_lower
+
+    def accept_guess(
+        self, u_nom: np.ndarray, u: np.ndarray, multipliers: np.ndarray
+    ) -> Solution:
+        """Take step 1's optimum found by a compiled pass, as :meth:`solve` would have.
+
+        ``u`` (clipped to the box, rows checked) and ``multipliers`` are
+        :func:`~grasp_safety_filter.control.working_set.clipped_optimum_on_working_set`'s
+        answer on :meth:`last_active_guess`, with this tick's rows already in ``C`` and ``b``.
+        """
+        self._infeasible_rows = None
+        self._relaxed_guess, self._relaxed_active = self._relaxed_active, None
+        self._attempt = None
+        self._set_metric(None, u_nom)
+        guess = self._last_active
+        return self._keep(Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, 0))
+
+    def guess_rejected(self) -> None:
+        """Skip step 1 in the next hard solve: a compiled pass found the guess not optimal."""
+        self._guess_rejected = True
+
     def solve(self, problem: Problem) -> Solution:
         """Solve the hard or the relaxed problem (relaxed: right after its hard problem)."""
         return self._solve_relaxed(problem) if problem.relaxed else self._solve_hard(problem)
@@ -182,7 +218,8 @@ class OSQPBackend(ActiveSetSteps):
         u_nom = -problem.g
         self._set_metric(problem.metric_factor, u_nom)
         C, y_nom = self._rows_y, self._y_nom
-        if self._last_active:
+        rejected, self._guess_rejected = self._guess_rejected, False
+        if self._last_active and not rejected:
             solution = self._on_guess(problem, self._last_active, 0)
             if solution is not None:
                 return solution
