@@ -122,6 +122,13 @@ def euler_rates(phi: np.ndarray, twist: np.ndarray, out: np.ndarray) -> None:
 
 
 @kernel
+def twist(phi: np.ndarray, r_dot: np.ndarray, out: np.ndarray) -> None:
+    """``out = P(phi) r_dot = (v, E phi_dot)``, (6,)."""
+    out[:3] = r_dot[:3]
+    out[3:] = np.dot(rate_jacobian(phi), np.ascontiguousarray(r_dot[3:]))
+
+
+@kernel
 def acceleration(
     phi: np.ndarray, r_dot: np.ndarray, r_ddot: np.ndarray, out: np.ndarray
 ) -> None:

@@ -323,14 +323,12 @@ class NominalController:
         )
 
 
-#: The state arrays the law reads, with their shapes in terms of (3n, m, n).
-_STATE_SHAPES = {
-    'J_h': ('rows', 'm'), 'G': (6, 'rows'), 'M_h': ('m', 'm'), 'h_bias': ('m',),
-    'gravity_torque': ('m',), 'q': ('m',), 'dq': ('m',), 'G_dot_T_twist': ('rows',),
-    'Jh_dot_dq': ('rows',), 'M_o': (6, 6), 'C_o_twist': (6,), 'w_e': (6,),
-    'p_object_in_palm': (3,), 'R_object_to_palm': (3, 3), 'twist_object': (6,),
-    'p_contact_in_palm': ('n', 3), 'R_contact_to_palm': ('n', 3, 3),
-}
+#: The state arrays the law reads, in the order _check_state lists their shapes.
+_STATE_ARRAYS = (
+    'J_h', 'G', 'M_h', 'h_bias', 'gravity_torque', 'q', 'dq', 'G_dot_T_twist', 'Jh_dot_dq',
+    'M_o', 'C_o_twist', 'w_e', 'p_object_in_palm', 'R_object_to_palm', 'twist_object',
+    'p_contact_in_palm', 'R_contact_to_palm',
+)
 
 
 def _check_state(state: GraspState) -> tuple[int, int]:
@@ -351,14 +349,22 @@ def _check_state(state: GraspState) -> tuple[int, int]:
             f'rolling contacts fix 3n = {rows} joint-velocity components, so the law needs '
             f'm >= 3n (with fewer joints the fingers cannot follow every object motion)'
         )
-    sizes = {'rows': rows, 'm': m, 'n': rows // 3}
-    arrays = [getattr(state, name) for name in _STATE_SHAPES]
-    expected_shapes = [tuple(sizes.get(d, d) for d in s) for s in _STATE_SHAPES.values()]
-    if [(a.shape, a.dtype) for a in arrays] != [(s, _FLOAT) for s in expected_shapes]:
-        for name, expected, array in zip(_STATE_SHAPES, expected_shapes, arrays, strict=True):
-            if array.shape != expected or array.dtype != _FLOAT:
+    n = rows // 3
+    arrays = (
+        J_h, state.G, state.M_h, state.h_bias, state.gravity_torque, state.q, state.dq,
+        state.G_dot_T_twist, state.Jh_dot_dq, state.M_o, state.C_o_twist, state.w_e,
+        state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
+        state.p_contact_in_palm, state.R_contact_to_palm,
+    )
+    expected = (
+        (rows, m), (6, rows), (m, m), (m,), (m,), (m,), (m,), (rows,), (rows,), (6, 6), (6,),
+        (6,), (3,), (3, 3), (6,), (n, 3), (n, 3, 3),
+    )
+    if tuple(a.shape for a in arrays) != expected or any(a.dtype != _FLOAT for a in arrays):
+        for name, shape, array in zip(_STATE_ARRAYS, expected, arrays, strict=True):
+            if array.shape != shape or array.dtype != _FLOAT:
                 raise ValueError(
-                    f'NominalController: state.{name}: expected float64 of shape {expected} '
+                    f'NominalController: state.{name}: expected float64 of shape {shape} '
                     f'(3n = {rows} contact rows, m = {m} joints), got {array.dtype} of shape '
                     f'{array.shape}'
                 )
