@@ -8,7 +8,9 @@ synthetic redundant hands (m > 3n: the null-space term) and of the four-finger h
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import re
 
 from grasp_states import CONFIG_DIR, paper_model, random_configuration
 import nominal_oracle as oracle
@@ -176,3 +178,30 @@ def test_pose_error_wraps_as_numpy_remainder_bit_for_bit():
         assert np.array_equal(pose_error.euler_pose_error(r_reference, r_object), expected)
         angle = r_reference[3 + k % 3]
         assert euler_kernel.wrap_angle(angle) == oracle.wrap_angle(angle)
+
+
+@pytest.mark.parametrize(
+    ('field', 'bad', 'shape'),
+    [
+        ('G', lambda s: s.G[:, :-3], '(6, 9)'),
+        ('h_bias', lambda s: s.h_bias[:-1], '(9,)'),
+        ('R_contact_to_palm', lambda s: s.R_contact_to_palm[:2], '(3, 3, 3)'),
+        ('twist_object', lambda s: s.twist_object.astype(np.float32), '(6,)'),
+    ],
+)
+def test_a_state_array_of_the_wrong_shape_or_type_is_named_before_any_kernel(field, bad, shape):
+    state = make_state('paper', 0)
+    broken = dataclasses.replace(state, **{field: bad(state)})
+    hold = ReferenceSample.from_pose(Pose(state.p_object_in_palm, state.R_object_to_palm))
+    expected = rf'state\.{field}: expected float64 of shape {re.escape(shape)}'
+    with pytest.raises(ValueError, match=expected):
+        NominalController().compute(broken, hold)
+
+
+def test_euler_functions_name_an_argument_of_the_wrong_shape():
+    expected = r'euler_from_matrix: R: expected shape \(3, 3\), got \(2, 2\)'
+    with pytest.raises(ValueError, match=expected):
+        pose_error.euler_from_matrix(np.eye(2))
+    expected = r'acceleration_from_euler: r_ddot: expected shape \(6,\)'
+    with pytest.raises(ValueError, match=expected):
+        pose_error.acceleration_from_euler(np.zeros(3), np.zeros(6), np.zeros(5))

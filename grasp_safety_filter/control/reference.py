@@ -128,6 +128,16 @@ class ReferenceSample:
         r_ddot = euler_accelerations_from_acceleration(r[3:], r_dot, acceleration)
         return cls(r=r, r_dot=r_dot, r_ddot=r_ddot, stale=stale)
 
+    @classmethod
+    def _of_checked(cls, r: np.ndarray, r_dot: np.ndarray, r_ddot: np.ndarray) -> ReferenceSample:
+        """Wrap finite read-only (6,) float arrays as they are (what the checks would make)."""
+        sample = object.__new__(cls)
+        object.__setattr__(sample, 'r', r)
+        object.__setattr__(sample, 'r_dot', r_dot)
+        object.__setattr__(sample, 'r_ddot', r_ddot)
+        object.__setattr__(sample, 'stale', False)
+        return sample
+
     @property
     def pose(self) -> Pose:
         """The desired pose."""
@@ -205,24 +215,26 @@ class PaperReference:
 
     def sample(self, t: float) -> ReferenceSample:
         """Return the reference at time ``t``, s (never stale)."""
-        r, r_dot, r_ddot = _paper_motion(
-            self._r0, self.amplitude, self.frequency, self.t0, float(t)
-        )
-        return ReferenceSample(r=r, r_dot=r_dot, r_ddot=r_ddot)
+        motion = _paper_motion(self._r0, self.amplitude, self.frequency, self.t0, float(t))
+        if not _all_finite(motion):
+            # The checking constructor names the entry that is not finite.
+            return ReferenceSample(r=motion[0], r_dot=motion[1], r_ddot=motion[2])
+        motion.flags.writeable = False
+        return ReferenceSample._of_checked(motion[0], motion[1], motion[2])
 
 
 @kernel
 def _paper_motion(
     r0: np.ndarray, amplitude: np.ndarray, frequency: float, t0: float, t: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(r, r_dot, r_ddot)`` of :class:`PaperReference` at time t, (6,) each."""
+) -> np.ndarray:
+    """Rows ``r, r_dot, r_ddot`` of :class:`PaperReference` at time t, shape (3, 6)."""
     phase = frequency * (t - t0)
     w = frequency
-    return (
-        r0 + amplitude * (math.cos(phase) - 1.0),
-        -w * amplitude * math.sin(phase),
-        -w * w * amplitude * math.cos(phase),
-    )
+    motion = np.empty((3, 6))
+    motion[0] = r0 + amplitude * (math.cos(phase) - 1.0)
+    motion[1] = -w * amplitude * math.sin(phase)
+    motion[2] = -w * w * amplitude * math.cos(phase)
+    return motion
 
 
 class TopicReference:
