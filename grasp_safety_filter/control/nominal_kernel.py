@@ -12,10 +12,14 @@ results can differ from numpy's in the last bit)::
     solve   (G G^T) y = u_m
     kernel  joint_torque: u_f and u = J_h^T (G^T y + u_f) + g + tau_null
 
-Every product is ``np.dot`` on operands laid out as the numpy expressions of the law lay
-them out, which numba hands to the same BLAS routines (gemm, gemv) as numpy's ``@``: the
-results are equal to the last bit. Shapes are not checked here (numba does not check
-bounds): :class:`~grasp_safety_filter.control.nominal.NominalController` does.
+Every product is ``np.dot`` on operands laid out as in the numpy expressions of the law;
+numba hands them to BLAS's gemm and gemv (scipy's OpenBLAS) as numpy's ``@`` does (its own
+OpenBLAS; ``G @ G.T`` by syrk), and test/test_nominal_kernel.py checks that the results are
+equal to the last bit. The rank check's Cholesky factorisation is numba's (scipy's LAPACK):
+a last-bit difference can only move a pivot that sits at the threshold, and the controller
+checks a Lambda^-1 rejected here again with numpy's before it raises. Shapes are not checked
+here (numba does not check bounds):
+:class:`~grasp_safety_filter.control.nominal.NominalController` does.
 """
 
 from __future__ import annotations
