@@ -8,8 +8,9 @@ results are equal to the last bit:
 - :func:`euler_angles` is Pinocchio's ``rpy.matrixToRpy``: Eigen's ``eulerAngles(2, 1, 0)``
   (Graphics Gems IV), reversed, with pitch brought into [-pi/2, pi/2];
 - E, E^-1 and dE/dt are Pinocchio's ``computeRpyJacobian``, ``...Inverse`` and
-  ``...TimeDerivative`` in the ``WORLD`` frame; their products with vectors are numpy's
-  (``np.dot`` of C-ordered 3 × 3 matrices, i.e. the same BLAS call as ``@`` in numpy);
+  ``...TimeDerivative`` in the ``WORLD`` frame; their products with vectors are ``np.dot``
+  of C-ordered 3 × 3 matrices, BLAS's gemv as numpy's ``@`` calls it (a plain loop would
+  not round as BLAS does; test/test_nominal_kernel.py checks the equality);
 - :func:`wrap_angle` is the same ``remainder`` (numba's is numpy's).
 
 Angles in rad, rates in rad/s, accelerations in rad/s².

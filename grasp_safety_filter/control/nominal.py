@@ -356,11 +356,11 @@ def _check_state(state: GraspState) -> tuple[int, int]:
         state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
         state.p_contact_in_palm, state.R_contact_to_palm,
     )
-    expected = (
+    expected = [
         (rows, m), (6, rows), (m, m), (m,), (m,), (m,), (m,), (rows,), (rows,), (6, 6), (6,),
         (6,), (3,), (3, 3), (6,), (n, 3), (n, 3, 3),
-    )
-    if tuple(a.shape for a in arrays) != expected or any(a.dtype != _FLOAT for a in arrays):
+    ]
+    if [a.shape for a in arrays] != expected or {a.dtype for a in arrays} != {_FLOAT}:
         for name, shape, array in zip(_STATE_ARRAYS, expected, arrays, strict=True):
             if array.shape != shape or array.dtype != _FLOAT:
                 raise ValueError(
