@@ -339,9 +339,7 @@ def _check_state(state: GraspState) -> tuple[int, int]:
     """
     J_h = state.J_h
     if J_h.ndim != 2 or J_h.shape[0] % 3:
-        raise ValueError(
-            f'NominalController: state.J_h: expected shape (3n, m), got {J_h.shape}'
-        )
+        raise ValueError(f'NominalController: state.J_h: expected shape (3n, m), got {J_h.shape}')
     rows, m = J_h.shape
     if m < rows:
         raise ValueError(
