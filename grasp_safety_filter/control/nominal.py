@@ -68,12 +68,7 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.control.pose_error import (
-    acceleration_from_euler,
-    euler_from_matrix,
-    euler_pose_error,
-    euler_rates_from_twist,
-)
+from grasp_safety_filter.control import nominal_kernel
 from grasp_safety_filter.control.reference import (
     PAPER_AMPLITUDE,
     PAPER_FREQUENCY,
@@ -242,12 +237,10 @@ class NominalController:
         centre of mass, ``sum_i (p_c,i - p_o) × k_f (p_bar_c - p_c,i)
         = k_f (p_bar_c - p_o) × sum_i (p_bar_c - p_c,i) = 0``: it lies in null(G).
         """
-        p_contact = state.p_contact_in_palm
-        # The centroid as a sum (ndarray.mean costs several µs of bookkeeping at this size).
-        p_centroid = p_contact.sum(axis=0) / p_contact.shape[0]
-        f_palm = self.config.kf * (p_centroid - p_contact)
-        # G acts on contact-frame forces: express each in C_i, R_pc^T f = (f^T R_pc)^T.
-        return (f_palm[:, None, :] @ state.R_contact_to_palm).reshape(-1)
+        _check_state(state)
+        return nominal_kernel.internal_force(
+            state.p_contact_in_palm, state.R_contact_to_palm, self.config.kf
+        )
 
     def desired_object_acceleration(
         self, state: GraspState, reference: ReferenceSample
@@ -262,28 +255,23 @@ class NominalController:
         disturbance ``-P^-1 P_dot r_o_dot`` in the error dynamics whenever the object turns
         about more than one axis.
         """
-        phi_object = euler_from_matrix(state.R_object_to_palm)
-        r_object = np.concatenate((state.p_object_in_palm, phi_object))
-        r_object_dot = euler_rates_from_twist(phi_object, state.twist_object)
-        e = euler_pose_error(reference.r, r_object)
-        e_dot = reference.r_dot - r_object_dot
-        r_object_ddot = reference.r_ddot + self.config.kp * e + self.config.kd * e_dot
-        x_ddot = acceleration_from_euler(phi_object, r_object_dot, r_object_ddot)
-        return x_ddot, e, e_dot
+        _check_state(state)
+        return nominal_kernel.desired_acceleration(
+            state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
+            reference.r, reference.r_dot, reference.r_ddot, self.config.kp, self.config.kd,
+        )
 
     def compute(self, state: GraspState, reference: ReferenceSample) -> NominalOutput:
         """Nominal joint torque for the current grasp state and reference sample.
 
         Raises:
-            ValueError: Fewer joints than contact constraint rows (m < 3n), or a posture of
-                the wrong length.
+            ValueError: Fewer joints than contact constraint rows (m < 3n), a state array
+                of the wrong shape or type, or a posture of the wrong length.
             numpy.linalg.LinAlgError: J_h is rank-deficient (rank < 3n), M_h is not
                 positive definite, or G G^T is exactly singular.
 
         """
-        J_h = state.J_h
-        rows, m = J_h.shape
-        _check_joint_count(rows, m)
+        rows, m = _check_state(state)
         if self._posture is None:
             self._posture = np.array(state.q, dtype=float)
         elif self._posture.shape != (m,):
@@ -291,50 +279,38 @@ class NominalController:
                 f'NominalController: posture has {self._posture.size} joint angles, the hand '
                 f'{m} joints'
             )
-        G = state.G
-        M_h = state.M_h
-        x_ddot_des, e, e_dot = self.desired_object_acceleration(state, reference)
-
-        # X = M_h^-1 J_h^T, Lambda^-1 = J_h X; Lambda = (J_h M_h^-1 J_h^T)^-1 is the
-        # contact-space inertia, J_bar = X Lambda, and J_h M_h^-1 = X^T (M_h symmetric).
-        C_h_dq = state.h_bias - state.gravity_torque
-        redundant = m > rows
+        config = self.config
+        J_h, G, M_h = state.J_h, state.G, state.M_h
+        # The solves are numpy's (nominal_kernel's docstring); the rest is compiled. With
+        # X = M_h^-1 J_h^T: Lambda^-1 = J_h X, J_bar = X Lambda, J_h M_h^-1 = X^T.
         rhs_m = np.empty((m, rows + 1))
         rhs_m[:, :rows] = J_h.T
-        rhs_m[:, rows] = C_h_dq
+        rhs_m[:, rows] = state.h_bias - state.gravity_torque  # C_h dq
         solution_m = np.linalg.solve(M_h, rhs_m)
-        X, M_inv_C_h_dq = solution_m[:, :rows], solution_m[:, rows]
-        contact_inertia_inv = J_h @ X
-        _check_rank(J_h, contact_inertia_inv)
+        contact_inertia_inv, rhs, a_null, full_rank = nominal_kernel.contact_space_terms(
+            J_h, solution_m, G, state.G_dot_T_twist, state.Jh_dot_dq, state.q, self._posture,
+            state.dq, config.null_space_kp, config.null_space_kd, RANK_TOLERANCE,
+        )
+        if not full_rank:
+            _check_rank(J_h, contact_inertia_inv)
         # One solve with Lambda^-1 for G Lambda G^T, the C_ho term and, for a redundant
         # hand, Lambda J_h a_null (the range-space part of M_h a_null, see tau_null):
-        #   [Lambda G^T | Lambda (J_h M_h^-1 C_h dq + G_dot^T x_dot - J_h_dot dq) | ...].
-        rhs = np.empty((rows, 8 if redundant else 7))
-        rhs[:, :6] = G.T
-        rhs[:, 6] = J_h @ M_inv_C_h_dq + state.G_dot_T_twist - state.Jh_dot_dq
-        if redundant:
-            # a_null = -k_null,p (q - q_posture) - k_null,d dq, a joint acceleration;
-            # tau_null = N^T M_h a_null = M_h a_null - J_h^T Lambda J_h a_null.
-            a_null = (
-                -self.config.null_space_kp * (state.q - self._posture)
-                - self.config.null_space_kd * state.dq
-            )
-            rhs[:, 7] = J_h @ a_null
+        #   [Lambda G^T | Lambda (J_h M_h^-1 C_h dq + G_dot^T x_dot - J_h_dot dq) | ...],
+        # a_null = -k_null,p (q - q_posture) - k_null,d dq and
+        # tau_null = N^T M_h a_null = M_h a_null - J_h^T Lambda J_h a_null.
         solution = np.linalg.solve(contact_inertia_inv, rhs)
-        M_ho = state.M_o + G @ solution[:, :6]
-        C_ho_x_dot = state.C_o_twist + G @ solution[:, 6]
-        u_m = M_ho @ x_ddot_des + C_ho_x_dot - state.w_e
-        if redundant:
-            tau_null = M_h @ a_null - J_h.T @ solution[:, 7]
-        else:
-            tau_null = np.zeros(m)
-
+        u_m, tau_null, x_ddot_des, e, e_dot, G_G_T = nominal_kernel.object_wrench(
+            state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
+            reference.r, reference.r_dot, reference.r_ddot, config.kp, config.kd,
+            state.M_o, state.C_o_twist, state.w_e, G, solution, M_h, J_h, a_null,
+        )
         # G has full row rank: its minimum-norm right inverse is G^+ = G^T (G G^T)^-1
         # (np.linalg.lstsq would take an SVD for the same 6 × 3n system).
-        f_manipulation = G.T @ np.linalg.solve(G @ G.T, u_m)
-        u_f = self.internal_force(state)
         # -tau_e = g(q): gravity compensation of the fingers.
-        u = J_h.T @ (f_manipulation + u_f) + state.gravity_torque + tau_null
+        u, u_f = nominal_kernel.joint_torque(
+            G, np.linalg.solve(G_G_T, u_m), J_h, state.p_contact_in_palm,
+            state.R_contact_to_palm, config.kf, state.gravity_torque, tau_null,
+        )
         return NominalOutput(
             u=u,
             u_manipulation_wrench=u_m,
@@ -347,14 +323,53 @@ class NominalController:
         )
 
 
-def _check_joint_count(rows: int, m: int) -> None:
-    """Refuse a hand with fewer joints than contact constraint rows (m < 3n)."""
+#: The state arrays the law reads, in the order _check_state lists their shapes.
+_STATE_ARRAYS = (
+    'J_h', 'G', 'M_h', 'h_bias', 'gravity_torque', 'q', 'dq', 'G_dot_T_twist', 'Jh_dot_dq',
+    'M_o', 'C_o_twist', 'w_e', 'p_object_in_palm', 'R_object_to_palm', 'twist_object',
+    'p_contact_in_palm', 'R_contact_to_palm',
+)
+
+
+def _check_state(state: GraspState) -> tuple[int, int]:
+    """Return (3n, m) of the state's arrays; ValueError naming any of the wrong shape or type.
+
+    The compiled kernels do not check bounds: every array they read is checked here, and
+    the hand must have m >= 3n joints for n contacts.
+    """
+    J_h = state.J_h
+    if J_h.ndim != 2 or J_h.shape[0] % 3:
+        raise ValueError(f'NominalController: state.J_h: expected shape (3n, m), got {J_h.shape}')
+    rows, m = J_h.shape
     if m < rows:
         raise ValueError(
             f'NominalController: the hand has m = {m} joints for n = {rows // 3} contacts; '
             f'rolling contacts fix 3n = {rows} joint-velocity components, so the law needs '
             f'm >= 3n (with fewer joints the fingers cannot follow every object motion)'
         )
+    n = rows // 3
+    arrays = (
+        J_h, state.G, state.M_h, state.h_bias, state.gravity_torque, state.q, state.dq,
+        state.G_dot_T_twist, state.Jh_dot_dq, state.M_o, state.C_o_twist, state.w_e,
+        state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
+        state.p_contact_in_palm, state.R_contact_to_palm,
+    )
+    expected = [
+        (rows, m), (6, rows), (m, m), (m,), (m,), (m,), (m,), (rows,), (rows,), (6, 6), (6,),
+        (6,), (3,), (3, 3), (6,), (n, 3), (n, 3, 3),
+    ]
+    if [a.shape for a in arrays] != expected or {a.dtype for a in arrays} != {_FLOAT}:
+        for name, shape, array in zip(_STATE_ARRAYS, expected, arrays, strict=True):
+            if array.shape != shape or array.dtype != _FLOAT:
+                raise ValueError(
+                    f'NominalController: state.{name}: expected float64 of shape {shape} '
+                    f'(3n = {rows} contact rows, m = {m} joints), got {array.dtype} of shape '
+                    f'{array.shape}'
+                )
+    return rows, m
+
+
+_FLOAT = np.dtype(float)
 
 
 def _check_rank(J_h: np.ndarray, contact_inertia_inv: np.ndarray) -> None:

@@ -12,6 +12,10 @@ which is how :class:`~grasp_safety_filter.model.grasp_state.GraspState` expresse
     x_o_dot = P(phi) r_dot,       P = blkdiag(I3, E(phi))   (the paper's P)
 
 E is singular at pitch = ±pi/2 (gimbal lock); the controller is not defined there.
+
+The functions check their arguments' shapes and call the compiled
+:mod:`grasp_safety_filter.control.euler_kernel`, which reproduces Pinocchio's functions to
+the last bit (the controller's tick calls those kernels directly).
 """
 
 from __future__ import annotations
@@ -19,10 +23,20 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pinocchio as pin
 from pinocchio import rpy
 
-_WORLD = pin.ReferenceFrame.WORLD
+from grasp_safety_filter.control import euler_kernel
+
+
+def _array(function: str, name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a float array of ``shape``; ValueError naming it otherwise.
+
+    The compiled functions of :mod:`.euler_kernel` do not check bounds.
+    """
+    array = np.asarray(value, dtype=float)
+    if array.shape != shape:
+        raise ValueError(f'{function}: {name}: expected shape {shape}, got {array.shape}')
+    return array
 
 
 def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
@@ -35,9 +49,12 @@ def wrap_angle(angle: np.ndarray | float) -> np.ndarray:
 def euler_from_matrix(R: np.ndarray) -> np.ndarray:
     """ZYX Euler angles ``(roll, pitch, yaw)`` of a rotation matrix, rad.
 
-    ``R = R_z(yaw) R_y(pitch) R_x(roll)`` with roll, yaw in [-pi, pi], pitch in [-pi/2, pi/2].
+    ``R = R_z(yaw) R_y(pitch) R_x(roll)`` with roll, yaw in [-pi, pi], pitch in [-pi/2, pi/2]
+    (Pinocchio's ``rpy.matrixToRpy``).
     """
-    return np.asarray(rpy.matrixToRpy(np.asarray(R, dtype=float)), dtype=float)
+    phi = np.empty(3)
+    euler_kernel.euler_angles(_array('euler_from_matrix', 'R', R, (3, 3)), phi)
+    return phi
 
 
 def matrix_from_euler(phi: np.ndarray) -> np.ndarray:
@@ -51,34 +68,45 @@ def euler_rate_jacobian(phi: np.ndarray) -> np.ndarray:
     ``w_palm = E(phi) phi_dot`` with
     ``E = [[cp cy, -sy, 0], [cp sy, cy, 0], [-sp, 0, 1]]`` (p = pitch, y = yaw).
     """
-    return np.asarray(rpy.computeRpyJacobian(np.asarray(phi, dtype=float), _WORLD))
+    return euler_kernel.rate_jacobian(_array('euler_rate_jacobian', 'phi', phi, (3,)))
 
 
 def euler_rate_jacobian_dot(phi: np.ndarray, phi_dot: np.ndarray) -> np.ndarray:
     """Time derivative ``dE/dt`` along ``phi_dot``, shape (3, 3), 1/s."""
-    return np.asarray(
-        rpy.computeRpyJacobianTimeDerivative(
-            np.asarray(phi, dtype=float), np.asarray(phi_dot, dtype=float), _WORLD
-        )
+    return euler_kernel.rate_jacobian_dot(
+        _array('euler_rate_jacobian_dot', 'phi', phi, (3,)),
+        _array('euler_rate_jacobian_dot', 'phi_dot', phi_dot, (3,)),
     )
 
 
 def euler_rates_from_angular_velocity(phi: np.ndarray, w_palm: np.ndarray) -> np.ndarray:
     """``phi_dot = E(phi)^-1 w_palm``, rad/s (closed-form inverse; singular at gimbal lock)."""
-    E_inv = rpy.computeRpyJacobianInverse(np.asarray(phi, dtype=float), _WORLD)
-    return np.asarray(E_inv @ np.asarray(w_palm, dtype=float))
+    E_inv = euler_kernel.rate_jacobian_inverse(
+        _array('euler_rates_from_angular_velocity', 'phi', phi, (3,))
+    )
+    return E_inv @ _array('euler_rates_from_angular_velocity', 'w_palm', w_palm, (3,))
 
 
 def twist_from_euler(phi: np.ndarray, r_dot: np.ndarray) -> np.ndarray:
     """Twist ``x_dot = P(phi) r_dot = (v, E(phi) phi_dot)``, shape (6,)."""
-    r_dot = np.asarray(r_dot, dtype=float)
-    return np.concatenate((r_dot[:3], euler_rate_jacobian(phi) @ r_dot[3:]))
+    out = np.empty(6)
+    euler_kernel.twist(
+        _array('twist_from_euler', 'phi', phi, (3,)),
+        _array('twist_from_euler', 'r_dot', r_dot, (6,)),
+        out,
+    )
+    return out
 
 
 def euler_rates_from_twist(phi: np.ndarray, twist: np.ndarray) -> np.ndarray:
     """Euler-coordinate rates ``r_dot = P(phi)^-1 x_dot = (v, E^-1 w)``, shape (6,)."""
-    twist = np.asarray(twist, dtype=float)
-    return np.concatenate((twist[:3], euler_rates_from_angular_velocity(phi, twist[3:])))
+    out = np.empty(6)
+    euler_kernel.euler_rates(
+        _array('euler_rates_from_twist', 'phi', phi, (3,)),
+        _array('euler_rates_from_twist', 'twist', twist, (6,)),
+        out,
+    )
+    return out
 
 
 def acceleration_from_euler(phi: np.ndarray, r_dot: np.ndarray, r_ddot: np.ndarray) -> np.ndarray:
@@ -87,22 +115,29 @@ def acceleration_from_euler(phi: np.ndarray, r_dot: np.ndarray, r_ddot: np.ndarr
     ``a`` is the centre-of-mass acceleration and ``alpha = w_dot`` the angular acceleration,
     both in palm coordinates, shape (6,).
     """
-    r_dot = np.asarray(r_dot, dtype=float)
-    r_ddot = np.asarray(r_ddot, dtype=float)
-    phi_dot, phi_ddot = r_dot[3:], r_ddot[3:]
-    alpha = euler_rate_jacobian(phi) @ phi_ddot + euler_rate_jacobian_dot(phi, phi_dot) @ phi_dot
-    return np.concatenate((r_ddot[:3], alpha))
+    out = np.empty(6)
+    euler_kernel.acceleration(
+        _array('acceleration_from_euler', 'phi', phi, (3,)),
+        _array('acceleration_from_euler', 'r_dot', r_dot, (6,)),
+        _array('acceleration_from_euler', 'r_ddot', r_ddot, (6,)),
+        out,
+    )
+    return out
 
 
 def euler_accelerations_from_acceleration(
     phi: np.ndarray, r_dot: np.ndarray, acceleration: np.ndarray
 ) -> np.ndarray:
     """Inverse of :func:`acceleration_from_euler`: ``r_ddot = P^-1 (x_ddot - P_dot r_dot)``."""
-    r_dot = np.asarray(r_dot, dtype=float)
-    acceleration = np.asarray(acceleration, dtype=float)
-    alpha_from_rates = euler_rate_jacobian_dot(phi, r_dot[3:]) @ r_dot[3:]
-    phi_ddot = euler_rates_from_angular_velocity(phi, acceleration[3:] - alpha_from_rates)
-    return np.concatenate((acceleration[:3], phi_ddot))
+    name = 'euler_accelerations_from_acceleration'
+    out = np.empty(6)
+    euler_kernel.euler_accelerations(
+        _array(name, 'phi', phi, (3,)),
+        _array(name, 'r_dot', r_dot, (6,)),
+        _array(name, 'acceleration', acceleration, (6,)),
+        out,
+    )
+    return out
 
 
 def euler_pose_error(r_reference: np.ndarray, r_object: np.ndarray) -> np.ndarray:
@@ -118,8 +153,10 @@ def euler_pose_error(r_reference: np.ndarray, r_object: np.ndarray) -> np.ndarra
     2 pi branch either is reported on. The error rate and the maps ``P``, ``P_dot`` depend
     only on pitch and yaw through sines and cosines, so they need no unwrapping.
     """
-    r_reference = np.asarray(r_reference, dtype=float)
-    r_object = np.asarray(r_object, dtype=float)
-    return np.concatenate(
-        (r_reference[:3] - r_object[:3], wrap_angle(r_reference[3:] - r_object[3:]))
+    out = np.empty(6)
+    euler_kernel.pose_error(
+        _array('euler_pose_error', 'r_reference', r_reference, (6,)),
+        _array('euler_pose_error', 'r_object', r_object, (6,)),
+        out,
     )
+    return out
