@@ -16,7 +16,8 @@ another thread), so it lands in the program's own code.
 Nor is it raised while the main thread is importing a module: an extension module that
 runs Python code while it initialises (numpy imports ``datetime``) turns an exception
 raised there into an ``ImportError``. The signal is delivered again a little later, until
-the import is done.
+the import is done. The same for Python code that numba's compiled code calls
+(``_numba_unpickle``), which turns an exception raised there into ``SystemError``.
 
 A long-running node takes no exception at all: :class:`TerminationRequests` records the
 signal and its loop ends at the next turn.
@@ -55,6 +56,11 @@ IMPORT_REDELIVERY_DELAY = 10e-3
 _IMPORT_SYSTEM = frozenset(
     {'<frozen importlib._bootstrap>', '<frozen importlib._bootstrap_external>'}
 )
+
+
+#: Functions of numba's that its C code calls, in the file :data:`_NUMBA_SERIALIZE`.
+_NUMBA_CALLBACKS = frozenset({'_numba_unpickle'})
+_NUMBA_SERIALIZE = os.path.join('numba', 'core', 'serialize.py')
 
 
 class SignalInterrupt(KeyboardInterrupt):
@@ -121,6 +127,20 @@ def importing(frame: FrameType | None) -> bool:
     return False
 
 
+def in_numba_callback(frame: FrameType | None) -> bool:
+    """Whether ``frame`` or one of its callers is Python code that numba's C code called.
+
+    Compiled code calls ``_numba_unpickle`` for an object constant (an exception it raises,
+    a cached kernel's globals); an exception raised in it becomes ``SystemError``.
+    """
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name in _NUMBA_CALLBACKS and code.co_filename.endswith(_NUMBA_SERIALIZE):
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _handle_signal(signum: int, frame: FrameType | None) -> None:
     if _InterruptState.closing:
         _InterruptState.held = signum
@@ -129,7 +149,7 @@ def _handle_signal(signum: int, frame: FrameType | None) -> None:
         # Inside a write or close: interrupt once the block is done.
         _InterruptState.pending, _InterruptState.held = signum, None
         return
-    if importing(frame) and _Redelivery.queue is not None:
+    if (importing(frame) or in_numba_callback(frame)) and _Redelivery.queue is not None:
         _InterruptState.held = signum
         _Redelivery.queue.put((signum, IMPORT_REDELIVERY_DELAY))
         return
