@@ -261,7 +261,7 @@ the rigid plant and is "not judged".
 exit codes:
   0    the runs completed as asked (a run that slips or stops early is an outcome)
   1    a run did not show its scenario's expected outcome (expected_outcome), or a run
-       failed (with --jobs 2: the nominal run's process raised or died)
+       failed (grasp-demo --jobs 2: the nominal run's own process raised or died)
   2    a user error: a bad scenario file, parameter, bag or output directory
   130  interrupted (SIGINT, SIGTERM)
 """

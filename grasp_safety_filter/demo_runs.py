@@ -12,7 +12,8 @@ numba's loading of a cached kernel, would fail the run with ``SystemError``). Th
 decides: once its own run has been interrupted, or a signal came while it waited for the
 child, it asks the child to stop through a shared byte, which the child's run reads at
 each simulated step and then stops as that signal would stop it (its bag closed, with
-its summary when it recorded a step). A child past its recording completes its analysis.
+its summary when it recorded a step). A child past its recording completes its analysis;
+one that gives no outcome within ``ForkedCall.least_wait`` of the request is killed.
 
 A child that cannot be forked is no failure: the runs are done one after the other. A
 child that raises or dies is a failed run (exit code 1), reported as such.
@@ -187,16 +188,15 @@ def side_by_side(
             yield from one_after_the_other(runs, progress_for, force)
             return
         with child:
-            started = time.monotonic()
             try:
                 own = run_outcome(own_options, own_dir, progress_for(own_options.mode), force)
             except BaseException as error:  # a bug in this run, or a signal between runs
                 stop.ask(error.signum if isinstance(error, SignalInterrupt) else signal.SIGTERM)
-                _child_outcome(child, child_options.mode, child_dir, stop, started)
+                _child_outcome(child, child_options.mode, child_dir, stop)
                 raise
             if own.interruption is not None:
                 stop.ask(signal.Signals[own.interruption.signal])
-            first = _child_outcome(child, child_options.mode, child_dir, stop, started)
+            first = _child_outcome(child, child_options.mode, child_dir, stop)
     yield first
     yield own
     if stop.asked and first.completed and own.completed:
@@ -204,34 +204,33 @@ def side_by_side(
 
 
 def _child_outcome(
-    child: ForkedCall[RunOutcome], mode: str, out_dir: Path, stop: _StopRequest, started: float
+    child: ForkedCall[RunOutcome], mode: str, out_dir: Path, stop: _StopRequest
 ) -> RunOutcome:
     """Wait for the child's outcome; forward a signal that comes meanwhile; reap it.
 
-    The wait is bounded as :meth:`ForkedCall.result`'s: twice this process's own run since
-    the fork (the child's run is the shorter), at least ``least_wait``; again at least
-    ``least_wait`` from a stop request on. A child that exceeds it is killed.
+    The child runs as long as its run takes; once asked to stop, it has ``least_wait``
+    to end (it stops at its next step, or completes its analysis), else it is killed.
     """
-    deadline = started + max(child.least_wait, 2.0 * (time.monotonic() - started))
-    if stop.asked:
-        deadline = max(deadline, time.monotonic() + child.least_wait)
-    while True:
+    deadline = time.monotonic() + child.least_wait if stop.asked else None
+    ready = False
+    while not ready and (deadline is None or time.monotonic() < deadline):
         try:
-            if child.ready(POLL_PERIOD) or time.monotonic() > deadline:
-                break
+            ready = child.ready(POLL_PERIOD)
         except SignalInterrupt as interrupt:
-            if not stop.asked:
-                deadline = max(deadline, time.monotonic() + child.least_wait)
+            if deadline is None:
+                deadline = time.monotonic() + child.least_wait
             stop.ask(interrupt.signum)
-    try:
-        return child.result(wait=0.0)
-    except ForkedCallError as error:
-        reason = str(error)
-        if 'gave no result' in reason:
-            reason = f'gave no result in {time.monotonic() - started:.0f} s and was killed'
-        return RunOutcome(
-            mode,
-            out_dir,
-            error=f'grasp-demo: [{mode}] the run failed in its own process: {reason}',
-            exit_code=EXIT_RUN_FAILED,
-        )
+    if ready:
+        try:
+            return child.result(wait=0.0)
+        except ForkedCallError as error:
+            reason = str(error)
+    else:
+        child.close()
+        reason = f'asked to stop, it gave no result in {child.least_wait:.0f} s: killed'
+    return RunOutcome(
+        mode,
+        out_dir,
+        error=f'grasp-demo: [{mode}] the run failed in its own process: {reason}',
+        exit_code=EXIT_RUN_FAILED,
+    )

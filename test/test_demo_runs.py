@@ -192,3 +192,22 @@ def test_a_signal_during_both_runs_stops_both_with_readable_bags(tmp_path, signu
     else:  # it completed before the signal
         assert '[nominal]' in stdout and not json.loads(nominal.read_text()).get('interrupted')
     assert not (tmp_path / 'verdict.json').exists()
+
+
+def _signalled_inside_a_run_block() -> str:
+    """What a child that leaves signals to its parent does with both (none may raise)."""
+    from grasp_safety_filter.io.interrupts import interrupt_on_signals
+
+    with interrupt_on_signals():
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.raise_signal(signum)
+        time.sleep(0.05)
+        return signal.getsignal(signal.SIGINT) is signal.SIG_IGN and 'ignored'
+
+
+def test_the_child_ignores_sigint_and_sigterm_even_inside_a_run():
+    """A handler raising inside numba's loading of a kernel gave SystemError: none runs."""
+    from grasp_safety_filter.analysis.forked import ForkedCall
+
+    with ForkedCall(_signalled_inside_a_run_block, leave_signals=True) as child:
+        assert child.result() == 'ignored'
