@@ -56,14 +56,14 @@ def _recorded(bag: Path) -> dict[str, list[tuple[int, object]]]:
 
 
 def _untimed(summary: dict) -> dict:
-    """A summary without the filter's measured times (``*_us``), which vary run to run."""
+    """Drop the filter's measured times (``*_us``) from a summary: they vary run to run."""
     if 'filter' in summary:
         summary['filter'] = {k: v for k, v in summary['filter'].items() if not k.endswith('_us')}
     return summary
 
 
 def _shown(text: str, out: Path) -> list[str]:
-    """Printed lines, the output directory and the measured filter times left out."""
+    """Return the printed lines without the output directory and measured filter times."""
     return [
         line.replace(str(out), 'OUT') for line in text.splitlines() if 'filter time' not in line
     ]
@@ -195,7 +195,7 @@ def test_a_signal_during_both_runs_stops_both_with_readable_bags(tmp_path, signu
 
 
 def _signalled_inside_a_run_block() -> str:
-    """What a child that leaves signals to its parent does with both (none may raise)."""
+    """Signal a child that leaves signals to its parent inside a run's block (none raises)."""
     from grasp_safety_filter.io.interrupts import interrupt_on_signals
 
     with interrupt_on_signals():
