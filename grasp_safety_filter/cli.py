@@ -103,7 +103,7 @@ def _override(text: str) -> tuple[str, Any]:
 
 
 def _interrupt_message(interrupt: Any) -> str:
-    """Say what an interrupted run left (a ``runner.RunInterrupted``)."""
+    """Say what an interrupted run left (a ``demo_runs.Interruption``)."""
     if interrupt.bag is None:
         return (
             f'interrupted by {interrupt.signal} before recording: this run left no bag, no summary'
@@ -129,15 +129,10 @@ def demo_main(argv: list[str] | None = None) -> int:
 
 
 def _demo(argv: list[str] | None) -> int:
+    from grasp_safety_filter.demo_runs import fork_available, one_after_the_other, side_by_side
     from grasp_safety_filter.io.files import OutputError, write_file
     from grasp_safety_filter.model.grasp_check import load_initial_grasp
-    from grasp_safety_filter.runner import (
-        check_output_dir,
-        run,
-        RunInterrupted,
-        RunOptions,
-        VERDICT_FILE,
-    )
+    from grasp_safety_filter.runner import check_output_dir, RunOptions, VERDICT_FILE
 
     parser = argparse.ArgumentParser(
         prog='grasp-demo',
@@ -187,6 +182,15 @@ def _demo(argv: list[str] | None) -> int:
         action='store_true',
         help='write into OUT even if it holds files that are not a previous output',
     )
+    parser.add_argument(
+        '--jobs',
+        type=int,
+        choices=(1, 2),
+        default=2 if fork_available() else 1,
+        help='with --mode both: 2 runs the nominal run in a second process beside the '
+        'filtered one (same outputs, on two cores), 1 one after the other '
+        '(default: %(default)s)',
+    )
     args = parser.parse_args(argv)
     if args.plant is not None:
         args.overrides.append(('plant', args.plant))
@@ -202,8 +206,8 @@ def _demo(argv: list[str] | None) -> int:
     except OutputError as error:
         print(f'grasp-demo: {error}', file=sys.stderr)
         return 2
+    runs = []
     for mode in modes:
-        out_dir = args.out / mode if args.mode == 'both' else args.out
         try:
             options = RunOptions(
                 args.config,
@@ -214,20 +218,27 @@ def _demo(argv: list[str] | None) -> int:
                 args.storage,
                 dict(args.overrides),
             )
-            result = run(options, out_dir, _progress_printer(mode), force=args.force)
         except ConfigError as error:
             print(config_error_line('grasp-demo', error), file=sys.stderr)
             return EXIT_CONFIG_ERROR
-        except OutputError as error:
-            print(f'grasp-demo: {error}', file=sys.stderr)
-            return 2
-        except RunInterrupted as interrupt:
-            print(f'\n[{mode}] {_interrupt_message(interrupt)}', file=sys.stderr)
-            return 130
+        runs.append((options, args.out / mode if args.mode == 'both' else args.out))
+    runner = side_by_side if len(runs) == 2 and args.jobs == 2 else one_after_the_other
+    status = 0
+    for outcome in runner(runs, _progress_printer, args.force):
+        if outcome.error is not None:
+            print(outcome.error, file=sys.stderr)
+            return outcome.exit_code
+        if outcome.interruption is not None:
+            left = _interrupt_message(outcome.interruption)
+            print(f'\n[{outcome.mode}] {left}', file=sys.stderr)
+            status = 130
+            continue
         verdict, expected = print_summary(
-            mode, result.summary, out_dir, params['expected_outcome']
+            outcome.mode, outcome.summary, outcome.out_dir, params['expected_outcome']
         )
-        verdicts[mode] = verdict_document(verdict, expected)
+        verdicts[outcome.mode] = verdict_document(verdict, expected)
+    if status:
+        return status
     write_file(args.out / VERDICT_FILE, json.dumps(verdicts, indent=2) + '\n')
     return 1 if any(v.get('reproduced') is False for v in verdicts.values()) else 0
 
@@ -249,7 +260,8 @@ the rigid plant and is "not judged".
 
 exit codes:
   0    the runs completed as asked (a run that slips or stops early is an outcome)
-  1    a run did not show its scenario's expected outcome (expected_outcome)
+  1    a run did not show its scenario's expected outcome (expected_outcome), or a run
+       failed (grasp-demo --jobs 2: the nominal run's own process raised or died)
   2    a user error: a bad scenario file, parameter, bag or output directory
   130  interrupted (SIGINT, SIGTERM)
 """

@@ -449,6 +449,8 @@ def run(
                 _write_summary(out_dir, summary)
                 written[0] = True
             figures = plot_run(run_data, out_dir, fingers)
+        except RunInterrupted:
+            raise  # stopped before a first step: it names its own signal
         except KeyboardInterrupt as interrupt:
             raise _interrupted(signal_name(interrupt), started[0], written[0], out_dir) from None
     if recording.interrupted is not None:

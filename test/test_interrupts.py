@@ -85,3 +85,34 @@ def test_a_signal_held_off_an_import_at_the_end_of_the_block_is_raised_as_it_end
         signal.signal(signal.SIGTERM, previous)
     assert interrupt.value.signum == signal.SIGTERM
     assert received == []
+
+
+def test_an_interrupt_is_held_off_numbas_callback_and_raised_after_it(tmp_path):
+    """Numba's compiled code calls ``_numba_unpickle`` from C: an exception there is lost.
+
+    It becomes ``SystemError``; the module below stands in for numba's (same file and
+    function name) and is signalled inside it, as a Ctrl-C may land there.
+    """
+    import importlib.util
+
+    serialize = tmp_path / 'numba' / 'core' / 'serialize.py'
+    serialize.parent.mkdir(parents=True)
+    serialize.write_text(
+        'import signal, time\n'
+        'def _numba_unpickle(address, bytedata, hashed):\n'
+        '    signal.raise_signal(signal.SIGINT)\n'
+        '    time.sleep(0.05)\n'
+        '    return "unpickled"\n'
+    )
+    spec = importlib.util.spec_from_file_location('stand_in_serialize', serialize)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    returned = []
+    with interrupt_on_signals():
+        with pytest.raises(SignalInterrupt) as interrupt:
+            returned.append(module._numba_unpickle(0, b'', b''))
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                time.sleep(0.001)
+    assert returned == ['unpickled']
+    assert interrupt.value.signum == signal.SIGINT

@@ -257,6 +257,19 @@ def test_a_signal_at_any_moment_leaves_a_bag_and_an_honest_summary(case, tmp_pat
         assert summary['completed'] == (interrupted is None)
 
 
+def test_a_sigterm_before_the_first_step_is_reported_as_sigterm(tmp_path):
+    """The run stops with too little for a summary; its interruption still names SIGTERM."""
+    import grasp_safety_filter.runner as runner
+
+    def progress(t: float, duration: float) -> None:
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    with pytest.raises(runner.RunInterrupted) as caught:
+        run(RunOptions(CONFIG, 'filtered', duration=0.02), tmp_path, progress)
+    assert caught.value.signal == 'SIGTERM'
+    assert caught.value.bag is not None and caught.value.summary is None
+
+
 def test_a_start_up_interrupt_keeps_no_stale_claim(tmp_path, monkeypatch):
     """An earlier run's summary beside a new run's bag would describe the wrong run."""
     import grasp_safety_filter.runner as runner

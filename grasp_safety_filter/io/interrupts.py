@@ -16,10 +16,18 @@ another thread), so it lands in the program's own code.
 Nor is it raised while the main thread is importing a module: an extension module that
 runs Python code while it initialises (numpy imports ``datetime``) turns an exception
 raised there into an ``ImportError``. The signal is delivered again a little later, until
-the import is done.
+the import is done. The same for Python code that numba's compiled code calls
+(``_numba_unpickle``), which turns an exception raised there into ``SystemError``.
 
 A long-running node takes no exception at all: :class:`TerminationRequests` records the
 signal and its loop ends at the next turn.
+
+A forked child whose parent decides when it stops (a run beside the parent's own) calls
+:func:`leave_signals_to_parent`: SIGINT and SIGTERM are ignored from then on, also inside
+:func:`interrupt_on_signals`, so that no handler raises inside code that cannot take an
+exception (numba's loading of a cached kernel turns one into ``SystemError``); the parent
+asks it to stop where it can. A child starts with none of its parent's bookkeeping: a
+pending or held signal was the parent's, and the re-delivering thread is not forked.
 
 This module imports nothing heavy: a console script can install the handlers before it
 imports numpy, Pinocchio or rosbags.
@@ -29,6 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from contextlib import AbstractContextManager, contextmanager
+import os
 from queue import SimpleQueue
 import signal
 import sys
@@ -47,6 +56,11 @@ IMPORT_REDELIVERY_DELAY = 10e-3
 _IMPORT_SYSTEM = frozenset(
     {'<frozen importlib._bootstrap>', '<frozen importlib._bootstrap_external>'}
 )
+
+
+#: Functions of numba's that its C code calls, in the file :data:`_NUMBA_SERIALIZE`.
+_NUMBA_CALLBACKS = frozenset({'_numba_unpickle'})
+_NUMBA_SERIALIZE = os.path.join('numba', 'core', 'serialize.py')
 
 
 class SignalInterrupt(KeyboardInterrupt):
@@ -84,6 +98,7 @@ class _InterruptState:
         installed: Nesting depth of :func:`interrupt_on_signals`.
         critical_depth: Nesting depth of :func:`critical_section`.
         pending: A signal deferred by a critical section.
+        left_to_parent: SIGINT and SIGTERM stay ignored (:func:`leave_signals_to_parent`).
         held: A signal being sent again (held off an import, or lost in a finaliser); raised
             on leaving the outermost block if it has not been by then.
         closing: The outermost block is restoring the previous handlers: a signal is held.
@@ -91,6 +106,7 @@ class _InterruptState:
     """
 
     installed = 0
+    left_to_parent = False
     critical_depth = 0
     pending: int | None = None
     held: int | None = None
@@ -111,6 +127,20 @@ def importing(frame: FrameType | None) -> bool:
     return False
 
 
+def in_numba_callback(frame: FrameType | None) -> bool:
+    """Whether ``frame`` or one of its callers is Python code that numba's C code called.
+
+    Compiled code calls ``_numba_unpickle`` for an object constant (an exception it raises,
+    a cached kernel's globals); an exception raised in it becomes ``SystemError``.
+    """
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name in _NUMBA_CALLBACKS and code.co_filename.endswith(_NUMBA_SERIALIZE):
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _handle_signal(signum: int, frame: FrameType | None) -> None:
     if _InterruptState.closing:
         _InterruptState.held = signum
@@ -119,7 +149,7 @@ def _handle_signal(signum: int, frame: FrameType | None) -> None:
         # Inside a write or close: interrupt once the block is done.
         _InterruptState.pending, _InterruptState.held = signum, None
         return
-    if importing(frame) and _Redelivery.queue is not None:
+    if (importing(frame) or in_numba_callback(frame)) and _Redelivery.queue is not None:
         _InterruptState.held = signum
         _Redelivery.queue.put((signum, IMPORT_REDELIVERY_DELAY))
         return
@@ -163,6 +193,17 @@ def record_termination_requests() -> TerminationRequests:
     for signum in TERMINATION_SIGNALS:
         signal.signal(signum, termination)
     return termination
+
+
+def leave_signals_to_parent() -> None:
+    """Ignore SIGINT and SIGTERM in this process from now on, inside blocks too.
+
+    For a forked child that its parent stops: a Ctrl-C reaches the whole process group,
+    and the parent decides what it does to the child.
+    """
+    _InterruptState.left_to_parent = True
+    for signum in TERMINATION_SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
 
 
 class _Redelivery:
@@ -227,6 +268,8 @@ def interrupt_on_signals(
     """
     if not _in_main_thread():
         raise RuntimeError('interrupt_on_signals: must be entered from the main thread')
+    if _InterruptState.left_to_parent:
+        signals = [s for s in signals if s not in TERMINATION_SIGNALS]
     _Redelivery.start()
     previous = {s: signal.signal(s, _handle_signal) for s in signals}
     previous_hook = sys.unraisablehook
@@ -254,6 +297,18 @@ def interrupt_on_signals(
                 _InterruptState.closing = False
     if completed and held is not None:
         raise SignalInterrupt(held)
+
+
+def _forget_parent_state() -> None:
+    """Start a forked child with none of its parent's signal bookkeeping (module doc)."""
+    _InterruptState.pending = _InterruptState.held = None
+    _InterruptState.closing = False
+    _InterruptState.lock = threading.Lock()  # another thread may have held it at the fork
+    _Redelivery.queue = None  # its thread was not forked: start() starts one anew
+
+
+if hasattr(os, 'register_at_fork'):
+    os.register_at_fork(after_in_child=_forget_parent_state)
 
 
 class critical_section(AbstractContextManager[None]):  # noqa: N801 (used as a function)
