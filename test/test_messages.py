@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from fractions import Fraction
 import math
+import warnings
 
 from grasp_states import paper_model, random_configuration
 import numpy as np
@@ -655,6 +656,11 @@ REFERENCE_DEFECTS = [
         ['point 2', 'rotation', 'unit quaternion'],
     ),
     (
+        'rotation of 1e308',
+        set_attr('points.2.transforms.0.rotation.w', 1e308),
+        ['point 2', 'rotation', 'unit quaternion', 'norm 1e+308'],
+    ),
+    (
         'inf velocity',
         set_attr('points.0.velocities.0.linear.z', math.inf),
         ['point 0', 'velocity', 'inf'],
@@ -686,8 +692,10 @@ REFERENCE_DEFECTS = [
 def test_bad_reference_is_rejected(rng, mutate, expected):
     msg = reference_msg(rng)
     mutate(msg)
-    with pytest.raises(MessageError) as error:
-        m.reference_from_msg(msg, source='/object/reference')
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')  # refused with a message, not a numpy warning
+        with pytest.raises(MessageError) as error:
+            m.reference_from_msg(msg, source='/object/reference')
     for fragment in ['/object/reference', *expected]:
         assert fragment in str(error.value)
 

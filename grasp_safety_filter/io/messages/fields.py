@@ -245,7 +245,11 @@ def finite_vector(source: str, what: str, values: Sequence[float]) -> np.ndarray
 def unit_quaternion(source: str, what: str, msg: Any) -> np.ndarray:
     """Return a ``geometry_msgs/Quaternion`` as finite ``(x, y, z, w)`` of unit norm, or raise."""
     quaternion = finite_vector(source, what, (msg.x, msg.y, msg.z, msg.w))
-    norm = float(np.linalg.norm(quaternion))
+    if float(np.abs(quaternion).max()) > 2.0:
+        # Far from unit (up to 1e308): hypot's norm cannot overflow, numpy's would warn.
+        norm = math.hypot(*quaternion)
+    else:
+        norm = float(np.linalg.norm(quaternion))
     if abs(norm - 1.0) > _QUATERNION_NORM_TOLERANCE:
         raise MessageError(
             f'{source}: {what} must be a unit quaternion (|norm - 1| <= '
