@@ -8,6 +8,7 @@ import pytest
 from grasp_safety_filter.control.row_checks import (
     all_finite,
     box_margins,
+    clip_if_finite,
     inside,
     residuals,
     violations,
@@ -86,3 +87,20 @@ def test_violations_flag_the_groups_numpy_finds_and_the_worst_row(seed):
     flags = np.zeros(4, dtype=np.bool_)
     assert np.isnan(violations(residual, group, tolerance, flags))
     assert flags[0]
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_clip_if_finite_is_the_numpy_clip_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    m = 9
+    u_max = rng.uniform(0.5, 2.0, m)
+    x = 2.0 * rng.normal(size=m + 4)  # only the first m entries are torques
+    x[0] = -u_max[0]  # on a bound
+    x[-1] = np.nan  # beyond m: ignored
+    out = np.full(m, 7.0)
+    assert clip_if_finite(x, -u_max, u_max, out)
+    expected = np.minimum(np.maximum(x[:m], -u_max), u_max)
+    assert out.tobytes() == expected.tobytes()
+    for bad in (np.inf, -np.inf, np.nan):
+        x[m - 1] = bad
+        assert not clip_if_finite(x, -u_max, u_max, out)
