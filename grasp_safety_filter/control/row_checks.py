@@ -135,3 +135,19 @@ def clip_if_finite(x: np.ndarray, u_min: np.ndarray, u_max: np.ndarray, out: np.
             return False
         out[j] = min(max(x[j], u_min[j]), u_max[j])
     return True
+
+
+@kernel
+def column_major_row_norms(A: np.ndarray, floor: float, out: np.ndarray) -> None:
+    """Write ``||A_r||`` into ``out``, 1 where below ``floor``, for a column-major A (k, m).
+
+    ``np.sqrt(np.einsum('ij,ij->i', A, A))`` then ``np.where(norms < floor, 1.0, norms)``
+    with the same sums: numpy's einsum runs along the contiguous rows axis, adding the
+    squares column by column, so each row's sum is taken in column order, as here.
+    """
+    for r in range(A.shape[0]):
+        total = 0.0
+        for c in range(A.shape[1]):
+            total = total + A[r, c] * A[r, c]
+        norm = math.sqrt(total)
+        out[r] = 1.0 if norm < floor else norm
