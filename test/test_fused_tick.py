@@ -122,15 +122,18 @@ def test_the_fused_pass_gives_the_unfused_results(hand, config, metric, tmp_path
     assert fused._fused is not None
     unfused._fused = None
     outcomes = []
-    original = fused_tick.packed_tick
 
-    def spy(*args):
-        answer = original(*args)
-        guessed = args[-4].shape[0] > 0  # the working set: the last active set, if any
-        outcomes.append(answer[0] if answer[0] or not guessed else 'guess rejected')
-        return answer
+    def spy(original):
+        def spied(*args):
+            answer = original(*args)
+            guessed = args[-4].shape[0] > 0  # the working set: the last active set, if any
+            outcomes.append(answer[0] if answer[0] or not guessed else 'guess rejected')
+            return answer
 
-    monkeypatch.setattr(fused_tick, 'packed_tick', spy)
+        return spied
+
+    for name in ('packed_tick', 'packed_tick_metric'):
+        monkeypatch.setattr(fused_tick, name, spy(getattr(fused_tick, name)))
     m = fused.n_joints
     c = configuration()
     u_nom = rng.normal(0.0, 0.2, m)

@@ -3,8 +3,9 @@
 A solved tick of :class:`~grasp_safety_filter.control.safety_filter.SafetyFilter` with the
 OSQP backend is some thirty compiled or numpy calls of a microsecond or two each: each
 family's rows, the finiteness and nominal checks, the backend's try of the previous tick's
-active set (solve, clip, row check) and the residuals. :func:`packed_tick` runs the same
-kernels in the same order in one call:
+active set (solve, clip, row check) and the residuals. :func:`packed_tick_metric` (for
+the identity metric :func:`packed_tick`) runs the same kernels in the same order in one
+call:
 
 - no slip (:func:`~grasp_safety_filter.control.constraints.pyramid_kernel.
   pyramid_rows_packed`) and the box barriers (:func:`~grasp_safety_filter.control.
@@ -71,6 +72,62 @@ NOT_FINITE, NOT_SETTLED, SETTLED_ON_GUESS, NOMINAL = -1, 0, 1, 2
 
 @kernel
 def packed_tick(
+    terms: np.ndarray,
+    negative_faces: np.ndarray,
+    pyramid: tuple[int, float, int],
+    box_places: np.ndarray,
+    box_rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    box_alpha: np.ndarray,
+    h: np.ndarray,
+    u_nom: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    nominal: tuple[np.ndarray, np.ndarray],
+    working_set: np.ndarray,
+    C: np.ndarray,
+    b: np.ndarray,
+    slack: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray, float]:
+    """:func:`packed_tick_metric` for the identity metric (no metric arrays to pass in)."""
+    empty, none = np.empty((0, 0)), np.empty(0)
+    identity = (0, empty, none, empty, none, none, none)
+    return _packed_tick(
+        terms, negative_faces, pyramid, box_places, box_rows, box_alpha, h, u_nom, box, rows,
+        nominal, identity, working_set, C, b, slack,
+    )
+
+
+@kernel
+def packed_tick_metric(
+    terms: np.ndarray,
+    negative_faces: np.ndarray,
+    pyramid: tuple[int, float, int],
+    box_places: np.ndarray,
+    box_rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    box_alpha: np.ndarray,
+    h: np.ndarray,
+    u_nom: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    nominal: tuple[np.ndarray, np.ndarray],
+    metric: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    working_set: np.ndarray,
+    C: np.ndarray,
+    b: np.ndarray,
+    slack: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray, float]:
+    """Write the tick's rows, check them and u_nom, try the last active set (module doc).
+
+    See :func:`_packed_tick` for the arguments.
+    """
+    return _packed_tick(
+        terms, negative_faces, pyramid, box_places, box_rows, box_alpha, h, u_nom, box, rows,
+        nominal, metric, working_set, C, b, slack,
+    )
+
+
+@kernel
+def _packed_tick(
     terms: np.ndarray,
     negative_faces: np.ndarray,
     pyramid: tuple[int, float, int],
@@ -284,13 +341,19 @@ class FusedTick:
         guess = self._backend.last_active_guess()
         h = np.empty(self._h_size)
         slack = np.empty(self._n_names)
-        hard_qp = self._hard_qp
-        metric = (self._M_start, *self._metric, hard_qp.W.reshape(-1), hard_qp.q)
         start = time.perf_counter()
-        outcome, u_star, multipliers, smallest = packed_tick(
-            terms, *self._arguments, h, u, self._box, self._rows, self._nominal, metric,
-            *guess, slack,
-        )
+        if self._problem.metric_factor is None:
+            outcome, u_star, multipliers, smallest = packed_tick(
+                terms, *self._arguments, h, u, self._box, self._rows, self._nominal, *guess,
+                slack,
+            )
+        else:
+            hard_qp = self._hard_qp
+            metric = (self._M_start, *self._metric, hard_qp.W.reshape(-1), hard_qp.q)
+            outcome, u_star, multipliers, smallest = packed_tick_metric(
+                terms, *self._arguments, h, u, self._box, self._rows, self._nominal, metric,
+                *guess, slack,
+            )
         elapsed = time.perf_counter() - start
         if outcome == NOT_FINITE:
             return None
