@@ -89,28 +89,51 @@ def _assert_same(fused, unfused, tick):
     )
 
 
-@pytest.mark.parametrize('config', list(CONFIGS))
-@pytest.mark.parametrize('hand', list(HANDS))
-def test_the_fused_pass_gives_the_unfused_results(hand, config, tmp_path, monkeypatch):
+def _assert_same_metric(fused, unfused):
+    """Check what the metric's part of a tick writes: R, q, and the backend's form in y."""
+    np.testing.assert_array_equal(fused.problem.metric_factor, unfused.problem.metric_factor)
+    np.testing.assert_array_equal(fused.hard_qp.q, unfused.hard_qp.q)
+    np.testing.assert_array_equal(fused.hard_qp.nominal, unfused.hard_qp.nominal)
+    a, b = fused.backend, unfused.backend
+    if a._R is not None or b._R is not None:
+        np.testing.assert_array_equal(a._R, b._R)
+        np.testing.assert_array_equal(a._rows_y, b._rows_y)
+        np.testing.assert_array_equal(a._y_nom, b._y_nom)
+
+
+METRIC_CASES = [
+    (hand, config, 'identity') for hand in HANDS for config in CONFIGS
+] + [
+    (hand, config, 'inverse_inertia')
+    for hand in ('four_finger', 'random_box')
+    for config in CONFIGS
+]
+
+
+@pytest.mark.parametrize(('hand', 'config', 'metric'), METRIC_CASES)
+def test_the_fused_pass_gives_the_unfused_results(hand, config, metric, tmp_path, monkeypatch):
     rng = np.random.default_rng(17)
     model, configuration = (
         HANDS[hand](rng, tmp_path) if hand == 'random_box' else HANDS[hand](rng)
     )
-    settings = SafetyFilterConfig(metric='identity', **CONFIGS[config])
+    settings = SafetyFilterConfig(metric=metric, **CONFIGS[config])
     fused = SafetyFilter.from_config(model, settings)
     unfused = SafetyFilter.from_config(model, settings)
     assert fused._fused is not None
     unfused._fused = None
     outcomes = []
-    original = fused_tick.packed_tick
 
-    def spy(*args):
-        answer = original(*args)
-        guessed = args[-4].shape[0] > 0  # the working set: the last active set, if any
-        outcomes.append(answer[0] if answer[0] or not guessed else 'guess rejected')
-        return answer
+    def spy(original):
+        def spied(*args):
+            answer = original(*args)
+            guessed = args[-4].shape[0] > 0  # the working set: the last active set, if any
+            outcomes.append(answer[0] if answer[0] or not guessed else 'guess rejected')
+            return answer
 
-    monkeypatch.setattr(fused_tick, 'packed_tick', spy)
+        return spied
+
+    for name in ('packed_tick', 'packed_tick_metric'):
+        monkeypatch.setattr(fused_tick, name, spy(getattr(fused_tick, name)))
     m = fused.n_joints
     c = configuration()
     u_nom = rng.normal(0.0, 0.2, m)
@@ -122,7 +145,11 @@ def test_the_fused_pass_gives_the_unfused_results(hand, config, tmp_path, monkey
             u_nom = u_nom + rng.normal(0.0, 0.01, m)
         state = c.state(model, tick * 1e-3)
         assert state.packed_terms is not None
+        if tick % 10 == 5:  # a W of the last R in the hard QP's q (as its dense form leaves)
+            fused.hard_qp.dense()
+            unfused.hard_qp.dense()
         _assert_same(fused.solve(state, u_nom), unfused.solve(state, u_nom), tick)
+        _assert_same_metric(fused, unfused)
         np.testing.assert_array_equal(fused.problem.A, unfused.problem.A)
         np.testing.assert_array_equal(fused.problem.lower, unfused.problem.lower)
         np.testing.assert_array_equal(fused.problem.g, unfused.problem.g)
@@ -134,9 +161,10 @@ def test_the_fused_pass_gives_the_unfused_results(hand, config, tmp_path, monkey
         assert 'guess rejected' in outcomes
 
 
-def test_a_nominal_torque_inside_every_row_is_settled_by_the_pass():
+@pytest.mark.parametrize('metric', ['identity', 'inverse_inertia'])
+def test_a_nominal_torque_inside_every_row_is_settled_by_the_pass(metric):
     model = paper_model()
-    settings = SafetyFilterConfig(metric='identity', **CONFIGS['joint limits only'])
+    settings = SafetyFilterConfig(metric=metric, **CONFIGS['joint limits only'])
     fused, unfused, reference = (SafetyFilter.from_config(model, settings) for _ in range(3))
     unfused._fused = None
     rng = np.random.default_rng(3)
@@ -147,6 +175,7 @@ def test_a_nominal_torque_inside_every_row_is_settled_by_the_pass():
         u_nom = reference.solve(state, rng.normal(0.0, 0.3, fused.n_joints)).u
         result = fused.solve(state, u_nom)
         _assert_same(result, unfused.solve(state, u_nom), tick)
+        _assert_same_metric(fused, unfused)
         nominal += result.status == 'nominal'
     assert nominal >= 2
 
@@ -174,11 +203,11 @@ def _initial(model):
     )
 
 
-def test_no_fused_pass_with_a_metric_or_another_backend():
+def test_no_fused_pass_with_another_backend():
     model = paper_model()
     assert SafetyFilter.from_config(model, SafetyFilterConfig(metric='identity'))._fused
+    assert SafetyFilter.from_config(model, SafetyFilterConfig(metric='inverse_inertia'))._fused
     for settings in (
-        SafetyFilterConfig(metric='inverse_inertia'),
         SafetyFilterConfig(metric='identity', solver='daqp'),
         SafetyFilterConfig(metric='identity', torque_rate_enabled=True),
     ):

@@ -12,9 +12,10 @@ stack by the call; an array argument is an array and an offset (in entries) into
 routine's matrix or vector starting there.
 
 :func:`dot` and :func:`matrix_vector` are numpy's ``@`` of a vector, or a row-major matrix,
-by a contiguous vector: they make the BLAS call numpy makes for those shapes and strides
-(or its plain loop for a single row or column), so a kernel built from them gives numpy's
-results bit for bit.
+by a contiguous vector, and :func:`matrix_matrix` of two C-ordered matrices: they make the
+BLAS call numpy makes for those shapes and strides (or its plain loop for a single row or
+column), so a kernel built from them gives numpy's results bit for bit where both
+libraries' routines round alike (tested for each shape used).
 """
 
 from __future__ import annotations
@@ -97,12 +98,16 @@ def _routine(module: str, name: str, kinds: str, returns_double: bool = False) -
 
 #: ``ddot(n, x, incx, y, incy)``.
 ddot = _routine('blas', 'ddot', 'iaiai', returns_double=True)
+#: ``dgemm(transa, transb, m, n, k, alpha, a, lda, b, ldb, beta, c, ldc)``.
+dgemm = _routine('blas', 'dgemm', 'cciiidaiaidai')
 #: ``dgemv(trans, m, n, alpha, a, lda, x, incx, beta, y, incy)``.
 dgemv = _routine('blas', 'dgemv', 'ciidaiaidai')
 #: ``dgeqrf(m, n, a, lda, tau, work, lwork, info)``.
 dgeqrf = _routine('lapack', 'dgeqrf', 'iiaiaain')
 #: ``dgeqp3(m, n, a, lda, jpvt, tau, work, lwork, info)``.
 dgeqp3 = _routine('lapack', 'dgeqp3', 'iiainaain')
+#: ``dpotrf(uplo, n, a, lda, info)``.
+dpotrf = _routine('lapack', 'dpotrf', 'ciain')
 #: ``dorgqr(m, n, k, a, lda, tau, work, lwork, info)``.
 dorgqr = _routine('lapack', 'dorgqr', 'iiiaiaain')
 #: ``dtrtrs(uplo, trans, diag, n, nrhs, a, lda, b, ldb, info)``.
@@ -191,3 +196,15 @@ def matrix_vector(
     else:
         # numpy: a row-major (columns, rows) matrix, transposed; BLAS: column-major, not.
         dgemv(ord('N'), rows, columns, 1.0, A, A_offset, column_step, x, 0, 1, 0.0, out, 0, 1)
+
+
+@kernel
+def matrix_matrix(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> None:
+    """Write numpy's ``A @ B`` into ``out``: C-ordered (p, q) by (q, r), p and r at least 2.
+
+    numpy's row-major ``dgemm`` is BLAS's column-major one on the transposes:
+    ``out^T = B^T A^T``.
+    """
+    p, q = A.shape
+    r = B.shape[1]
+    dgemm(ord('N'), ord('N'), r, p, q, 1.0, B, 0, r, A, 0, q, 0.0, out, 0, r)

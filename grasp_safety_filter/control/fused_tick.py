@@ -1,23 +1,27 @@
 """The filter step's usual tick on a packed state, in one compiled pass.
 
 A solved tick of :class:`~grasp_safety_filter.control.safety_filter.SafetyFilter` with the
-OSQP backend and the identity metric is some thirty compiled or numpy calls of a
-microsecond or two each: each family's rows, the finiteness and nominal checks, the
-backend's try of the previous tick's active set (solve, clip, row check) and the
-residuals. :func:`packed_tick` runs the same kernels in the same order in one call:
+OSQP backend is some thirty compiled or numpy calls of a microsecond or two each: each
+family's rows, the finiteness and nominal checks, the backend's try of the previous tick's
+active set (solve, clip, row check) and the residuals. :func:`packed_tick_metric` (for
+the identity metric :func:`packed_tick`) runs the same kernels in the same order in one
+call:
 
 - no slip (:func:`~grasp_safety_filter.control.constraints.pyramid_kernel.
   pyramid_rows_packed`) and the box barriers (:func:`~grasp_safety_filter.control.
   constraints.box_kernel.box_barrier_rows_packed`) into ``A`` and ``lower``;
+- with ``qp.metric: inverse_inertia``, the metric factor R of the state's M_h
+  (:func:`~grasp_safety_filter.control.metric_kernel.inertia_factor`);
 - :func:`~grasp_safety_filter.control.row_checks.all_finite` on the rows and u_nom;
 - :func:`~grasp_safety_filter.control.row_checks.inside`: u_nom is the optimum;
 - :func:`~grasp_safety_filter.control.working_set.clipped_optimum_on_working_set` on the
   backend's last active set (:meth:`~grasp_safety_filter.control.qp_solvers.osqp_backend.
-  OSQPBackend.last_active_guess`);
+  OSQPBackend.last_active_guess`), or with the metric :func:`~grasp_safety_filter.control.
+  metric_kernel.metric_optimum_on_working_set` (its BLAS and LAPACK calls numpy's);
 - :func:`~grasp_safety_filter.control.row_checks.residuals` at the answer.
 
 so its answers are those of the unfused step, to the bit. Whatever is unusual (a family
-without packed rows, a staged state, a metric, another backend) is not fused at all; a
+without packed rows, a staged state, another backend) is not fused at all; a
 tick whose u_nom or rows are not finite is done again by the unfused step (which raises or
 falls back); a tick whose guess is not optimal continues with the backend's solve (without
 trying the guess again).
@@ -39,6 +43,12 @@ from grasp_safety_filter.control.constraints import ConstraintFamily, FrictionPy
 from grasp_safety_filter.control.constraints.box_kernel import box_barrier_rows_packed
 from grasp_safety_filter.control.constraints.pyramid_kernel import pyramid_rows_packed
 from grasp_safety_filter.control.filter_result import FilterStatus
+from grasp_safety_filter.control.fortran_linalg import matrix_vector
+from grasp_safety_filter.control.metric_kernel import (
+    inertia_factor,
+    metric_optimum_on_working_set,
+    PAIRWISE_BLOCK,
+)
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_solvers import (
     FEASIBILITY_TOLERANCE,
@@ -78,6 +88,63 @@ def packed_tick(
     b: np.ndarray,
     slack: np.ndarray,
 ) -> tuple[int, np.ndarray, np.ndarray, float]:
+    """:func:`packed_tick_metric` for the identity metric (no metric arrays to pass in)."""
+    empty, none = np.empty((0, 0)), np.empty(0)
+    identity = (0, empty, none, empty, none, none, none)
+    return _packed_tick(
+        terms, negative_faces, pyramid, box_places, box_rows, box_alpha, h, u_nom, box, rows,
+        nominal, identity, working_set, C, b, slack,
+    )
+
+
+@kernel
+def packed_tick_metric(
+    terms: np.ndarray,
+    negative_faces: np.ndarray,
+    pyramid: tuple[int, float, int],
+    box_places: np.ndarray,
+    box_rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    box_alpha: np.ndarray,
+    h: np.ndarray,
+    u_nom: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    nominal: tuple[np.ndarray, np.ndarray],
+    metric: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    working_set: np.ndarray,
+    C: np.ndarray,
+    b: np.ndarray,
+    slack: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray, float]:
+    """Write the tick's rows, check them and u_nom, try the last active set (module doc).
+
+    See :func:`_packed_tick` for the arguments.
+    """
+    return _packed_tick(
+        terms, negative_faces, pyramid, box_places, box_rows, box_alpha, h, u_nom, box, rows,
+        nominal, metric, working_set, C, b, slack,
+    )
+
+
+@kernel
+def _packed_tick(
+    terms: np.ndarray,
+    negative_faces: np.ndarray,
+    pyramid: tuple[int, float, int],
+    box_places: np.ndarray,
+    box_rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    box_alpha: np.ndarray,
+    h: np.ndarray,
+    u_nom: np.ndarray,
+    box: tuple[np.ndarray, np.ndarray],
+    rows: tuple[np.ndarray, np.ndarray, np.ndarray],
+    nominal: tuple[np.ndarray, np.ndarray],
+    metric: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    working_set: np.ndarray,
+    C: np.ndarray,
+    b: np.ndarray,
+    slack: np.ndarray,
+) -> tuple[int, np.ndarray, np.ndarray, float]:
     """Write the tick's rows, check them and u_nom, try the last active set (module doc).
 
     Args:
@@ -95,6 +162,9 @@ def packed_tick(
         rows: Out: the stacked ``A`` (k, m) and ``lower`` (k,); in: the hard QP's
             constraint values ``C_data`` (``A`` among them), checked finite.
         nominal: Out: the problem's cost ``g = -u_nom`` and the hard QP's ``nominal``.
+        metric: ``(M_h's start in terms, R, R column-major, C R, y_nom, W, q)``: out, the
+            metric factor R (m, m), the hard QP's ``q[:m] = W (-u_nom)`` (its W, (m, m),
+            in) and the least-distance form in y (work); R of shape (0, 0): the identity.
         working_set: The last active set, (q,); empty: no guess.
         C: The hard least-distance rows ``[A; B]`` (k + 2m, m); rows ``:k`` are written.
         b: Their lower bounds; ``:k`` written.
@@ -129,11 +199,18 @@ def packed_tick(
             box_places[f, 4],
             h[entries],
         )
+    M_start, R, factor, rows_y, y_nom, W, q = metric
+    m = u_nom.shape[0]
+    with_metric = R.shape[0] > 0
+    if with_metric and not inertia_factor(terms, M_start, R, factor):
+        return NOT_FINITE, u_nom, np.empty(0), 0.0
     if not (all_finite(u_nom, u_min[:0]) and all_finite(C_data, lower)):
         return NOT_FINITE, u_nom, np.empty(0), 0.0
-    for j in range(u_nom.shape[0]):
+    for j in range(m):
         nominal_out[j] = u_nom[j]
         g[j] = -u_nom[j]
+    if with_metric:
+        matrix_vector(m, m, W, 0, m, 1, g, q)
     if inside(A, lower, u_nom, u_min, u_max):
         return NOMINAL, u_nom, np.empty(0), residuals(A, lower, u_nom, slack)
     if working_set.shape[0] == 0:
@@ -142,10 +219,16 @@ def packed_tick(
     C[:k] = A
     b[:k] = lower
     y0 = -g  # -(-u_nom), u_nom to the bit: the backend's start
-    outcome, u, multipliers = clipped_optimum_on_working_set(
-        y0, C, b, working_set, ACTIVE_SET_TOLERANCE, u_min, u_max, A, lower,
-        FEASIBILITY_TOLERANCE,
-    )
+    if with_metric:
+        outcome, u, multipliers = metric_optimum_on_working_set(
+            C, b, working_set, (R, factor, rows_y, y_nom), y0, box, (C_data, lower),
+            (ACTIVE_SET_TOLERANCE, FEASIBILITY_TOLERANCE),
+        )
+    else:
+        outcome, u, multipliers = clipped_optimum_on_working_set(
+            y0, C, b, working_set, ACTIVE_SET_TOLERANCE, u_min, u_max, A, lower,
+            FEASIBILITY_TOLERANCE,
+        )
     if outcome != 1:
         return NOT_SETTLED, u_nom, np.empty(0), 0.0
     return SETTLED_ON_GUESS, u, multipliers, residuals(A, lower, u, slack)
@@ -205,6 +288,15 @@ class FusedTick:
         self._rows = (problem.A, problem.lower, hard_qp.C_data)
         self._nominal = (problem.g, hard_qp.nominal)
         self._box = (problem.u_min, problem.u_max)
+        self._hard_qp = hard_qp
+        # The metric's buffers (R, R column-major, C R, y_nom); empty for the identity.
+        R = problem.metric_factor
+        m, rows = (0, 0) if R is None else (self._m, problem.n_rows + 2 * self._m)
+        self._metric = (
+            np.zeros((m, m)) if R is None else R, np.empty(m * m), np.empty((rows, m)),
+            np.empty(m),
+        )
+        self._M_start = 0
         self._layout: Any = None
         self._arguments: tuple[Any, ...] = ()
         self._barriers: tuple[tuple[Any, slice], ...] = ()
@@ -218,6 +310,8 @@ class FusedTick:
         last_active_guess = getattr(backend, 'last_active_guess', None)
         if last_active_guess is None or last_active_guess() is None or problem.relaxed:
             return None
+        if problem.n_torques > PAIRWISE_BLOCK:
+            return None  # M_h's trace: numpy splits a longer sum (metric_kernel.numpy_sum)
         pyramids = [f for f in families if isinstance(f, FrictionPyramid)]
         boxes = [f for f in families if getattr(f, 'packed_fields', None) is not None]
         if not families or len(pyramids) + len(boxes) != len(families) or len(pyramids) > 1:
@@ -248,9 +342,18 @@ class FusedTick:
         h = np.empty(self._h_size)
         slack = np.empty(self._n_names)
         start = time.perf_counter()
-        outcome, u_star, multipliers, smallest = packed_tick(
-            terms, *self._arguments, h, u, self._box, self._rows, self._nominal, *guess, slack
-        )
+        if self._problem.metric_factor is None:
+            outcome, u_star, multipliers, smallest = packed_tick(
+                terms, *self._arguments, h, u, self._box, self._rows, self._nominal, *guess,
+                slack,
+            )
+        else:
+            hard_qp = self._hard_qp
+            metric = (self._M_start, *self._metric, hard_qp.W.reshape(-1), hard_qp.q)
+            outcome, u_star, multipliers, smallest = packed_tick_metric(
+                terms, *self._arguments, h, u, self._box, self._rows, self._nominal, metric,
+                *guess, slack,
+            )
         elapsed = time.perf_counter() - start
         if outcome == NOT_FINITE:
             return None
@@ -262,7 +365,9 @@ class FusedTick:
             self._backend.warm_start(Solution(u, SolutionStatus.OPTIMAL))
             return FusedOutcome(u, u, FilterStatus.NOMINAL, 0.0, computed)
         if outcome == SETTLED_ON_GUESS:
-            solution = self._backend.accept_guess(u, u_star, multipliers)
+            R, _, rows_y, y_nom = self._metric
+            in_y = None if self._problem.metric_factor is None else (R, rows_y, y_nom)
+            solution = self._backend.accept_guess(u, u_star, multipliers, in_y)
             return FusedOutcome(u, solution.u, FilterStatus.SOLVED, elapsed, computed)
         if guess[0].shape[0]:
             self._backend.guess_rejected()  # the same rows, the same answer: not tried twice
@@ -302,4 +407,5 @@ class FusedTick:
         )
         self._barriers = tuple(barriers)
         self._h_size = first
+        self._M_start = layout.start('M_h')
         self._layout = layout

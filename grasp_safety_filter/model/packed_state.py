@@ -220,11 +220,8 @@ def packed_state(
             m, q=q, dq=dq, p_object_in_palm=p_o, R_object_to_palm=R_o, twist_object=twist_o
         )
     raw = hand.raw_terms(q, dq)
-    object_terms = (
-        rigid_object.inertia_matrix(R_o),
-        rigid_object.bias_wrench(R_o, twist_o),
-        rigid_object.external_wrench(),
-    )
+    M_o, C_o_twist, M_o_inverse = rigid_object.dynamic_terms(R_o, twist_o)
+    object_terms = (M_o, C_o_twist, rigid_object.external_wrench())
     buffer = np.empty(layout.size)
     try:
         sphere_on_plane_terms(
@@ -237,8 +234,8 @@ def packed_state(
             p_o,
             R_o,
             twist_o,
-            rigid_object.inverse_inertia_matrix(R_o),
-            object_terms[1],
+            M_o_inverse,
+            C_o_twist,
             object_terms[2],
             *stack.surface_arrays,
         )

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from grasp_safety_filter.model.arrays import read_only
+from grasp_safety_filter.model.object_kernel import object_dynamics
 
 
 class RigidObject:
@@ -27,7 +28,7 @@ class RigidObject:
     def __init__(self, mass: float, inertia_in_body: np.ndarray, gravity: np.ndarray) -> None:
         if not np.isfinite(mass) or mass <= 0.0:
             raise ValueError(f'model.object.mass: expected a positive mass in kg, got {mass!r}')
-        inertia_in_body = np.asarray(inertia_in_body, dtype=float)
+        inertia_in_body = np.ascontiguousarray(inertia_in_body, dtype=float)
         if inertia_in_body.shape != (3, 3) or not np.allclose(inertia_in_body, inertia_in_body.T):
             raise ValueError(
                 f'object inertia: expected a symmetric (3, 3) matrix, got {inertia_in_body!r}'
@@ -36,7 +37,7 @@ class RigidObject:
             raise ValueError('object inertia: expected positive definite')
         self.mass = float(mass)
         self.inertia_in_body = inertia_in_body
-        self.inverse_inertia_in_body = np.linalg.inv(inertia_in_body)
+        self.inverse_inertia_in_body = np.ascontiguousarray(np.linalg.inv(inertia_in_body))
         self.gravity = np.asarray(gravity, dtype=float)
         # An isotropic inertia c I (the cube's, the sphere's) is the same in every frame,
         # R (c I) R^T = c I, and has no gyroscopic torque, w × c w = 0: M_o, M_o^-1 and
@@ -119,6 +120,22 @@ class RigidObject:
                 ]
             )
         )
+
+    def dynamic_terms(
+        self, R_object_to_palm: np.ndarray, twist: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return ``(M_o, C_o x_o_dot, M_o^-1)``, read-only, as the three methods give them.
+
+        One compiled pass for an anisotropic body (:func:`~grasp_safety_filter.model.
+        object_kernel.object_dynamics`, the same products); ``R_object_to_palm`` C-ordered.
+        """
+        if self.isotropic:
+            return self._M_o, self._zero_wrench, self._M_o_inv
+        M_o, M_o_inverse, bias = object_dynamics(
+            self.mass, (self.inertia_in_body, self.inverse_inertia_in_body), R_object_to_palm,
+            twist,
+        )
+        return read_only(M_o), read_only(bias), read_only(M_o_inverse)
 
     def external_wrench(self) -> np.ndarray:
         """``w_e``: gravity at the centre of mass, (6,) (a shared read-only array)."""

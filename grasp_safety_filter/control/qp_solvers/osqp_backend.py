@@ -169,33 +169,39 @@ class OSQPBackend(ActiveSetSteps):
         self._last_active = solution.active
         self._pending = (solution.u, solution.active, solution.multipliers)
 
-    def last_active_guess(self) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Return what a compiled pass needs to try step 1 itself (identity metric only).
+    def last_active_guess(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return what a compiled pass needs to try step 1 itself.
 
         Returns:
             The previous tick's active set as an index array (empty when there is no guess)
-            and the hard least-distance form's rows ``C`` and ``b``, whose first k rows the
-            pass overwrites with the tick's ``A`` and ``lower``; None with a metric.
+            and the hard least-distance form's rows ``C`` and ``b`` in u, whose first k rows
+            the pass overwrites with the tick's ``A`` and ``lower``.
         """
-        if self.hard_qp.metric_factor is not None:
-            return None
         guess = self._last_active
         working_set = self._working_set_array(guess) if guess else _NO_ROWS
         return working_set, self._hard_rows, self._hard_lower
 
     def accept_guess(
-        self, u_nom: np.ndarray, u: np.ndarray, multipliers: np.ndarray
+        self,
+        u_nom: np.ndarray,
+        u: np.ndarray,
+        multipliers: np.ndarray,
+        in_y: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> Solution:
         """Take step 1's optimum found by a compiled pass, as :meth:`solve` would have.
 
         ``u`` (clipped to the box, rows checked) and ``multipliers`` are
         :func:`~grasp_safety_filter.control.working_set.clipped_optimum_on_working_set`'s
-        answer on :meth:`last_active_guess`, with this tick's rows already in ``C`` and ``b``.
+        answer on :meth:`last_active_guess`, with this tick's rows already in ``C`` and ``b``
+        (with a metric, ``in_y``: the tick's R, ``C R`` and ``R^-1 u_nom`` the pass formed).
         """
         self._infeasible_rows = None
         self._relaxed_guess, self._relaxed_active = self._relaxed_active, None
         self._attempt = None
-        self._set_metric(None, u_nom)
+        if in_y is None:
+            self._set_metric(None, u_nom)
+        else:
+            self._R, self._rows_y, self._y_nom = in_y
         guess = self._last_active
         return self._keep(Solution(u, SolutionStatus.OPTIMAL, guess, multipliers, None, 0))
 
