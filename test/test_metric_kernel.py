@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grasp_safety_filter.control.fortran_linalg import matrix_matrix, matrix_vector
 from grasp_safety_filter.control.metric_kernel import (
     inertia_factor,
     metric_optimum_on_working_set,
@@ -14,6 +13,7 @@ from grasp_safety_filter.control.metric_kernel import (
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_metric import to_metric_coordinates, write_inertia_factor
 from grasp_safety_filter.control.working_set import optimum_on_working_set
+from grasp_safety_filter.model.fortran_linalg import matrix_matrix, matrix_vector
 
 SIZES = (2, 3, 7, 8, 9, 12, 16, 17, 40)
 

@@ -43,7 +43,6 @@ from grasp_safety_filter.control.constraints import ConstraintFamily, FrictionPy
 from grasp_safety_filter.control.constraints.box_kernel import box_barrier_rows_packed
 from grasp_safety_filter.control.constraints.pyramid_kernel import pyramid_rows_packed
 from grasp_safety_filter.control.filter_result import FilterStatus
-from grasp_safety_filter.control.fortran_linalg import matrix_vector
 from grasp_safety_filter.control.metric_kernel import (
     inertia_factor,
     metric_optimum_on_working_set,
@@ -60,6 +59,7 @@ from grasp_safety_filter.control.qp_solvers.osqp_active_set import ACTIVE_SET_TO
 from grasp_safety_filter.control.row_checks import all_finite, inside, residuals
 from grasp_safety_filter.control.working_set import clipped_optimum_on_working_set
 from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.fortran_linalg import matrix_vector
 from grasp_safety_filter.model.grasp_state import GraspState
 
 if TYPE_CHECKING:

@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-from grasp_safety_filter.control.fortran_linalg import (
+from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.fortran_linalg import (
     dgeqp3,
     dgeqrf,
     dorgqr,
@@ -22,7 +23,6 @@ from grasp_safety_filter.control.fortran_linalg import (
     dtrtrs,
     matrix_vector,
 )
-from grasp_safety_filter.model.compiled import kernel
 
 #: A row whose normal has a component below this fraction of its norm outside the span of
 #: the working rows' normals is treated as linearly dependent on them.

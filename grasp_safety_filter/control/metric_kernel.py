@@ -20,14 +20,14 @@ import math
 
 import numpy as np
 
-from grasp_safety_filter.control.fortran_linalg import (
+from grasp_safety_filter.control.working_set import optimum_on_working_set
+from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.fortran_linalg import (
     dpotrf,
     dtrtrs,
     matrix_matrix,
     matrix_vector,
 )
-from grasp_safety_filter.control.working_set import optimum_on_working_set
-from grasp_safety_filter.model.compiled import kernel
 
 #: The longest sum :func:`numpy_sum` adds as numpy does (numpy splits longer ones in two).
 PAIRWISE_BLOCK = 128

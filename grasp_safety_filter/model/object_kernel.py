@@ -3,15 +3,15 @@
 :class:`~grasp_safety_filter.model.rigid_object.RigidObject`'s ``M_o``, ``M_o^-1`` and
 ``C_o x_o_dot`` of a body whose inertia is not isotropic (a box) are each a few 3 × 3
 products, some 14 µs of numpy calls a tick together. :func:`object_dynamics` makes the same
-BLAS calls as numpy's ``@`` (:mod:`~grasp_safety_filter.control.fortran_linalg`) in one call.
+BLAS calls as numpy's ``@`` (:mod:`~grasp_safety_filter.model.fortran_linalg`) in one call.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from grasp_safety_filter.control.fortran_linalg import dgemm, matrix_matrix, matrix_vector
 from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.fortran_linalg import dgemm, matrix_matrix, matrix_vector
 
 
 @kernel
