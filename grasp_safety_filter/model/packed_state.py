@@ -34,7 +34,7 @@ _AFFINE = {
 }
 
 #: GraspState fields :meth:`PackedGraspState.of` sets (not in the buffer).
-_SET_BY_OF = ('t', 'M_o', 'C_o_twist', 'w_e')
+_SET_BY_OF = ('t', 'w_e')
 
 
 class _View:
@@ -92,7 +92,7 @@ class PackedGraspState(GraspState):
         t: float,
         buffer: np.ndarray,
         layout: PackedLayout,
-        object_terms: tuple[np.ndarray, np.ndarray, np.ndarray],
+        w_e: np.ndarray,
         stack: ContactStack,
     ) -> PackedGraspState:
         """Wrap a filled buffer (made read-only here) as the state at time ``t``, s.
@@ -101,14 +101,14 @@ class PackedGraspState(GraspState):
             t: Time stamp, s.
             buffer: The terms, laid out as ``layout`` says.
             layout: Where each term lies.
-            object_terms: ``M_o``, ``C_o x_o_dot`` and ``w_e``, read-only arrays.
+            w_e: The external wrench on the object, (6,), read-only.
             stack: The contacts (for :attr:`GraspState.xi_co_rate_terms`).
         """
         buffer.setflags(write=False)
         state = object.__new__(cls)
         fields = state.__dict__
         fields['t'] = t
-        fields['M_o'], fields['C_o_twist'], fields['w_e'] = object_terms
+        fields['w_e'] = w_e
         fields['_buffer'] = buffer
         fields['_layout'] = layout
         fields['_stack'] = stack
@@ -182,8 +182,8 @@ def packed_state(
     :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms` gives the same
     terms as the staged computation of
     :meth:`~grasp_safety_filter.model.grasp_model.GraspModel.state` (the same formulas and
-    LAPACK solve), computed in one compiled pass from Pinocchio's and the object's terms
-    into one buffer.
+    LAPACK solve), computed in one compiled pass from Pinocchio's terms and the object's
+    mass matrices into one buffer.
 
     Args:
         hand: The hand.
@@ -220,8 +220,7 @@ def packed_state(
             m, q=q, dq=dq, p_object_in_palm=p_o, R_object_to_palm=R_o, twist_object=twist_o
         )
     raw = hand.raw_terms(q, dq)
-    M_o, C_o_twist, M_o_inverse = rigid_object.dynamic_terms(R_o, twist_o)
-    object_terms = (M_o, C_o_twist, rigid_object.external_wrench())
+    w_e = rigid_object.external_wrench()
     buffer = np.empty(layout.size)
     try:
         sphere_on_plane_terms(
@@ -234,14 +233,14 @@ def packed_state(
             p_o,
             R_o,
             twist_o,
-            M_o_inverse,
-            C_o_twist,
-            object_terms[2],
+            rigid_object.mass_matrices_in_body,
+            rigid_object.isotropic,
+            w_e,
             *stack.surface_arrays,
         )
     except np.linalg.LinAlgError:
         return None
-    return PackedGraspState.of(float(t), buffer, layout, object_terms, stack)
+    return PackedGraspState.of(float(t), buffer, layout, w_e, stack)
 
 
 def _raise_shape_error(m: int, **inputs: np.ndarray) -> None:

@@ -25,6 +25,7 @@ import numpy as np
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
+from grasp_safety_filter.model.object_kernel import object_dynamics
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
 
 
@@ -73,6 +74,8 @@ def packed_fields(n: int, m: int) -> tuple[tuple[str, tuple[int, ...]], ...]:
         ('joint_acceleration_augmented', (m, m + 1)),
         ('object_acceleration_augmented', (6, m + 1)),
         ('xi_cf_ddot_augmented', (2 * n, m + 1)),
+        ('M_o', (6, 6)),
+        ('C_o_twist', (6,)),
     )
 
 
@@ -138,8 +141,8 @@ def sphere_on_plane_terms(
     p_object_in_palm: np.ndarray,
     R_object_to_palm: np.ndarray,
     twist_object: np.ndarray,
-    M_o_inverse: np.ndarray,
-    C_o_twist: np.ndarray,
+    M_o_in_body: np.ndarray,
+    isotropic: bool,
     w_e: np.ndarray,
     plane_origin: np.ndarray,
     plane_frame: np.ndarray,
@@ -169,8 +172,10 @@ def sphere_on_plane_terms(
         p_object_in_palm: Object centre of mass, (3,), m.
         R_object_to_palm: Object orientation, (3, 3).
         twist_object: ``(v_o, w_o)``, (6,).
-        M_o_inverse: ``M_o^-1``, (6, 6).
-        C_o_twist: ``C_o x_o_dot``, (6,).
+        M_o_in_body: ``M_o`` and ``M_o^-1`` in the object frame, ``blkdiag(mass I3,
+            I_body)`` and ``blkdiag(I3 / mass, I_body^-1)``, (2, 6, 6)
+            (:attr:`~grasp_safety_filter.model.rigid_object.RigidObject.mass_matrices_in_body`).
+        isotropic: Whether ``I_body`` is isotropic (then ``M_o`` is the same in every frame).
         w_e: External wrench on the object, (6,).
         plane_origin: Each face's origin in the object frame, (n, 3), m.
         plane_frame: Each face's ``[e1, e2, n]`` in the object frame, (n, 3, 3).
@@ -179,6 +184,19 @@ def sphere_on_plane_terms(
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
     """
+    # ---- The object (RigidObject.dynamic_terms): here, not a compiled call of its own.
+    if isotropic:
+        M_o = M_o_in_body[0].copy()
+        M_o_inverse = M_o_in_body[1].copy()
+        C_o_twist = np.zeros(6)
+    else:
+        inertia = (
+            np.ascontiguousarray(M_o_in_body[0, 3:, 3:]),
+            np.ascontiguousarray(M_o_in_body[1, 3:, 3:]),
+        )
+        M_o, M_o_inverse, C_o_twist = object_dynamics(
+            M_o_in_body[0, 0, 0], inertia, R_object_to_palm, twist_object
+        )
     # ---- The hand, in the model's joint order (HandModel.terms).
     p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = (
         hand_in_model_order(
@@ -241,4 +259,6 @@ def sphere_on_plane_terms(
     at = _put(out, at, force)
     at = _put(out, at, ddq)
     at = _put(out, at, x_ddot)
-    _put(out, at, xi_ddot)
+    at = _put(out, at, xi_ddot)
+    at = _put(out, at, M_o)
+    _put(out, at, C_o_twist)
