@@ -12,7 +12,6 @@ from __future__ import annotations
 import numpy as np
 
 from grasp_safety_filter.model.arrays import read_only
-from grasp_safety_filter.model.object_kernel import object_dynamics
 
 
 class RigidObject:
@@ -123,22 +122,6 @@ class RigidObject:
                 ]
             )
         )
-
-    def dynamic_terms(
-        self, R_object_to_palm: np.ndarray, twist: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return ``(M_o, C_o x_o_dot, M_o^-1)``, read-only, as the three methods give them.
-
-        One compiled pass for an anisotropic body (:func:`~grasp_safety_filter.model.
-        object_kernel.object_dynamics`, the same products); ``R_object_to_palm`` C-ordered.
-        """
-        if self.isotropic:
-            return self._M_o, self._zero_wrench, self._M_o_inv
-        M_o, M_o_inverse, bias = object_dynamics(
-            self.mass, (self.inertia_in_body, self.inverse_inertia_in_body), R_object_to_palm,
-            twist,
-        )
-        return read_only(M_o), read_only(bias), read_only(M_o_inverse)
 
     def external_wrench(self) -> np.ndarray:
         """``w_e``: gravity at the centre of mass, (6,) (a shared read-only array)."""
