@@ -303,12 +303,18 @@ class FusedTick:
         self._h_size = 0
 
     @classmethod
-    def of(cls, safety_filter: SafetyFilter) -> FusedTick | None:
-        """Return a :class:`SafetyFilter`'s fused tick, or None where it does not apply."""
+    def of(
+        cls, safety_filter: SafetyFilter, starts: Sequence[int], n_names: int
+    ) -> FusedTick | None:
+        """Return a :class:`SafetyFilter`'s fused tick, or None where it does not apply.
+
+        ``starts``: each family's first row; ``n_names``: the result's rows, the box's
+        included (the filter's :class:`~grasp_safety_filter.control.result_assembly.
+        ResultAssembler` layout).
+        """
         families, problem = safety_filter.families, safety_filter.problem
         backend = safety_filter.backend
-        last_active_guess = getattr(backend, 'last_active_guess', None)
-        if last_active_guess is None or last_active_guess() is None or problem.relaxed:
+        if getattr(backend, 'last_active_guess', None) is None or problem.relaxed:
             return None
         if problem.n_torques > PAIRWISE_BLOCK:
             return None  # M_h's trace: numpy splits a longer sum (metric_kernel.numpy_sum)
@@ -316,9 +322,6 @@ class FusedTick:
         boxes = [f for f in families if getattr(f, 'packed_fields', None) is not None]
         if not families or len(pyramids) + len(boxes) != len(families) or len(pyramids) > 1:
             return None
-        sizes = [len(family.names) for family in families]
-        starts = np.cumsum([0, *sizes[:-1]]).tolist()
-        n_names = sum(sizes) + 2 * problem.n_torques  # the box's rows too
         hard_qp, n = safety_filter.hard_qp, len(safety_filter.contact_names)
         return cls(families, starts, problem, hard_qp, backend, n_names, n)
 

@@ -192,7 +192,7 @@ class SafetyFilter:
         self._row_writers = tuple(zip(row_writers(self.families), starts, strict=True))
         self._rows_compiled = rows_compiled(self.families)
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
-        self._fused = FusedTick.of(self)
+        self._fused = FusedTick.of(self, starts, len(self._results.names))
         self._last_good_u: np.ndarray | None = None
 
     @classmethod

@@ -184,7 +184,7 @@ def sphere_on_plane_terms(
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
     """
-    # ---- The object (RigidObject.dynamic_terms): here, not a compiled call of its own.
+    # ---- The object (RigidObject's inertia_matrix, bias_wrench, inverse_inertia_matrix).
     if isotropic:
         M_o = M_o_in_body[0].copy()
         M_o_inverse = M_o_in_body[1].copy()

@@ -42,13 +42,15 @@ class RigidObject:
         # R (c I) R^T = c I, and has no gyroscopic torque, w × c w = 0: M_o, M_o^-1 and
         # C_o x_o_dot are then constants, computed once.
         self.isotropic = bool(np.all(inertia_in_body == inertia_in_body[0, 0] * np.eye(3)))
-        self._M_o = read_only(self._block_diagonal(self.mass, inertia_in_body))
-        self._M_o_inv = read_only(
-            self._block_diagonal(1.0 / self.mass, self.inverse_inertia_in_body)
-        )
         #: ``blkdiag(mass I3, I_body)`` and ``blkdiag(I3 / mass, I_body^-1)``, (2, 6, 6),
         #: read-only: M_o and M_o^-1 in the body frame (the compiled grasp terms rotate them).
-        self.mass_matrices_in_body = read_only(np.stack([self._M_o, self._M_o_inv]))
+        self.mass_matrices_in_body = read_only(
+            np.stack([
+                self._block_diagonal(self.mass, inertia_in_body),
+                self._block_diagonal(1.0 / self.mass, self.inverse_inertia_in_body),
+            ])
+        )
+        self._M_o, self._M_o_inv = self.mass_matrices_in_body
         self._zero_wrench = read_only(np.zeros(6))
         self._external_wrench = read_only(np.concatenate([self.mass * self.gravity, np.zeros(3)]))
 
