@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from grasp_safety_filter.control.row_checks import clip_if_finite
 from grasp_safety_filter.control.working_set import optimum_on_working_set
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.fortran_linalg import (
@@ -145,12 +146,11 @@ def metric_optimum_on_working_set(
     )
     if outcome != 1:
         return outcome, y, multipliers
+    unclipped = np.empty(m)
+    matrix_vector(m, m, R.reshape(-1), 0, m, 1, y, unclipped)
     u = np.empty(m)
-    matrix_vector(m, m, R.reshape(-1), 0, m, 1, y, u)
-    for j in range(m):
-        if not math.isfinite(u[j]):
-            return 0, y, multipliers
-        u[j] = min(max(u[j], u_min[j]), u_max[j])
+    if not clip_if_finite(unclipped, u_min, u_max, u):
+        return 0, y, multipliers
     if k == 0:
         return 1, u, multipliers
     residual = np.empty(k)

@@ -348,12 +348,7 @@ def _check_state(state: GraspState) -> tuple[int, int]:
             f'm >= 3n (with fewer joints the fingers cannot follow every object motion)'
         )
     n = rows // 3
-    arrays = (
-        J_h, state.G, state.M_h, state.h_bias, state.gravity_torque, state.q, state.dq,
-        state.G_dot_T_twist, state.Jh_dot_dq, state.M_o, state.C_o_twist, state.w_e,
-        state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
-        state.p_contact_in_palm, state.R_contact_to_palm,
-    )
+    arrays = [getattr(state, name) for name in _STATE_ARRAYS]
     expected = [
         (rows, m), (6, rows), (m, m), (m,), (m,), (m,), (m,), (rows,), (rows,), (6, 6), (6,),
         (6,), (3,), (3, 3), (6,), (n, 3), (n, 3, 3),
