@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from grasp_states import paper_model, random_configuration
+import json
+
+from grasp_states import P_OBJECT_PAPER, paper_model, Q_PAPER, random_configuration
 import numpy as np
 import pytest
 
@@ -10,6 +12,14 @@ from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.control.reference import PaperReference, Pose
 from grasp_safety_filter.model.grasp_check import grasp_findings
 from grasp_safety_filter.model.per_contact import PerContactError
+from grasp_safety_filter.nodes.scenario import (
+    scenario_document,
+    scenario_from_text,
+    scenario_to_text,
+    ScenarioError,
+    TORSIONAL_FRICTION_KEY,
+)
+from hand_sim_node.config import SimConfig
 
 SOFT = {'model.torsional_friction': 0.005}
 
@@ -78,3 +88,17 @@ def test_the_grasp_check_accepts_the_papers_grasp_with_soft_fingers():
     model = paper_model(**SOFT)
     c = random_configuration(model, rng)
     assert grasp_findings(model, c.q, c.p_object, c.R_object, 1e-6) == []
+
+
+@pytest.mark.parametrize('torsional_friction', [0.0, 0.005, [0.004, 0.005, 0.006]])
+def test_the_scenario_document_says_which_contact_model_a_run_had(torsional_friction):
+    model = paper_model(**{'model.torsional_friction': torsional_friction})
+    config = SimConfig(Q_PAPER.tolist(), P_OBJECT_PAPER.tolist())
+    document = scenario_from_text(scenario_to_text(scenario_document(model, config)))
+    if torsional_friction == 0.0:
+        assert TORSIONAL_FRICTION_KEY not in document
+    else:
+        assert document[TORSIONAL_FRICTION_KEY] == torsional_friction
+        document[TORSIONAL_FRICTION_KEY] = -0.005
+        with pytest.raises(ScenarioError, match="'torsional_friction'"):
+            scenario_from_text(json.dumps(document))
