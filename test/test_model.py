@@ -9,6 +9,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from grasp_safety_filter.model.dynamics_kernel import TORSIONAL_COMPLIANCE
+
 N_STATES = 20
 EPS = 1e-6
 RTOL = 1e-5
@@ -230,9 +232,15 @@ def test_accelerations_satisfy_the_differentiated_rolling_constraint(model, conf
             x_ddot = state.object_acceleration(u)
             lhs = state.J_h @ ddq + state.Jh_dot_dq
             rhs = state.G.T @ x_ddot + state.G_dot_T_twist
+            f_c = state.contact_force(u)
+            if model.soft_finger:
+                # Each spin row is compliant: its acceleration is rho (B_ho)_tt tau_i.
+                spin = np.zeros_like(f_c)
+                t = slice(3 * model.n_contacts, None)
+                spin[t] = TORSIONAL_COMPLIANCE * np.diag(state.B_ho)[t] * f_c[t]
+                rhs = rhs + spin
             np.testing.assert_allclose(lhs, rhs, atol=1e-9)
             # And both dynamics hold with the same contact force.
-            f_c = state.contact_force(u)
             np.testing.assert_allclose(
                 state.M_h @ ddq + state.h_bias, u - state.J_h.T @ f_c, atol=1e-9
             )

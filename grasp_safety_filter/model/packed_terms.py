@@ -23,7 +23,11 @@ from typing import NamedTuple
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
+from grasp_safety_filter.model.dynamics_kernel import (
+    acceleration_terms,
+    velocity_terms,
+    wrench_solve,
+)
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.object_kernel import object_dynamics
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
@@ -226,7 +230,7 @@ def sphere_on_plane_terms(
         twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
         contacts[11], contacts[12], contacts[13], torsion,
     )
-    force = np.linalg.solve(B_ho, force_rhs)
+    force = wrench_solve(B_ho, force_rhs) if torsion else np.linalg.solve(B_ho, force_rhs)
     ddq, x_ddot, xi_ddot = acceleration_terms(
         force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
         J_s, J_frames_dot_dq, contacts[5], contacts[10], contacts[11],
