@@ -119,7 +119,7 @@ class FrictionPyramid:
 
         g(f_t) / mu' + |tau| / mu_t' <= f_n - eps / a
 
-    - Inscribed: ``g(f_t) >= |f_t|`` (the polygon contains the disc it is drawn around), so
+    - Inscribed: ``g(f_t) >= |f_t|`` (g's unit ball, the polygon, lies in the unit disc), so
       ``|f_t| / mu' + |tau| / mu_t' <= f_n``: every accepted wrench has ``|f_t| <= mu' f_n``
       and ``|tau| <= mu_t' f_n`` (the soft-finger cone) and, as an l1 norm bounds the l2
       norm, lies in the elliptic soft-finger cone ``f_t^2 / mu'^2 + tau^2 / mu_t'^2 <=
