@@ -310,19 +310,25 @@ class EventMonitor:
     ) -> ConstraintMargins:
         """Margins from raw samples: joint angles (m,), fingertip coordinates (n, 2), forces (3n,).
 
+        A soft finger's contact wrench (4n,) has its torsion entries after the forces; they are
+        not read here.
+
         With the object surface coordinates ``xi_co`` (n, 2) (m on a face) and the faces'
         half extents, also the object-face margins (else NaN). The bag analysis evaluates
         recorded runs with this, so a run and its recording are judged by the same code.
         """
         a_b = np.asarray(xi_cf, dtype=float)
-        forces = np.asarray(contact_force, dtype=float).reshape(-1, 3)
+        wrench = np.asarray(contact_force, dtype=float).reshape(-1)
         n, m = a_b.shape[0], self.joint_lower_limits.shape[0]
         workspace_end, joint_end, slip_end, separation_end, size = self._ends
-        if forces.shape[0] != n or size != 7 * n + 2 * m:
+        if wrench.size not in (3 * n, 4 * n) or size != 7 * n + 2 * m:
             raise ValueError(
                 f'EventMonitor.margins_at: expected {len(self.contact_names)} contacts, got '
-                f'coordinates of {n} and forces of {forces.shape[0]}'
+                f'coordinates of {n} and a contact wrench of {wrench.size} entries (3 per '
+                'contact, or 4 with soft fingers)'
             )
+        # Slip and separation read the forces; a soft finger's torsion entries follow them.
+        forces = wrench[: 3 * n].reshape(n, 3)
         q = np.asarray(q, dtype=float)
         faces = self.object_face_half_widths
         no_faces = xi_co is None or faces is None

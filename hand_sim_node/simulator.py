@@ -316,7 +316,7 @@ class Simulator:
         try:
             k1, f_c = self.derivative(state0, u, x0[quaternion])
         except np.linalg.LinAlgError:
-            k1, f_c = None, np.full(3 * self.model.n_contacts, np.nan)
+            k1, f_c = None, np.full(self.model.wrench_size, np.nan)
         margins = self.monitor.margins(state0, f_c)
         events = self.monitor.events(margins)
         self.log.record(margins, events)

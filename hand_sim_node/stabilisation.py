@@ -57,11 +57,14 @@ def baumgarte_correction(
     position_gain: float,
     velocity_gain: float,
 ) -> np.ndarray:
-    """``s = K_v e + K_p [0, 0, δ_i]_i`` with ``e = J_h dq - G^T x_o_dot``, shape (3n,), m/s².
+    """``s = K_v e + K_p [0, 0, δ_i]_i`` with ``e = J_h dq - G^T x_o_dot``, shape (k,), m/s².
+
+    With soft fingers (k = 4n) the last n rows are the spin residuals, rad/s², with no
+    position term.
 
     Args:
-        J_h: Hand Jacobian (3n, m).
-        G: Grasp map (6, 3n).
+        J_h: Hand Jacobian (k, m), k = 3n or 4n.
+        G: Grasp map (6, k).
         dq: Joint velocities (m,), rad/s.
         twist_object: Object twist (6,), palm coordinates.
         penetration: Normal interpenetration per contact (n,), m.
@@ -77,7 +80,7 @@ def baumgarte_correction(
         for j in range(6):
             residual -= G[j, r] * twist_object[j]
         correction[r] = velocity_gain * residual
-    for i in range(k // 3):
+    for i in range(penetration.shape[0]):
         correction[3 * i + 2] += position_gain * penetration[i]
     return correction
 
@@ -225,6 +228,7 @@ def _sphere_on_plane_stage_system(
     radius: np.ndarray,
     position_gain: float,
     velocity_gain: float,
+    torsion: bool,
 ) -> tuple[np.ndarray, ...]:
     """Run the model's hand terms, contact kinematics and first dynamics pass, then ``s``.
 
@@ -273,6 +277,7 @@ def _sphere_on_plane_stage_system(
         H_cf_dot_w,
         sliding,
         Omega,
+        torsion,
     )
     stabilisation = baumgarte_correction(
         J_h, G, dq, twist_object, penetration, position_gain, velocity_gain
@@ -335,6 +340,7 @@ def sphere_on_plane_stage_rate(
     effort: np.ndarray,
     position_gain: float,
     velocity_gain: float,
+    torsion: bool = False,
 ) -> np.ndarray:
     """``x_dot`` of spherical fingertips on flat faces, from the hand's terms at a stage.
 
@@ -362,6 +368,7 @@ def sphere_on_plane_stage_rate(
         effort: Joint torque u, shape (m,), N·m.
         position_gain: ``K_p`` of the stabilisation, 1/s².
         velocity_gain: ``K_v`` of the stabilisation, 1/s.
+        torsion: Soft-finger contacts (the model's ``soft_finger``).
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
@@ -386,6 +393,7 @@ def sphere_on_plane_stage_rate(
         radius,
         position_gain,
         velocity_gain,
+        torsion,
     )
     # Two solves, not one of [force_rhs | s]: LAPACK's bits depend on the number of columns.
     force, correction = _solve(B_ho, force_rhs), _solve(B_ho, stabilisation)

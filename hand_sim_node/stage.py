@@ -172,7 +172,7 @@ class PlantRate:
             return sphere_on_plane_stage_rate(
                 self._hand, x[:m], stack.surface_arrays, dq, p_o, R_o, twist_o, quaternion,
                 M_o_inv, C_o_twist, rigid_object.external_wrench(), effort, position_gain,
-                velocity_gain,
+                velocity_gain, self._model.soft_finger,
             )
         hand = self._hand.terms(x[:m], dq)
         p_f = hand.p_fingertip_in_palm
@@ -197,6 +197,7 @@ class PlantRate:
             rates.H_cf_dot_w,
             rates.sliding_velocity,
             rates.frame_angular_velocity,
+            self._model.soft_finger,
         )
         # Read-only, as in a GraspState: the compiled kernels then see one array type.
         for array in (dq, twist_o, geometry.penetration, J_h, G, B_ho, force, ddq, x_ddot):

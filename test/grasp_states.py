@@ -86,5 +86,9 @@ def random_configuration(
         if np.any(q <= model.joint_lower_limits) or np.any(q >= model.joint_upper_limits):
             continue
         twist = rng.normal(0.0, speed, 6) * np.array([0.3, 0.3, 0.3, 1.0, 1.0, 1.0])
-        dq = model.rolling_joint_velocity(q, p_object, R_object, twist)
+        if model.soft_finger:
+            # Fingers that cannot spin on the object follow only some twists.
+            dq, twist = model.rolling_motion(q, p_object, R_object, twist)
+        else:
+            dq = model.rolling_joint_velocity(q, p_object, R_object, twist)
         return Configuration(q, dq, p_object, R_object, twist)

@@ -39,6 +39,12 @@ MODELS = {
         'model.object.shape': 'sphere',
         'model.object.size': 0.3,
     },
+    'paper cube, soft fingers': {'model.torsional_friction': 0.005},
+    'sphere object, soft fingers': {
+        'model.object.shape': 'sphere',
+        'model.object.size': 0.3,
+        'model.torsional_friction': [0.004, 0.005, 0.006],
+    },
     'random tip radii, box': 'random',
     'random tip radii, sphere object': 'random sphere',
 }
@@ -133,6 +139,19 @@ def test_hand_jacobian_and_grasp_map_match_material_point_velocities(model, conf
                 R_cp @ central(object_point, c),
                 f'G contact {i}',
             )
+        if model.soft_finger:
+            # Torsion rows: each body's angular velocity about the contact normal.
+            R_plus = model.hand.fingertip_placements(moved(c, EPS).q)[1]
+            R_minus = model.hand.fingertip_placements(moved(c, -EPS).q)[1]
+            n = model.n_contacts
+            assert state.J_h.shape[0] == state.G.shape[1] == 4 * n
+            for i in range(n):
+                normal = state.R_contact_to_palm[i][:, 2]
+                w_f = pin.log3(R_plus[i] @ R_minus[i].T) / (2 * EPS)
+                assert_close(state.J_h[3 * n + i] @ c.dq, normal @ w_f, f'spin row {i}')
+                assert_close(
+                    state.G[:, 3 * n + i], np.concatenate([np.zeros(3), normal]), f'G torsion {i}'
+                )
         # On a rolling motion the two material velocities agree (the no-slip constraint).
         np.testing.assert_allclose(state.J_h @ c.dq, state.G.T @ c.twist_object, atol=1e-10)
 

@@ -27,6 +27,11 @@ BOXES = {
         'model.object.shape': 'box',
         'model.object.edge_lengths': [0.26, 0.28, 0.24],
     },
+    'anisotropic box, soft fingers': {
+        'model.object.shape': 'box',
+        'model.object.edge_lengths': [0.26, 0.28, 0.24],
+        'model.torsional_friction': 0.005,
+    },
 }
 
 

@@ -280,7 +280,8 @@ class NominalController:
                 f'{m} joints'
             )
         config = self.config
-        J_h, G, M_h = state.J_h, state.G, state.M_h
+        J_h, G, G_dot_T_twist, Jh_dot_dq = _point_contact_rows(state, rows)
+        M_h = state.M_h
         # The solves are numpy's (nominal_kernel's docstring); the rest is compiled. With
         # X = M_h^-1 J_h^T: Lambda^-1 = J_h X, J_bar = X Lambda, J_h M_h^-1 = X^T.
         rhs_m = np.empty((m, rows + 1))
@@ -288,7 +289,7 @@ class NominalController:
         rhs_m[:, rows] = state.h_bias - state.gravity_torque  # C_h dq
         solution_m = np.linalg.solve(M_h, rhs_m)
         contact_inertia_inv, rhs, a_null, full_rank = nominal_kernel.contact_space_terms(
-            J_h, solution_m, G, state.G_dot_T_twist, state.Jh_dot_dq, state.q, self._posture,
+            J_h, solution_m, G, G_dot_T_twist, Jh_dot_dq, state.q, self._posture,
             state.dq, config.null_space_kp, config.null_space_kd, RANK_TOLERANCE,
         )
         if not full_rank:
@@ -331,26 +332,51 @@ _STATE_ARRAYS = (
 )
 
 
+def _point_contact_rows(
+    state: GraspState, rows: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``J_h``, ``G``, ``G_dot^T x_o_dot`` and ``J_h_dot dq`` of the 3n force rows.
+
+    The law plans contact forces (the paper's point contacts); with soft fingers the state
+    also has n torsion rows, which it leaves out: the torques about the normals that the
+    plant then transmits are bounded by the safety filter's friction rows.
+    """
+    J_h, G = state.J_h, state.G
+    if J_h.shape[0] == rows:
+        return J_h, G, state.G_dot_T_twist, state.Jh_dot_dq
+    return (
+        J_h[:rows],
+        np.ascontiguousarray(G[:, :rows]),
+        state.G_dot_T_twist[:rows],
+        state.Jh_dot_dq[:rows],
+    )
+
+
 def _check_state(state: GraspState) -> tuple[int, int]:
     """Return (3n, m) of the state's arrays; ValueError naming any of the wrong shape or type.
 
     The compiled kernels do not check bounds: every array they read is checked here, and
-    the hand must have m >= 3n joints for n contacts.
+    the hand must have m >= 3n joints for n contacts. Soft fingers' states have k = 4n
+    wrench rows (:func:`_point_contact_rows`); point contacts' k = 3n.
     """
     J_h = state.J_h
-    if J_h.ndim != 2 or J_h.shape[0] % 3:
-        raise ValueError(f'NominalController: state.J_h: expected shape (3n, m), got {J_h.shape}')
-    rows, m = J_h.shape
+    n = state.n_contacts
+    if J_h.ndim != 2 or J_h.shape[0] not in (3 * n, 4 * n):
+        raise ValueError(
+            f'NominalController: state.J_h: expected shape (3n, m) or, with soft fingers, '
+            f'(4n, m) for n = {n} contacts, got {J_h.shape}'
+        )
+    k, m = J_h.shape
+    rows = 3 * n
     if m < rows:
         raise ValueError(
             f'NominalController: the hand has m = {m} joints for n = {rows // 3} contacts; '
             f'rolling contacts fix 3n = {rows} joint-velocity components, so the law needs '
             f'm >= 3n (with fewer joints the fingers cannot follow every object motion)'
         )
-    n = rows // 3
     arrays = [getattr(state, name) for name in _STATE_ARRAYS]
     expected = [
-        (rows, m), (6, rows), (m, m), (m,), (m,), (m,), (m,), (rows,), (rows,), (6, 6), (6,),
+        (k, m), (6, k), (m, m), (m,), (m,), (m,), (m,), (k,), (k,), (6, 6), (6,),
         (6,), (3,), (3, 3), (6,), (n, 3), (n, 3, 3),
     ]
     if [a.shape for a in arrays] != expected or {a.dtype for a in arrays} != {_FLOAT}:
@@ -358,7 +384,7 @@ def _check_state(state: GraspState) -> tuple[int, int]:
             if array.shape != shape or array.dtype != _FLOAT:
                 raise ValueError(
                     f'NominalController: state.{name}: expected float64 of shape {shape} '
-                    f'(3n = {rows} contact rows, m = {m} joints), got {array.dtype} of shape '
+                    f'(k = {k} contact rows, m = {m} joints), got {array.dtype} of shape '
                     f'{array.shape}'
                 )
     return rows, m

@@ -11,6 +11,15 @@ rates, :func:`contact_dynamics` computes (DESIGN.md §3; the derivation is in
     J_h_dot dq      = R_cp (a_f0 - p_fc × alpha_f0 + w_f × (p_c_dot - v_f) - w_c × v_cf)
     G_dot^T x_o_dot = R_cp (w_o × (p_c_dot - v_o) - w_c × v_co)
 
+With soft-finger contacts (``torsion``) each contact i also has a torsion row 3n + i, after
+the 3n force rows: its wrench entry is the torque about the normal ``n_i = R_pc,i e_z`` that
+the fingertip exerts on the object (N·m), and its constraint is no spin, ``n_i^T (w_f - w_o)
+= 0``:
+
+    J_h,3n+i = n_i^T J_w,i,     G_3n+i = [0; n_i]
+    J_h_dot dq      = n_i^T alpha_f0 + (w_c × n_i)^T w_f
+    G_dot^T x_o_dot = (w_c × n_i)^T w_o
+
 and the torque-affine terms, as augmented matrices ``[matrix | offset]`` acting on (u, 1):
 
     B_ho = J_h M_h^-1 J_h^T + G^T M_o^-1 G
@@ -20,7 +29,7 @@ and the torque-affine terms, as augmented matrices ``[matrix | offset]`` acting 
                    + H_cf_dot w
 
 Plain loops compiled by numba (:mod:`grasp_safety_filter.model.compiled`): at these sizes
-(3n ≤ 12 rows, m ≤ 16 joints) two compiled passes, around LAPACK's solve of ``B_ho``, cost
+(k ≤ 16 rows, m ≤ 16 joints) two compiled passes, around LAPACK's solve of ``B_ho``, cost
 less than the calls of the numpy expressions they replace. Units: SI; frames and conventions as in
 :mod:`grasp_safety_filter.model.grasp_state`.
 """
@@ -59,6 +68,7 @@ def contact_dynamics(
     H_cf_dot_w: np.ndarray,
     sliding_velocity: np.ndarray,
     frame_angular_velocity: np.ndarray,
+    torsion: bool = False,
 ) -> tuple[
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
     np.ndarray, np.ndarray,
@@ -83,10 +93,13 @@ def contact_dynamics(
         H_cf_dot_w: ``H_cf_dot w``, (n, 2).
         sliding_velocity: ``M_cf xi_cf_dot`` along (rho1, rho2), (n, 2), m/s.
         frame_angular_velocity: ``Omega`` (contact-frame components), (n, 3), rad/s.
+        torsion: Soft-finger contacts: each contact also transmits a torque about its
+            normal and the fingertip cannot spin on the object (k = 4n rows, the n torsion
+            rows after the 3n force rows); False: point contacts with friction (k = 3n).
 
     Returns:
-        ``J_h`` (3n, m), ``G`` (6, 3n), ``J_h_dot dq`` (3n,), ``G_dot^T x_o_dot`` (3n,),
-        ``B_ho`` (3n, 3n), and ``[matrix | offset]`` of ``f_c`` (3n, m + 1), ``ddq``
+        ``J_h`` (k, m), ``G`` (6, k), ``J_h_dot dq`` (k,), ``G_dot^T x_o_dot`` (k,),
+        ``B_ho`` (k, k), and ``[matrix | offset]`` of ``f_c`` (k, m + 1), ``ddq``
         (m, m + 1), ``x_o_ddot`` (6, m + 1) and ``xi_cf_ddot`` (2n, m + 1, contact-major).
 
     Raises:
@@ -113,8 +126,9 @@ def contact_dynamics(
         H_cf_dot_w,
         sliding_velocity,
         frame_angular_velocity,
+        torsion,
     )
-    # B_ho is at most 12 × 12: LAPACK's dgesv (scipy) in between the two compiled passes.
+    # B_ho is at most 16 × 16: LAPACK's dgesv (scipy) in between the two compiled passes.
     _, _, force, info = dgesv(B_ho, force_rhs)
     if info > 0:
         raise np.linalg.LinAlgError('Singular matrix')
@@ -144,15 +158,17 @@ def velocity_terms(
     H_cf_dot_w: np.ndarray,
     sliding_velocity: np.ndarray,
     frame_angular_velocity: np.ndarray,
+    torsion: bool,
 ) -> tuple[np.ndarray, ...]:
     """Everything up to ``B_ho f_c = rhs``: the Jacobians, rates, ``B_ho`` and ``rhs``.
 
     The first of :func:`contact_dynamics`' two compiled passes; a compiled caller that
-    solves ``B_ho`` itself (the simulator's Runge–Kutta stages) calls both.
+    solves ``B_ho`` itself (the simulator's Runge–Kutta stages) calls both. With
+    ``torsion``, rows ``3n + i`` are contact i's torsion rows (module docstring).
     """
     n = J_fingertip.shape[0]
     m = J_fingertip.shape[2]
-    k = 3 * n
+    k = 4 * n if torsion else 3 * n
     J_h = np.empty((k, m))
     G = np.zeros((6, k))
     Jh_dot_dq = np.empty(k)
@@ -234,6 +250,27 @@ def velocity_terms(
             G_dot_T_twist[3 * i + r] = (
                 R[0, r] * world[0] + R[1, r] * world[1] + R[2, r] * world[2]
             )
+        if torsion:
+            # No spin about the normal n = z_c: n^T (w_f - w_o) = 0, whose rate is
+            # n^T (alpha_f - alpha_o) + (w_c × n)^T (w_f - w_o) = 0 (n turns with w_c).
+            t = 3 * n + i
+            for j in range(m):
+                J_h[t, j] = (
+                    R[0, 2] * J_fingertip[i, 3, j]
+                    + R[1, 2] * J_fingertip[i, 4, j]
+                    + R[2, 2] * J_fingertip[i, 5, j]
+                )
+            for r in range(3):
+                G[3 + r, t] = R[r, 2]
+                tmp2[r] = R[r, 2]
+            _cross(w_c[i], tmp2, tmp)
+            total = 0.0
+            spin = 0.0
+            for r in range(3):
+                total += R[r, 2] * alpha_f0[r] + tmp[r] * w_f[r]
+                spin += tmp[r] * w_o[r]
+            Jh_dot_dq[t] = total
+            G_dot_T_twist[t] = spin
 
     # ---- Torque-affine terms, [matrix | offset] on (u, 1).
     # Joint acceleration without contact forces: M_h^-1 [I | -h].
@@ -309,7 +346,7 @@ def acceleration_terms(
     """From ``f_c``: ``ddq``, ``x_o_ddot`` and ``xi_cf_ddot`` (augmented, as returned)."""
     n = J_fingertip.shape[0]
     m = J_fingertip.shape[2]
-    k = 3 * n
+    k = force.shape[0]
     tmp = np.empty(3)
     # ddq = M_h^-1 (u - h) - M_h^-1 J_h^T f_c;  x_o_ddot = M_o^-1 G f_c + x_ddot_free.
     for r in range(m):

@@ -241,7 +241,9 @@ def _hand_findings(
             )
         )
     n = model.n_contacts
-    rank = int(np.linalg.matrix_rank(state.J_h))
+    # The force rows: a soft finger's torsion rows only add to what they can hold.
+    J_h, G = state.J_h[: 3 * n], state.G[:, : 3 * n]
+    rank = int(np.linalg.matrix_rank(J_h))
     if rank < 3 * n:
         findings.append(
             GraspFinding(
@@ -250,7 +252,7 @@ def _hand_findings(
                 'singular configuration',
             )
         )
-    rank = int(np.linalg.matrix_rank(state.G))
+    rank = int(np.linalg.matrix_rank(G))
     if rank < 6:
         findings.append(
             GraspFinding(
@@ -259,7 +261,7 @@ def _hand_findings(
                 'object in every direction',
             )
         )
-    elif not squeezes_inside_friction_cones(state.G, model.friction_coefficient):
+    elif not squeezes_inside_friction_cones(G, model.friction_coefficient):
         mu = model.friction_coefficient.tolist()
         findings.append(
             GraspFinding(

@@ -35,7 +35,10 @@ from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.object_shapes import ObjectShape
 from grasp_safety_filter.model.packed_state import packed_state
 from grasp_safety_filter.model.packed_terms import PackedLayout
-from grasp_safety_filter.model.per_contact import friction_coefficients
+from grasp_safety_filter.model.per_contact import (
+    friction_coefficients,
+    torsional_friction_coefficients,
+)
 from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
 from grasp_safety_filter.model.staged_state import staged_state
@@ -62,6 +65,11 @@ class GraspModel:
             face nearest to the fingertip (with ``contacts`` None).
         palm_frame: Name of the palm frame P (the frame_id of poses in P).
         object_frame: Name of the object frame O.
+        torsional_friction: Torsional friction mu_t (m), one for every contact or one per
+            contact: 0 for point contacts with friction (the paper's model), > 0 for soft
+            fingers, which also transmit a torque about the normal, ``|tau_n| <= mu_t f_n``,
+            and do not spin on the object (the contact wrench then has 4n entries:
+            :mod:`~grasp_safety_filter.model.dynamics_kernel`).
     """
 
     def __init__(
@@ -77,6 +85,7 @@ class GraspModel:
         declared_faces: Sequence[str | None] | None = None,
         palm_frame: str = 'palm',
         object_frame: str = 'object',
+        torsional_friction: float | Sequence[float] = 0.0,
     ) -> None:
         n = len(hand.frame_ids)
         if contacts is not None and len(contacts) != n:
@@ -98,6 +107,10 @@ class GraspModel:
             )
         self.hand = hand
         self.object = rigid_object
+        #: mu_t per contact, (n,), m, read-only; None for point contacts with friction.
+        self.torsional_friction = torsional_friction_coefficients(
+            torsional_friction, contact_names
+        )
         self.object_shape = object_shape
         self.declared_faces = list(declared_faces) if declared_faces is not None else [None] * n
         self._contacts: list[ContactPair] | None = None
@@ -120,10 +133,21 @@ class GraspModel:
         self._contact_stack = contact_stack(self._contacts)
         # Spherical fingertips on flat faces: every term in one compiled pass (packed_terms).
         self._packed_layout = (
-            PackedLayout.of(len(self._contacts), self.hand.n_joints)
+            PackedLayout.of(len(self._contacts), self.hand.n_joints, self.soft_finger)
             if isinstance(self._contact_stack, SphereOnPlaneStack)
             else None
         )
+
+    @property
+    def soft_finger(self) -> bool:
+        """Whether the contacts are soft fingers (a torque about each normal, no spin)."""
+        return self.torsional_friction is not None
+
+    @property
+    def wrench_size(self) -> int:
+        """Entries k of the contact wrench f_c: 3n, or 4n with soft fingers."""
+        n = len(self.contact_names)
+        return 4 * n if self.soft_finger else 3 * n
 
     @property
     def contacts_bound(self) -> bool:
@@ -302,13 +326,42 @@ class GraspModel:
     ) -> np.ndarray:
         """Joint velocity that rolls the fingertips with the object.
 
-        Solves ``J_h dq = G^T x_o_dot`` (least-norm when m > 3n).
+        Solves ``J_h dq = G^T x_o_dot`` (least-norm when m > 3n). Soft fingers also forbid
+        spin, which not every twist allows: :meth:`rolling_motion` gives an admissible pair.
         """
         state = self.state(
             0.0, q, np.zeros(self.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
         )
-        rhs = state.G.T @ np.asarray(twist_object, dtype=float)
-        return np.linalg.lstsq(state.J_h, rhs, rcond=None)[0]
+        k = 3 * self.n_contacts
+        rhs = state.G[:, :k].T @ np.asarray(twist_object, dtype=float)
+        return np.linalg.lstsq(state.J_h[:k], rhs, rcond=None)[0]
+
+    def rolling_motion(
+        self,
+        q: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+        twist_object: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Return the admissible ``(dq, x_o_dot)`` nearest to rolling with ``twist_object``.
+
+        ``(rolling_joint_velocity(twist), twist)`` projected onto the null space of
+        ``[J_h, -G^T]``: with soft fingers (4n rows on m joints) an object twist is admissible
+        only if the fingers can follow it without spinning on the object; with point
+        contacts and J_h of full row rank every twist is, and the projection changes it by
+        rounding only.
+        """
+        state = self.state(
+            0.0, q, np.zeros(self.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
+        )
+        twist = np.asarray(twist_object, dtype=float)
+        motion = np.concatenate(
+            [self.rolling_joint_velocity(q, p_object_in_palm, R_object_to_palm, twist), twist]
+        )
+        constraint = np.hstack([state.J_h, -state.G.T])
+        motion -= np.linalg.lstsq(constraint, constraint @ motion, rcond=None)[0]
+        m = self.n_joints
+        return motion[:m], motion[m:]
 
     def total_energy(self, state: GraspState) -> float:
         """Kinetic plus gravitational potential energy of hand and object, J."""
@@ -360,6 +413,7 @@ class GraspModel:
             p_object_in_palm,
             R_object_to_palm,
             twist_object,
+            torsion=self.soft_finger,
         )
 
 

@@ -12,8 +12,9 @@ What each parameter becomes (io/schemas/model.py documents them):
   all contacts allowed); the nearest faces, and a sphere's charts, are chosen at the first
   configuration: the initial grasp when the parameters hold it (``hand_sim_node``'s
   ``initial.*``), else the first state the model is given;
-- ``model.friction_coefficient`` and ``model.fingertip_workspace.*``: one value for every
-  contact or one per contact (:mod:`grasp_safety_filter.model.per_contact`);
+- ``model.friction_coefficient``, ``model.torsional_friction`` (0: point contacts, > 0: soft
+  fingers) and ``model.fingertip_workspace.*``: one value for every contact or one per
+  contact (:mod:`grasp_safety_filter.model.per_contact`);
 - ``model.palm_frame`` (empty: the URDF's root link), ``model.object_frame``.
 
 Free fingers: ``model.joint_names`` lists every actuated joint of the URDF; a joint on no
@@ -198,6 +199,7 @@ def grasp_model_from_parameters(
         declared_faces=faces,
         palm_frame=palm_frame_name(hand, str(params.get('model.palm_frame', ''))),
         object_frame=str(params.get('model.object_frame', 'object')) or 'object',
+        torsional_friction=params.get('model.torsional_friction', 0.0),
     )
     q0, p0 = params.get('initial.joint_positions'), params.get('initial.object_position')
     if not model.contacts_bound and q0 is not None and p0 is not None:

@@ -58,17 +58,20 @@ class GraspState:
             torques, shape (m,), N·m.
         gravity_torque: ``g(q) = -tau_e``, shape (m,), N·m.
         J_fingertip: Fingertip frame Jacobians ``J_s`` (LOCAL_WORLD_ALIGNED), (n, 6, m).
-        J_h: Hand Jacobian, shape (3n, m): ``dq ↦`` fingertip material velocity at each
-            contact point, in contact frames.
-        G: Grasp map, shape (6, 3n): contact forces (contact frames) ↦ object wrench at
+        J_h: Hand Jacobian, shape (k, m): ``dq ↦`` fingertip material velocity at each
+            contact point, in contact frames (k = 3n); with soft fingers (k = 4n) then each
+            fingertip's angular velocity about its contact normal, rows 3n .. 4n - 1.
+        G: Grasp map, shape (6, k): contact wrench (contact frames) ↦ object wrench at
             the centre of mass (palm coordinates).
-        Jh_dot_dq: ``J_h_dot @ dq`` (total time derivative along the rolling motion), (3n,).
-        G_dot_T_twist: ``G_dot^T @ x_o_dot``, shape (3n,).
+        Jh_dot_dq: ``J_h_dot @ dq`` (total time derivative along the rolling motion), (k,).
+        G_dot_T_twist: ``G_dot^T @ x_o_dot``, shape (k,).
         M_o: Object inertia in palm coordinates, shape (6, 6).
         C_o_twist: ``C_o x_o_dot = (0, w × I w)``, shape (6,).
         w_e: External wrench on the object (gravity), shape (6,), (N, N·m).
-        B_ho: ``J_h M_h^-1 J_h^T + G^T M_o^-1 G``, shape (3n, 3n).
-        contact_force: ``u ↦ f_c``, shape (3n, m), contact frames.
+        B_ho: ``J_h M_h^-1 J_h^T + G^T M_o^-1 G``, shape (k, k).
+        contact_force: ``u ↦ f_c``, shape (k, m): ``(f_x, f_y, f_n)`` per contact in its
+            contact frame (N), then with soft fingers the torque about each contact normal
+            (N·m) (:mod:`~grasp_safety_filter.model.dynamics_kernel`).
         joint_acceleration: ``u ↦ ddq``, shape (m, m).
         object_acceleration: ``u ↦ x_o_ddot = (a_o, alpha_o)``, shape (6, m).
         xi_cf_ddot: ``u ↦ (a_1_ddot, b_1_ddot, a_2_ddot, ...)``, shape (2n, m).
@@ -152,13 +155,14 @@ class GraspState:
 
     def required_friction(self, f_c: np.ndarray) -> np.ndarray:
         """Return the required friction per contact for ``f_c`` (see :func:`required_friction`)."""
-        return required_friction(f_c)
+        return required_friction(np.asarray(f_c)[: 3 * self.n_contacts])
 
 
 def required_friction(f_c: np.ndarray) -> np.ndarray:
     """Return the required friction ``beta_i = ||f_t,i|| / f_n,i`` per contact, shape (n,).
 
-    ``f_c`` stacks ``(f_x, f_y, f_n)`` per contact in contact frames. ``inf`` where the
+    ``f_c`` stacks ``(f_x, f_y, f_n)`` per contact in contact frames (a soft finger's torsion
+    entries, which follow, are left out by :meth:`GraspState.required_friction`). ``inf`` where the
     normal force is not positive (the contact is separating); NaN where it is unknown.
     """
     forces = np.asarray(f_c, dtype=float).reshape(-1, 3)

@@ -237,6 +237,7 @@ def packed_state(
             rigid_object.isotropic,
             w_e,
             *stack.surface_arrays,
+            layout.torsion,
         )
     except np.linalg.LinAlgError:
         return None

@@ -29,15 +29,18 @@ from grasp_safety_filter.model.object_kernel import object_dynamics
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
 
 
-def packed_fields(n: int, m: int) -> tuple[tuple[str, tuple[int, ...]], ...]:
+def packed_fields(
+    n: int, m: int, torsion: bool = False
+) -> tuple[tuple[str, tuple[int, ...]], ...]:
     """Return the buffer's terms in order, with their shapes, for n contacts and m joints.
 
     The order is the one :func:`sphere_on_plane_terms` writes. Names are
     :class:`~grasp_safety_filter.model.grasp_state.GraspState` fields, the contact
     geometry's and rolling rates' fields, and ``*_augmented``: ``[matrix | offset]`` of an
-    affine term, (k, m + 1).
+    affine term, (k, m + 1). The contact wrench has k = 3n entries, or 4n with soft-finger
+    contacts (``torsion``; :mod:`~grasp_safety_filter.model.dynamics_kernel`).
     """
-    k = 3 * n
+    k = 4 * n if torsion else 3 * n
     return (
         ('q', (m,)),
         ('dq', (m,)),
@@ -87,27 +90,29 @@ class PackedLayout(NamedTuple):
         places: Per term name, its ``(start, stop, shape)`` in the buffer.
         n_joints: m.
         n_contacts: n.
+        torsion: Whether the contacts are soft fingers (4n wrench entries, not 3n).
     """
 
     size: int
     places: dict[str, tuple[int, int, tuple[int, ...]]]
     n_joints: int
     n_contacts: int
+    torsion: bool = False
 
     def start(self, name: str) -> int:
         """Return the index of a term's first entry (its entries follow in C order)."""
         return self.places[name][0]
 
     @classmethod
-    def of(cls, n: int, m: int) -> PackedLayout:
+    def of(cls, n: int, m: int, torsion: bool = False) -> PackedLayout:
         """Return the layout of :func:`packed_fields` for n contacts and m joints."""
         places = {}
         start = 0
-        for name, shape in packed_fields(n, m):
+        for name, shape in packed_fields(n, m, torsion):
             stop = start + int(np.prod(shape))
             places[name] = (start, stop, shape)
             start = stop
-        return cls(start, places, m, n)
+        return cls(start, places, m, n, torsion)
 
 
 @kernel
@@ -147,6 +152,7 @@ def sphere_on_plane_terms(
     plane_origin: np.ndarray,
     plane_frame: np.ndarray,
     radius: np.ndarray,
+    torsion: bool,
 ) -> None:
     """Write every term of :func:`packed_fields` into ``out``, in that order.
 
@@ -180,6 +186,7 @@ def sphere_on_plane_terms(
         plane_origin: Each face's origin in the object frame, (n, 3), m.
         plane_frame: Each face's ``[e1, e2, n]`` in the object frame, (n, 3, 3).
         radius: Each fingertip's radius, (n,), m.
+        torsion: Soft-finger contacts (:attr:`PackedLayout.torsion`).
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
@@ -217,7 +224,7 @@ def sphere_on_plane_terms(
     ) = velocity_terms(
         J_s, twist_f, J_frames_dot_dq, p_f, M_h_inverse, h_bias, p_object_in_palm,
         twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
-        contacts[11], contacts[12], contacts[13],
+        contacts[11], contacts[12], contacts[13], torsion,
     )
     force = np.linalg.solve(B_ho, force_rhs)
     ddq, x_ddot, xi_ddot = acceleration_terms(

@@ -1,6 +1,7 @@
 """Model parameters given once for every contact or once per contact.
 
-``model.friction_coefficient`` and each bound of ``model.fingertip_workspace`` take one
+``model.friction_coefficient``, ``model.torsional_friction`` and each bound of
+``model.fingertip_workspace`` take one
 value (every contact) or a list of n values in contact order (``model.contact_names``):
 fingertips of different materials and shapes. :func:`per_contact_values` turns either form
 into one value per contact; its errors name the parameter, the contact and the value.
@@ -87,6 +88,32 @@ def friction_coefficients(value: Any, contact_names: Sequence[str]) -> np.ndarra
     return per_contact_values(
         value, contact_names, 'model.friction_coefficient', lambda mu: mu > 0.0, '> 0'
     )
+
+
+def torsional_friction_coefficients(
+    value: Any, contact_names: Sequence[str]
+) -> np.ndarray | None:
+    """Each contact's torsional friction mu_t,i, m, shape (n,); None for point contacts.
+
+    0 for every contact is the paper's point contact with friction: no torque about the
+    normal is transmitted, the fingertip spins freely on the object. > 0 for every contact is
+    the soft finger: ``|tau_n,i| <= mu_t,i f_n,i`` and no spin. A mix is refused: the model
+    is one or the other.
+
+    Raises:
+        PerContactError: A value that is negative or not finite, or a mix of 0 and > 0.
+    """
+    parameter = 'model.torsional_friction'
+    values = per_contact_values(value, contact_names, parameter, lambda mu: mu >= 0.0, '>= 0')
+    if not values.any():
+        return None
+    if not values.all():
+        raise PerContactError(
+            f'{parameter}: expected 0 for every contact (point contacts with friction) or > 0 '
+            f'for every contact (soft fingers), got {values.tolist()} for contacts '
+            f'{list(contact_names)}'
+        )
+    return values
 
 
 def compact(values: Sequence[float] | np.ndarray) -> float | list[float]:

@@ -31,6 +31,8 @@ def staged_state(
     p_object_in_palm: np.ndarray,
     R_object_to_palm: np.ndarray,
     twist_object: np.ndarray,
+    *,
+    torsion: bool = False,
 ) -> GraspState:
     """Every model term at one instant (see :class:`GraspState`), stage by stage.
 
@@ -45,6 +47,8 @@ def staged_state(
         R_object_to_palm: Object orientation, (3, 3).
         twist_object: Object twist ``x_o_dot = (v_o, w_o)`` in palm coordinates, (6,),
             (m/s, rad/s).
+        torsion: Soft-finger contacts (4n wrench entries; see
+            :mod:`~grasp_safety_filter.model.dynamics_kernel`).
     """
     m = hand_model.n_joints
     q = np.array(q, dtype=float)
@@ -84,6 +88,7 @@ def staged_state(
         rates.H_cf_dot_w,
         rates.sliding_velocity,
         rates.frame_angular_velocity,
+        torsion,
     )
 
     arrays = {

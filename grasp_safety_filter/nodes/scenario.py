@@ -13,7 +13,8 @@ later still gets it) as one JSON object::
       "time_step": 0.001, "duration": 15.0, "n_steps": 15000,   # s, s, -
       "integrator": "ode3", "lockstep": true,
       "stop_on_slip": false, "stop_on_workspace_exit": true,
-      "object_face_half_widths": [[h_u, h_v], ...]   # m, per contact; null: no edge
+      "object_face_half_widths": [[h_u, h_v], ...],  # m, per contact; null: no edge
+      "torsional_friction": 0.005    # m; soft fingers only (absent: point contacts)
     }
 
 ``friction_coefficient`` and each workspace bound are one number when every contact has the
@@ -83,6 +84,10 @@ def _floats(values: Any) -> list[float]:
     return [float(v) for v in values]
 
 
+#: Key of the ``/grasp/scenario`` document holding each contact's torsional friction mu_t, m,
+#: present only with soft-finger contacts (``model.torsional_friction`` > 0).
+TORSIONAL_FRICTION_KEY = 'torsional_friction'
+
 #: Key of the ``/grasp/scenario`` document holding each contact's face half extents
 #: ``[h_u, h_v]``, m (absent for a sphere object), for judging a bag's object-face margins.
 OBJECT_FACES_KEY = 'object_face_half_widths'
@@ -135,6 +140,9 @@ def scenario_document(model: Any, sim_config: Any) -> dict[str, Any]:
         'stop_on_slip': bool(sim_config.stop_on_slip),
         'stop_on_workspace_exit': bool(sim_config.stop_on_workspace_exit),
     }
+    torsional = getattr(model, 'torsional_friction', None)
+    if torsional is not None:
+        document[TORSIONAL_FRICTION_KEY] = compact(torsional)
     half = object_face_half_widths(model)
     if half is not None:
         document[OBJECT_FACES_KEY] = [
@@ -259,6 +267,14 @@ def _check_physical(document: Mapping[str, Any]) -> None:
             f'numbers in (0, {MAX_FRICTION_COEFFICIENT:g}], 1 or {contacts} (one per contact)',
             document['friction_coefficient'],
         )
+    if TORSIONAL_FRICTION_KEY in document:
+        mu_t = scenario_per_contact(document, TORSIONAL_FRICTION_KEY)
+        if not all(_finite(v) and v > 0 for v in mu_t):
+            raise _bad(
+                TORSIONAL_FRICTION_KEY,
+                f'numbers > 0 m, 1 or {contacts} (one per contact)',
+                document[TORSIONAL_FRICTION_KEY],
+            )
     box = scenario_workspace(document)
     for row in box:
         for low, high in ((0, 1), (2, 3)):

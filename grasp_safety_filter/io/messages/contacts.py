@@ -69,7 +69,9 @@ class ContactData:
     @classmethod
     def from_grasp_state(cls, state: GraspState, force: np.ndarray) -> ContactData:
         """Take the contact part of a grasp state, with the contact forces ``force`` (3n,)."""
-        forces = np.asarray(force, dtype=np.float64).reshape(-1, 3)
+        # A soft finger's torsion entries follow the 3n forces; they are not published here.
+        n = state.n_contacts
+        forces = np.asarray(force, dtype=np.float64).reshape(-1)[: 3 * n].reshape(n, 3)
         return cls(
             t=state.t,
             xi_cf=np.array(state.xi_cf),

@@ -131,6 +131,19 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
         per_contact=True,
     ),
     ParameterSpec(
+        'model.torsional_friction',
+        DOUBLE,
+        0.0,
+        'Torsional friction mu_t of the fingertips: 0, point contacts with friction (the '
+        "paper's model: no torque about the contact normal, the fingertip spins freely); > 0, "
+        'soft fingers: each contact also transmits a torque about its normal, |tau_n| <= '
+        'mu_t f_n, and the fingertip does not spin on the object (MuJoCo condim 4; its default '
+        'is 0.005 m); one for every contact or a list of one per contact, all 0 or all > 0 [m]',
+        min_value=0.0,
+        read_only=True,
+        per_contact=True,
+    ),
+    ParameterSpec(
         'model.gravity',
         DOUBLE_ARRAY,
         [0.0, 0.0, -9.81],
