@@ -229,7 +229,7 @@ class SafetyFilter:
             mu=grasp_model.friction_coefficient,
             workspace=tuple(grasp_model.fingertip_workspace),
             object_workspace=object_workspace_of(grasp_model, config),
-            torsional_friction=getattr(grasp_model, 'torsional_friction', None),
+            torsional_friction=grasp_model.torsional_friction,
         )
 
     @property
