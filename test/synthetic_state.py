@@ -38,6 +38,7 @@ class SyntheticHand:
     n_fingers: int = 3
     joints_per_finger: int = 3
     friction_coefficient: float = 0.9
+    torsional_friction: None = None  # point contacts
     effort: float = 5.0
     fingertip_workspace: tuple[float, float, float, float] = PAPER_WORKSPACE
     object_mass: float = 0.11

@@ -33,11 +33,13 @@ def enabled_families(
     mu: float | Sequence[float] | np.ndarray,
     workspace: tuple[float, float, float, float],
     object_workspace: ObjectWorkspaceBarrier | None,
+    torsional_friction: float | Sequence[float] | np.ndarray | None = None,
 ) -> tuple[list[tuple[ConstraintFamily, float]], tuple[str, ...], TorqueRateBound | None]:
     """Build every family, validating its arguments, and keep the enabled ones.
 
     The arguments are :class:`~grasp_safety_filter.control.safety_filter.SafetyFilter`'s
-    (``joint_names`` already validated by its actuator limits).
+    (``joint_names`` already validated by its actuator limits); ``torsional_friction`` is
+    the soft fingers' mu_t (None: point contacts), for the no-slip rows.
 
     Returns:
         The enabled families with their slack weights, in row order (no slip, joint
@@ -56,6 +58,7 @@ def enabled_families(
         config.normal_force_margin,
         config.friction_margin,
         config.cone,
+        torsional_friction,
     )
     contacts = no_slip.contact_names
     joint_limits = JointLimitBarrier(joint_names, q_min, q_max, config.alpha1, config.alpha2)

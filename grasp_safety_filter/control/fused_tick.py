@@ -149,8 +149,9 @@ def _packed_tick(
 
     Args:
         terms: The packed state's buffer.
-        negative_faces: :class:`FrictionPyramid`'s face normals, (n, faces, 3); (0, 1, 3)
-            without no slip.
+        negative_faces: :class:`FrictionPyramid`'s face normals, (n, rows per contact, 3)
+            (point contacts) or (..., 4) (soft fingers, the torques' rows read too);
+            (0, 1, 3) without no slip.
         pyramid: ``(force_start, normal_force_margin, first row)`` of the no-slip rows.
         box_places: Per box family, ``(x_start, x_dot_start, x_ddot_start, d, first row,
             first entry of its index, sign, h_offset and h, row count)``, (families, 7).

@@ -135,6 +135,7 @@ class SafetyFilter:
         mu: float | Sequence[float] | np.ndarray,
         workspace: tuple[float, float, float, float],
         object_workspace: ObjectWorkspaceBarrier | None = None,
+        torsional_friction: float | Sequence[float] | np.ndarray | None = None,
     ) -> None:
         """Build the families, the problems and the QP backend.
 
@@ -151,6 +152,9 @@ class SafetyFilter:
                 scalar (every contact) or one per contact, (n,).
             object_workspace: The object-workspace family (its rows, same contacts);
                 needed only with ``object_workspace_enabled``.
+            torsional_friction: Soft fingers' torsional friction mu_t, > 0, m (scalar or
+                (n,)): the no-slip rows also bound the torque about each contact normal,
+                and ``contact_force`` has 4n rows; None: point contacts (3n rows).
 
         Raises:
             ValueError: A malformed argument; the message names it.
@@ -164,7 +168,8 @@ class SafetyFilter:
         self.joint_names = self.actuator_limits.joint_names
         m = len(self.joint_names)
         chosen, self.contact_names, self.torque_rate = enabled_families(
-            config, self.joint_names, contact_names, q_min, q_max, mu, workspace, object_workspace
+            config, self.joint_names, contact_names, q_min, q_max, mu, workspace, object_workspace,
+            torsional_friction,
         )
         self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
         self._results = ResultAssembler(self.families, self.actuator_limits, self.torque_rate)
@@ -204,7 +209,8 @@ class SafetyFilter:
         Args:
             grasp_model: Anything with ``joint_names``, ``contact_names``,
                 ``joint_lower_limits``, ``joint_upper_limits``, ``effort_limits`` (u_max;
-                u_min = -u_max), ``friction_coefficient`` and ``fingertip_workspace``
+                u_min = -u_max), ``friction_coefficient``, ``torsional_friction`` (None:
+                point contacts) and ``fingertip_workspace``
                 (``(a_min, a_max, b_min, b_max)``), e.g. a ``GraspModel``; with
                 ``object_workspace.enabled`` a ``GraspModel`` (its contacts' object surfaces,
                 :meth:`ObjectWorkspaceBarrier.for_model`).
@@ -223,6 +229,7 @@ class SafetyFilter:
             mu=grasp_model.friction_coefficient,
             workspace=tuple(grasp_model.fingertip_workspace),
             object_workspace=object_workspace_of(grasp_model, config),
+            torsional_friction=grasp_model.torsional_friction,
         )
 
     @property

@@ -12,7 +12,6 @@ from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
     ConstraintRows,
     finite_scalar,
-    finite_vector,
     validate_names,
 )
 from grasp_safety_filter.control.constraints.pyramid_kernel import (
@@ -35,6 +34,38 @@ DIAMOND = 'diamond'
 FRICTION_CONES = (INSCRIBED, DIAMOND)
 #: The largest relative friction margin (``no_slip.friction_margin``).
 MAX_FRICTION_MARGIN = 0.9
+#: A soft finger's row pair per face: the torsion term's sign and its row-name suffix.
+TORSION_SIGNS = ((1.0, 'torsion+'), (-1.0, 'torsion-'))
+
+
+def positive_per_contact(
+    value: float | Sequence[float] | np.ndarray, contact_names: Sequence[str], parameter: str
+) -> np.ndarray:
+    """``value`` as one finite coefficient > 0 per contact, (n,), read-only.
+
+    Args:
+        value: One number for every contact, or one per contact (length 1 or n).
+        contact_names: The n contact names, for the messages.
+        parameter: The argument's name, for the messages.
+
+    Raises:
+        ValueError: Naming ``parameter`` and, for a bad value, its contact and the value.
+    """
+    n = len(contact_names)
+    try:
+        array = np.broadcast_to(np.array(value, dtype=float), (n,)).copy()
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"'{parameter}': expected one number or {n} (one per contact), got {value!r}"
+        ) from None
+    for contact, coefficient in zip(contact_names, array.tolist(), strict=True):
+        if not (math.isfinite(coefficient) and coefficient > 0.0):
+            raise ValueError(
+                f"'{parameter}' of contact {contact!r}: expected a finite number > 0, "
+                f'got {coefficient!r}'
+            )
+    array.setflags(write=False)
+    return array
 
 
 class FrictionPyramid:
@@ -72,6 +103,36 @@ class FrictionPyramid:
       cone but not inside that one (its vertex at ``th = pi / l_s`` has
       ``|f_x| + |f_y| = mu f_n (cos(pi / l_s) + sin(pi / l_s)) > mu f_n``); the diamond is
       inside both.
+
+    Soft fingers (``torsional_friction`` mu_t, m, one per contact): the contact also
+    transmits a torque tau_i about its normal, bounded by ``|tau_i| <= mu_t,i f_n,i``
+    (Murray, Li and Sastry's soft-finger model); ``f_c`` then has 4n entries, the torques
+    ``tau_1 .. tau_n`` (N·m) after the 3n forces. Each face row above is taken twice, once
+    with each sign s in {+1, -1} of an added torsion term. With ``mu' = mu (1 - m)``,
+    ``mu_t' = mu_t (1 - m)`` and ``a = mu' cos(pi / l_s)`` (inscribed) or ``a = mu'``
+    (diamond), the rows of face j are::
+
+        t_j . f_t,i + s (a / mu_t,i') tau_i - a f_n,i <= -eps
+
+    with ``t_j = (cos th_j, sin th_j)`` (inscribed) or ``(s_x, s_y)`` (diamond). Together,
+    with ``g(f_t) = max_j t_j . f_t / (a / mu')`` the pyramid's gauge::
+
+        g(f_t) / mu' + |tau| / mu_t' <= f_n - eps / a
+
+    - Inscribed: ``g(f_t) >= |f_t|`` (g's unit ball, the polygon, lies in the unit disc), so
+      ``|f_t| / mu' + |tau| / mu_t' <= f_n``: every accepted wrench has ``|f_t| <= mu' f_n``
+      and ``|tau| <= mu_t' f_n`` (the soft-finger cone) and, as an l1 norm bounds the l2
+      norm, lies in the elliptic soft-finger cone ``f_t^2 / mu'^2 + tau^2 / mu_t'^2 <=
+      f_n^2``.
+    - Diamond: ``g(f_t) = |f_x| + |f_y|``, so the rows are exactly
+      ``|f_x| / mu' + |f_y| / mu' + |tau| / mu_t' <= f_n - eps / mu'``: with eps = 0, the
+      cone spanned by ``(+-mu', 0, 1, 0)``, ``(0, +-mu', 1, 0)`` and ``(0, 0, 1, +-mu_t')``,
+      MuJoCo's pyramidal cone of condim 4 (``friction`` = (mu, ., mu_t)).
+
+    The margin of each row is its left side negated, as without torsion (N). Row names:
+    ``"no_slip/<contact>/face<j>/torsion+"`` and ``".../torsion-"`` (:data:`TORSION_SIGNS`),
+    face by face. ``torsional_friction=None`` is the point contact: the rows, names and
+    values are those above, to the bit.
     """
 
     family = 'no_slip'
@@ -87,6 +148,7 @@ class FrictionPyramid:
         normal_force_margin: float = 0.0,
         friction_margin: float = 0.0,
         cone: str = INSCRIBED,
+        torsional_friction: float | Sequence[float] | np.ndarray | None = None,
     ) -> None:
         """Build the pyramid faces of every contact.
 
@@ -98,6 +160,8 @@ class FrictionPyramid:
             friction_margin: The relative friction margin m in [0, 0.9]: rows use
                 ``mu_i (1 - m)``.
             cone: :data:`INSCRIBED` (l_s faces) or :data:`DIAMOND` (4 rows, ``faces`` unused).
+            torsional_friction: Soft fingers' torsional friction mu_t, > 0, m: one for all
+                contacts or one per contact (two rows per face); None: point contacts.
 
         Raises:
             ValueError: An argument is malformed; the message names it.
@@ -107,10 +171,12 @@ class FrictionPyramid:
         if isinstance(faces, bool) or not isinstance(faces, int | np.integer) or faces < 3:
             raise ValueError(f"'faces': expected an integer >= 3, got {faces!r}")
         self.faces = int(faces)
-        self.mu = finite_vector(mu, n, 'mu')
-        for contact, value in zip(self.contact_names, self.mu.tolist(), strict=True):
-            if not value > 0.0:
-                raise ValueError(f"'mu' of contact {contact!r}: expected > 0, got {value!r}")
+        self.mu = positive_per_contact(mu, self.contact_names, 'mu')
+        self.torsional_friction = (
+            None
+            if torsional_friction is None
+            else positive_per_contact(torsional_friction, self.contact_names, 'torsional_friction')
+        )
         self.normal_force_margin = finite_scalar(normal_force_margin, 'normal_force_margin', 0.0)
         self.friction_margin = finite_scalar(friction_margin, 'friction_margin', 0.0)
         if self.friction_margin > MAX_FRICTION_MARGIN:
@@ -135,15 +201,27 @@ class FrictionPyramid:
         face = np.empty((n, self.faces, 3))
         face[:, :, :2] = tangential
         face[:, :, 2] = -apothem[:, np.newaxis]
-        self._negative_faces = -face
-        self._packed_layout: object = None
-        self._block = CheckedBlock()
-        self._force_start = 0
-        self.names = tuple(
+        names = [
             f'{self.family}/{contact}/face{j}'
             for contact in self.contact_names
             for j in range(self.faces)
-        )
+        ]
+        if self.torsional_friction is not None:
+            # Each face twice, [t_x, t_y, -apothem_i, s apothem_i / mu_t,i']: (n, 2 faces, 4).
+            torsion = apothem / (self.torsional_friction * (1.0 - self.friction_margin))
+            signs = np.array([sign for sign, _ in TORSION_SIGNS])
+            soft = np.empty((n, self.faces, len(signs), 4))
+            soft[:, :, :, :3] = face[:, :, np.newaxis, :]
+            soft[:, :, :, 3] = torsion[:, np.newaxis, np.newaxis] * signs
+            face = soft.reshape(n, -1, 4)
+            names = [f'{name}/{suffix}' for name in names for _, suffix in TORSION_SIGNS]
+        self._negative_faces = -face
+        #: Rows of f_c: 3n (point contacts) or 4n (soft fingers).
+        self._force_rows = face.shape[2] * n
+        self._packed_layout: object = None
+        self._block = CheckedBlock()
+        self._force_start = 0
+        self.names = tuple(names)
 
     def rows(self, state: GraspState) -> ConstraintRows:
         """Rows ``h_ij(u) >= eps`` as ``A u >= lower``.
@@ -153,7 +231,7 @@ class FrictionPyramid:
         (:func:`~grasp_safety_filter.control.constraints.pyramid_kernel.pyramid_rows`).
         """
         contact_force = state.contact_force
-        check_rows(contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+        check_rows(contact_force.offset, self._force_rows, 'contact_force')
         A, lower = pyramid_rows(
             self._negative_faces,
             contact_force.matrix,
@@ -185,7 +263,7 @@ class FrictionPyramid:
             )
             return
         contact_force = state.contact_force
-        check_rows(contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+        check_rows(contact_force.offset, self._force_rows, 'contact_force')
         check_block(A, lower, start, len(self.names), contact_force.matrix.shape[1], self.family)
         pyramid_rows_into(
             self._negative_faces,
@@ -206,7 +284,7 @@ class FrictionPyramid:
         shape is checked once per layout (ValueError naming it).
         """
         if layout is not self._packed_layout:
-            check_rows(state.contact_force.offset, 3 * len(self.contact_names), 'contact_force')
+            check_rows(state.contact_force.offset, self._force_rows, 'contact_force')
             self._packed_layout = layout
             self._force_start = layout.start('contact_force_augmented')
         return self._negative_faces, self._force_start, self.normal_force_margin
@@ -223,5 +301,8 @@ class FrictionPyramid:
             m = packed[1].n_joints
             augmented = state.contact_force_augmented
             forces = augmented[:, :m] @ u + augmented[:, m]
-        forces = forces.reshape(n, 3, 1)
+        if self.torsional_friction is None:
+            forces = forces.reshape(n, 3, 1)
+        else:  # per contact (f_x, f_y, f_n, tau), as the rows read them
+            forces = np.column_stack((forces[:3 * n].reshape(n, 3), forces[3 * n:]))[..., None]
         return BarrierValues(np.matmul(self._negative_faces, forces).reshape(-1), self.names)
