@@ -7,8 +7,9 @@ points, torques ``n_i tau_i``), the spin residual's rate taken by finite differe
 two bodies' angular velocities, energy conservation of the unactuated plant, and the
 constraint, spin rows included, holding over a run.
 
-The grasps are the paper's with the object turned 0.2 rad about the palm z axis: at the
-paper's symmetric grasp no finger can spin about its contact normal (every joint axis is
+The instantaneous checks run at random grasps near the paper's, on a cube and on a sphere;
+the runs start from the paper's grasp with the object turned 0.2 rad about the palm z axis:
+at the paper's symmetric grasp no finger can spin about its contact normal (every joint axis is
 perpendicular to it), so fingers 1 and 2, on opposite faces, forbid the same object spin
 twice, ``[J_h, -G^T]`` loses rank and ``B_ho`` is singular (the internal torsion between
 them is statically indeterminate).
@@ -20,10 +21,12 @@ import dataclasses
 import math
 from pathlib import Path
 
+from grasp_states import paper_model, random_configuration
 import numpy as np
 import pytest
 
 from grasp_safety_filter.bench.recorded_run import Scenario
+from grasp_safety_filter.model.quaternion import from_rotation_matrix
 from hand_sim_node.simulator import SimState, Simulator
 from hand_sim_node.stage import PlantRate
 
@@ -53,29 +56,31 @@ def spin_residual(state):
     return np.einsum('ij,ij->i', normals, w_f - state.twist_object[3:])
 
 
-def rolling_state(model, config, rng, speed=0.3):
-    """The configured grasp with a random admissible (rolling, not spinning) motion."""
-    start = Simulator(model, config).state
-    dq, twist = model.rolling_motion(
-        start.q,
-        start.p_object_in_palm,
-        start.R_object_to_palm,
-        rng.normal(0.0, speed, 6) * np.array([0.3, 0.3, 0.3, 1.0, 1.0, 1.0]),
-    )
-    return SimState(0.0, start.q, dq, start.p_object_in_palm, start.quaternion_object, twist)
+#: Soft-finger models for the instantaneous checks (at random grasps near the paper's): on a
+#: sphere the contact frame does not turn with the object, so every rate term is exercised.
+MODELS = {
+    'cube': {'model.torsional_friction': 0.005},
+    'sphere object': {
+        'model.object.shape': 'sphere',
+        'model.object.size': 0.3,
+        'model.torsional_friction': [0.004, 0.005, 0.006],
+    },
+}
 
 
-def off_manifold_state(model, config, rng):
-    """The configured grasp, joints and velocities perturbed: the constraint is violated."""
-    start = Simulator(model, config).state
-    return SimState(
-        0.0,
-        start.q + rng.normal(0.0, 0.01, model.n_joints),
-        rng.normal(0.0, 0.3, model.n_joints),
-        start.p_object_in_palm,
-        start.quaternion_object,
-        rng.normal(0.0, 0.1, 6),
-    )
+@pytest.fixture(scope='module', params=list(MODELS), ids=list(MODELS))
+def soft_model(request):
+    return paper_model(**MODELS[request.param])
+
+
+def random_state(model, rng, on_manifold):
+    """A random grasp near the paper's, rolling (or, off the manifold, velocities perturbed)."""
+    c = random_configuration(model, rng)
+    dq, twist = c.dq, c.twist_object
+    if not on_manifold:
+        dq = dq + rng.normal(0.0, 0.3, dq.size)
+        twist = twist + rng.normal(0.0, 0.1, 6)
+    return SimState(0.0, c.q, dq, c.p_object, from_rotation_matrix(c.R_object), twist)
 
 
 def grasp_state(model, s):
@@ -83,22 +88,20 @@ def grasp_state(model, s):
 
 
 @pytest.mark.parametrize('on_manifold', [True, False], ids=['rolling', 'off the manifold'])
-def test_newton_euler_contact_by_contact(soft, on_manifold):
+def test_newton_euler_contact_by_contact(soft_model, on_manifold):
     """The stage's accelerations are Newton–Euler of its wrench, summed contact by contact.
 
     Object: ``M_o x_o_ddot = (sum f_i, sum (p_c,i - p_o) × f_i + n_i tau_i) + w_e - C_o x_o_dot``;
     hand: ``M_h ddq = u - h - sum (J_c,i^T f_i + J_w,i^T n_i tau_i)``, J_c,i the Jacobian of
     the fingertip's material point at the contact. Neither G nor J_h is used.
     """
-    model, config = soft
+    model = soft_model
     m, n = model.n_joints, model.n_contacts
     rate = PlantRate(model)
     rng = np.random.default_rng(40 + on_manifold)
     torsion_seen = 0.0
     for _ in range(5):
-        s = rolling_state(model, config, rng) if on_manifold else off_manifold_state(
-            model, config, rng
-        )
+        s = random_state(model, rng, on_manifold)
         state = grasp_state(model, s)
         u = state.h_bias + rng.normal(0.0, 0.5, m)
         x_dot, wrench = rate.from_state(state, u, s.quaternion_object, 2500.0, 100.0)
@@ -121,33 +124,57 @@ def test_newton_euler_contact_by_contact(soft, on_manifold):
     assert torsion_seen > 1e-3  # the torsions are not all zero: the check has teeth
 
 
-def test_spin_residual_decays_at_the_stabilisation_rate(soft):
-    """Off the manifold, ``d/dt n_i^T (w_f - w_o) = -K_v n_i^T (w_f - w_o)`` along the rate.
-
-    The rate is taken by central differences of the spin residual, computed from the bodies'
-    angular velocities (not J_h, G), at ``x ± h x_dot``: it checks the torsion rows' rates
-    ``J_h_dot dq`` and ``G_dot^T x_o_dot`` as the stage solves with them.
-    """
-    model, config = soft
+def spin_rate(model, s, effort, position_gain, velocity_gain):
+    """The spin residual and its rate along the stage's ``x_dot``, by central differences."""
     m = model.n_joints
-    rate = PlantRate(model)
+    x = s.to_vector()
+    x_dot = PlantRate(model).at(x, effort, position_gain, velocity_gain)
+    h = 1e-6
+    plus, minus = (
+        grasp_state(model, SimState.from_vector(step, x + step * x_dot, m)) for step in (h, -h)
+    )
+    normals = grasp_state(model, s).R_contact_to_palm[:, :, 2]
+    alpha_o = x_dot[2 * m + 10 :]
+    return spin_residual(grasp_state(model, s)), (
+        spin_residual(plus) - spin_residual(minus)
+    ) / (2 * h), np.abs(normals @ alpha_o).max()
+
+
+def test_rolling_fingertips_keep_not_spinning(soft_model):
+    """On the manifold, the stage's accelerations keep ``n_i^T (w_f - w_o) = 0``.
+
+    The spin residual comes from the bodies' angular velocities (not J_h, G) at ``x ± h
+    x_dot``: its rate vanishes only if the torsion rows' rates ``J_h_dot dq`` and
+    ``G_dot^T x_o_dot`` are those the stage solves with. On a sphere the contact frame does
+    not turn with the object, so ``G_dot^T x_o_dot``'s torsion entries are not zero.
+    """
+    model = soft_model
     rng = np.random.default_rng(50)
     for _ in range(3):
-        s = off_manifold_state(model, config, rng)
-        state = grasp_state(model, s)
-        spin = spin_residual(state)
+        s = random_state(model, rng, on_manifold=True)
+        u = grasp_state(model, s).h_bias + rng.normal(0.0, 0.5, model.n_joints)
+        spin, spin_dot, alpha_about_normals = spin_rate(model, s, u, 0.0, 0.0)
+        assert np.abs(spin).max() < 1e-12
+        assert alpha_about_normals > 0.1  # rad/s²: both bodies do turn about the normals
+        np.testing.assert_allclose(spin_dot, 0.0, rtol=0, atol=1e-8 * alpha_about_normals)
+
+
+def test_spin_residual_decays_at_the_stabilisation_rate():
+    """Off the manifold, ``d/dt n_i^T (w_f - w_o) = -K_v n_i^T (w_f - w_o)`` along the rate.
+
+    On the cube's flat faces (on curved surfaces the contact kinematics, and so the
+    stabilised decay of every row, hold on the manifold only).
+    """
+    model = paper_model(**MODELS['cube'])
+    rng = np.random.default_rng(51)
+    velocity_gain = 100.0
+    for _ in range(3):
+        s = random_state(model, rng, on_manifold=False)
+        u = grasp_state(model, s).h_bias + rng.normal(0.0, 0.5, model.n_joints)
+        spin, spin_dot, _ = spin_rate(model, s, u, 2500.0, velocity_gain)
         assert np.abs(spin).max() > 1e-2
-        u = state.h_bias + rng.normal(0.0, 0.5, m)
-        x = s.to_vector()
-        x_dot = rate.at(x, u, config.position_gain, config.velocity_gain)
-        h = 1e-6
-
-        def at(step, x=x, x_dot=x_dot):
-            return grasp_state(model, SimState.from_vector(step, x + step * x_dot, m))
-
-        spin_dot = (spin_residual(at(h)) - spin_residual(at(-h))) / (2 * h)
-        expected = -config.velocity_gain * spin
-        np.testing.assert_allclose(spin_dot, expected, rtol=0, atol=1e-5 * np.abs(expected).max())
+        expected = -velocity_gain * spin
+        np.testing.assert_allclose(spin_dot, expected, rtol=0, atol=1e-6 * np.abs(expected).max())
 
 
 def energy_drift(model, config, time_step, duration):
