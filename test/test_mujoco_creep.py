@@ -191,7 +191,7 @@ def test_our_contacts_match_mujocos_stiff_contacts_of_the_same_kind(overrides, o
 
 
 def test_mujocos_object_acceleration_is_newton_euler_of_its_forces_and_torsions():
-    """MuJoCo's torsions as the plant reads them: ``n_i tau_i`` on the object (G's columns)."""
+    """Torsions as the plant reads them from MuJoCo act as ``n_i tau_i`` on the object."""
     scenario = Scenario.load(CONFIG, plant_overrides=SOFT_FINGERS)
     plant = MuJoCoPlant(scenario.model, scenario.sim_config, MjcfOptions(**SOFT_FINGER_CONTACTS))
     n = scenario.model.n_contacts

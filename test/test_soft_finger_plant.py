@@ -74,7 +74,7 @@ def soft_model(request):
 
 
 def random_state(model, rng, on_manifold):
-    """A random grasp near the paper's, rolling (or, off the manifold, velocities perturbed)."""
+    """Return a random grasp near the paper's, rolling (off the manifold: velocities perturbed)."""
     c = random_configuration(model, rng)
     dq, twist = c.dq, c.twist_object
     if not on_manifold:
@@ -125,7 +125,7 @@ def test_newton_euler_contact_by_contact(soft_model, on_manifold):
 
 
 def spin_rate(model, s, effort, position_gain, velocity_gain):
-    """The spin residual and its rate along the stage's ``x_dot``, by central differences."""
+    """Return the spin residual, its rate along the stage's x_dot, and max |n_i^T alpha_o|."""
     m = model.n_joints
     x = s.to_vector()
     x_dot = PlantRate(model).at(x, effort, position_gain, velocity_gain)
@@ -204,7 +204,7 @@ def energy_drift(model, config, time_step, duration):
 
 
 def test_energy_of_the_unactuated_plant_is_conserved_to_integrator_accuracy(soft):
-    """u = 0, gravity, 1 s, no stabilisation: the drift is ode3's (half the step, ~1/8 of it).
+    """Zero torque, gravity, 1 s, no stabilisation: the drift is ode3's (half the step, 1/8).
 
     Contacts that roll without slipping or spinning do no work; a torsion row with a wrong
     rate would make the constraint force work on the motion.
@@ -233,8 +233,10 @@ def holding_torque(state, squeeze=10.0):
 
 
 def test_constraint_spin_rows_included_holds_over_a_manipulation(soft):
-    """3 s, the configured plant (ode3, 1 ms, stabilised) under a holding torque and a joint
-    torque wave: gap <= 1e-6 m, rolling residual <= 1e-6 m/s, spin residual <= 1e-6 rad/s.
+    """Over 3 s the gap, rolling and spin residuals stay below 1e-6 (m, m/s, rad/s).
+
+    The configured plant (ode3, 1 ms, stabilised) under a holding torque and a joint torque
+    wave.
     """
     model, config = soft
     assert config.time_step == 0.001 and config.integrator == 'ode3'
