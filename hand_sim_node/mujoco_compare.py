@@ -9,10 +9,11 @@ Prints the median / p99 / max of the errors (per-contact force error norm, N; ob
 linear, m/s², and angular, rad/s², acceleration error norm) and of their scale, and writes a
 figure (``--figure``): the normal forces of both over time, and the error norms.
 
-With soft fingers (``--set model.torsional_friction=...`` > 0) it also compares each
+With soft fingers (``--plant-set model.torsional_friction=...`` > 0) it also compares each
 contact's torsion, the torque on the object about the normal ``n_i`` (N·m): MuJoCo has one
 with ``--condim 4`` (or 6), and with a torsional friction large enough that nothing spins
-its contacts are soft fingers too.
+its contacts are soft fingers too (MuJoCo's torsion is a soft constraint whose regulariser
+grows as 1 / mu_t²: at 0.05 m it still creeps, at 5 m it holds).
 
 Example (the paper's filtered run, default contacts; then stiff ones)::
 
@@ -22,9 +23,9 @@ Example (the paper's filtered run, default contacts; then stiff ones)::
 
 Soft fingers on both sides (stiff contacts, no spin)::
 
-    python -m hand_sim_node.mujoco_compare --mode nominal --set model.torsional_friction=0.05 \
-        --condim 4 --torsional-friction 0.05 --cone elliptic --solref 0.004 1.0 \
-        --solimp 0.99 0.99 0.001 0.5 2
+    python -m hand_sim_node.mujoco_compare --mode nominal \
+        --plant-set model.torsional_friction=0.05 --condim 4 --torsional-friction 5 \
+        --cone elliptic --solref 0.004 1.0 --solimp 0.99 0.99 0.001 0.5 2
 """
 
 from __future__ import annotations
@@ -205,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument('--noslip-iterations', type=int, default=defaults.noslip_iterations)
     parser.add_argument(
-        '--set',
+        '--plant-set',
         type=parameter_override,
         action='append',
         default=[],
