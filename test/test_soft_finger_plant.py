@@ -266,3 +266,22 @@ def test_constraint_spin_rows_included_holds_over_a_manipulation(soft):
     assert max_gap <= 1e-6
     assert max_residual <= 1e-6
     assert max_spin <= 1e-6
+
+
+@pytest.mark.parametrize('yaw, rank', [(0.0, 11), (YAW, 12)], ids=['paper grasp', 'turned'])
+def test_at_the_papers_grasp_two_spin_rows_coincide(yaw, rank):
+    """Why the runs start turned: at the paper's grasp the 12 constraints have rank 11.
+
+    No finger can spin about its normal there (its spin row of J_h is zero), so the spin
+    rows of fingers 1 and 2 (normals ±x) both read ``w_o,x = 0``: B_ho is singular and the
+    internal torsion between them is statically indeterminate. Turned, each finger can spin.
+    """
+    quaternion = [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)]
+    overrides = {**SOFT_FINGERS, 'initial.object_orientation': quaternion}
+    scenario = Scenario.load(SCENARIO, plant_overrides=overrides)
+    state = Simulator(scenario.model, scenario.sim_config).grasp_state()
+    spin_rows = np.abs(state.J_h[9:]).max(axis=1)
+    constraint = np.hstack([state.J_h, -state.G.T])
+    assert np.linalg.matrix_rank(constraint) == rank
+    assert np.linalg.matrix_rank(state.B_ho) == rank
+    assert np.all(spin_rows < 1e-12) if rank == 11 else np.all(spin_rows > 0.1)
