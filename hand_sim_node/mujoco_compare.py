@@ -9,11 +9,23 @@ Prints the median / p99 / max of the errors (per-contact force error norm, N; ob
 linear, m/s², and angular, rad/s², acceleration error norm) and of their scale, and writes a
 figure (``--figure``): the normal forces of both over time, and the error norms.
 
+With soft fingers (``--plant-set model.torsional_friction=...`` > 0) it also compares each
+contact's torsion, the torque on the object about the normal ``n_i`` (N·m): MuJoCo has one
+with ``--condim 4`` (or 6), and with a torsional friction large enough that nothing spins
+its contacts are soft fingers too (MuJoCo's torsion is a soft constraint whose regulariser
+grows as 1 / mu_t²: at 0.05 m it still creeps, at 5 m it holds).
+
 Example (the paper's filtered run, default contacts; then stiff ones)::
 
     python -m hand_sim_node.mujoco_compare --mode filtered --figure /tmp/compare.png
     python -m hand_sim_node.mujoco_compare --mode filtered --solref 0.004 1.0 \
         --solimp 0.99 0.99 0.001 0.5 2 --cone elliptic --figure /tmp/compare-stiff.png
+
+Soft fingers on both sides (stiff contacts, no spin)::
+
+    python -m hand_sim_node.mujoco_compare --mode nominal \
+        --plant-set model.torsional_friction=0.05 --condim 4 --torsional-friction 5 \
+        --cone elliptic --solref 0.004 1.0 --solimp 0.99 0.99 0.001 0.5 2
 """
 
 from __future__ import annotations
@@ -28,8 +40,9 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.bench.recorded_run import Scenario
+from grasp_safety_filter.cli import _override as parameter_override
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
-from hand_sim_node.mjcf import CONES, MjcfOptions
+from hand_sim_node.mjcf import CONDIMS, CONES, MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 
 
@@ -43,6 +56,9 @@ class Comparison:
         force_mujoco: MuJoCo's, (k, n, 3), N, the same frames.
         acceleration_model: Our model's ``x_o_ddot(u) = (a_o, alpha_o)``, (k, 6), palm frame.
         acceleration_mujoco: MuJoCo's, (k, 6).
+        torsion_model: With soft fingers, our model's torsions (k, n), N·m, the torque on the
+            object about each contact normal; None with point contacts.
+        torsion_mujoco: MuJoCo's (0 below ``condim`` 4), or None.
     """
 
     t: np.ndarray
@@ -50,23 +66,34 @@ class Comparison:
     force_mujoco: np.ndarray
     acceleration_model: np.ndarray
     acceleration_mujoco: np.ndarray
+    torsion_model: np.ndarray | None = None
+    torsion_mujoco: np.ndarray | None = None
 
     def errors(self) -> dict[str, np.ndarray]:
-        """Error norms per tick: per contact force (k, n), N; linear and angular, (k,)."""
+        """Error norms per tick: per contact force (k, n), N; linear and angular, (k,).
+
+        With soft fingers also the torsion error per contact, ``torsion_Nm`` (k, n), N·m.
+        """
         difference = self.acceleration_model - self.acceleration_mujoco
-        return {
+        errors = {
             'force_N': np.linalg.norm(self.force_model - self.force_mujoco, axis=2),
             'linear_acceleration_m_s2': np.linalg.norm(difference[:, :3], axis=1),
             'angular_acceleration_rad_s2': np.linalg.norm(difference[:, 3:], axis=1),
         }
+        if self.torsion_model is not None and self.torsion_mujoco is not None:
+            errors['torsion_Nm'] = np.abs(self.torsion_model - self.torsion_mujoco)
+        return errors
 
     def scales(self) -> dict[str, np.ndarray]:
         """Return MuJoCo's magnitudes of the same quantities, to read the errors against."""
-        return {
+        scales = {
             'force_N': np.linalg.norm(self.force_mujoco, axis=2),
             'linear_acceleration_m_s2': np.linalg.norm(self.acceleration_mujoco[:, :3], axis=1),
             'angular_acceleration_rad_s2': np.linalg.norm(self.acceleration_mujoco[:, 3:], axis=1),
         }
+        if self.torsion_mujoco is not None:
+            scales['torsion_Nm'] = np.abs(self.torsion_mujoco)
+        return scales
 
 
 def compare(
@@ -99,10 +126,18 @@ def compare(
     t, f_model, f_mujoco, a_model, a_mujoco = (
         np.array(column) for column in zip(*rows, strict=True)
     )
-    return (
-        Comparison(t, f_model.reshape(-1, n, 3), f_mujoco.reshape(-1, n, 3), a_model, a_mujoco),
-        run.stop_reason,
+    # A soft finger's wrench: the 3n forces, then the n torsions.
+    soft = scenario.model.soft_finger
+    comparison = Comparison(
+        t,
+        f_model[:, : 3 * n].reshape(-1, n, 3),
+        f_mujoco[:, : 3 * n].reshape(-1, n, 3),
+        a_model,
+        a_mujoco,
+        f_model[:, 3 * n :] if soft else None,
+        f_mujoco[:, 3 * n :] if soft else None,
     )
+    return comparison, run.stop_reason
 
 
 def statistics(values: np.ndarray) -> dict[str, float]:
@@ -162,7 +197,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--solref', type=float, nargs=2, default=defaults.solref)
     parser.add_argument('--solimp', type=float, nargs=5, default=defaults.solimp)
     parser.add_argument('--cone', choices=CONES, default=defaults.cone)
+    parser.add_argument('--condim', type=int, choices=CONDIMS, default=defaults.condim)
+    parser.add_argument(
+        '--torsional-friction',
+        type=float,
+        default=defaults.torsional_friction,
+        help="MuJoCo's, m (condim 4 and 6)",
+    )
     parser.add_argument('--noslip-iterations', type=int, default=defaults.noslip_iterations)
+    parser.add_argument(
+        '--plant-set',
+        type=parameter_override,
+        action='append',
+        default=[],
+        dest='overrides',
+        metavar='NAME=VALUE',
+        help="override a parameter of the simulator's (e.g. model.torsional_friction=0.05)",
+    )
     parser.add_argument('--figure', type=Path, help='write the figure here (PNG)')
     parser.add_argument('--json', type=Path, help='also write the statistics here')
     args = parser.parse_args(argv)
@@ -171,9 +222,11 @@ def main(argv: list[str] | None = None) -> int:
             solref=tuple(args.solref),
             solimp=tuple(args.solimp),
             cone=args.cone,
+            condim=args.condim,
+            torsional_friction=args.torsional_friction,
             noslip_iterations=args.noslip_iterations,
         )
-        scenario = Scenario.load(args.config)
+        scenario = Scenario.load(args.config, plant_overrides=dict(args.overrides))
     except (ConfigError, ValueError) as error:
         print(config_error_line('mujoco_compare', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
@@ -184,10 +237,17 @@ def main(argv: list[str] | None = None) -> int:
         'mode': args.mode,
         'stop_reason': stop_reason,
         't_end_s': float(comparison.t[-1]),
+        'model_torsional_friction': (
+            None
+            if scenario.model.torsional_friction is None
+            else scenario.model.torsional_friction.tolist()
+        ),
         'mujoco': {
             'solref': list(options.solref),
             'solimp': list(options.solimp),
             'cone': options.cone,
+            'condim': options.condim,
+            'torsional_friction': options.torsional_friction,
             'noslip_iterations': options.noslip_iterations,
         },
         **summary(comparison),

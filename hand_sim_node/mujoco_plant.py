@@ -239,7 +239,7 @@ class MuJoCoPlant:
             raise ValueError(f'MuJoCoPlant.step: expected {m} finite joint torques, got {u}')
         mujoco, mj, data = self._mujoco, self.mj_model, self.mj_data
         start, state0 = self._observation, self.grasp_state()
-        force = np.full(3 * self.model.n_contacts, np.nan)
+        force = np.full(self.model.wrench_size, np.nan)
         data.ctrl[:] = u
         for substep in range(self.n_substeps):
             mujoco.mj_step(mj, data)
@@ -303,19 +303,30 @@ class MuJoCoPlant:
         return int(hits[0]) if len(hits) else None
 
     def _contact_forces(self, state: GraspState) -> np.ndarray:
-        """Return MuJoCo's contact forces on the object in our contact frames, (3n,), N.
+        """Return MuJoCo's contact wrench on the object in our contact frames, (k,).
 
         Per contact, at ``state`` (the step's start), ``(f_x, f_y, f_n)`` in
-        ``state.R_contact_to_palm`` (z along the fingertip normal into the object), summed
-        over MuJoCo's contacts of the pair; 0 without one.
+        ``state.R_contact_to_palm`` (z along the fingertip normal into the object), N, summed
+        over MuJoCo's contacts of the pair; 0 without one. With a soft-finger model
+        (k = 4n) the n torsions follow: the torque MuJoCo's contacts exert on the object
+        about our normal ``n_i``, N·m (0 below ``condim`` 4, where MuJoCo has none).
         """
-        force_in_palm = np.zeros((self.model.n_contacts, 3))
+        n = self.model.n_contacts
+        force_in_palm = np.zeros((n, 3))
+        torque_in_palm = np.zeros((n, 3))
         for i, contact, wrench in self.fingertip_contacts():
-            # The force of geom1 on geom2, in the contact frame whose rows are its axes
-            # (the first the normal from geom1 to geom2).
-            on_geom2 = np.asarray(contact.frame).reshape(3, 3).T @ wrench[:3]
-            force_in_palm[i] += on_geom2 if int(contact.geom2) == self.object_geom else -on_geom2
-        return np.einsum('nji,nj->ni', state.R_contact_to_palm, force_in_palm).ravel()
+            # The wrench of geom1 on geom2, in the contact frame whose rows are its axes
+            # (the first the normal from geom1 to geom2); the torque is about the contact
+            # point, its first component the torsion about that normal.
+            axes = np.asarray(contact.frame).reshape(3, 3).T
+            sign = 1.0 if int(contact.geom2) == self.object_geom else -1.0
+            force_in_palm[i] += sign * (axes @ wrench[:3])
+            torque_in_palm[i] += sign * (axes @ wrench[3:])
+        force = np.einsum('nji,nj->ni', state.R_contact_to_palm, force_in_palm).ravel()
+        if not self.model.soft_finger:
+            return force
+        torsion = np.einsum('nj,nj->n', state.R_contact_to_palm[:, :, 2], torque_in_palm)
+        return np.concatenate((force, torsion))
 
     def _object_acceleration(self, state: GraspState) -> np.ndarray:
         """Return the object's acceleration, MuJoCo's ``qacc``, in palm coordinates, (6,).

@@ -19,6 +19,14 @@ creep of soft friction)::
         --set torque_rate.enabled=true --set torque_rate.max_step=0.05
     python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode filtered \
         --noslip-iterations 10 --set no_slip.cone=diamond --set no_slip.friction_margin=0.3
+
+Soft fingers (``--plant-set`` overrides the simulator's parameters, the model's among them)
+on MuJoCo's torsional contacts, and on our rigid plant::
+
+    python -m hand_sim_node.mujoco_run --mode nominal --condim 4 \
+        --plant-set model.torsional_friction=0.005
+    python -m hand_sim_node.mujoco_run --mode nominal --plant rigid \
+        --plant-set model.torsional_friction=0.005
 """
 
 from __future__ import annotations
@@ -150,6 +158,11 @@ def run_on_rigid(scenario: Scenario, mode: str, duration: float) -> dict[str, An
         'stop_reason': run.stop_reason,
         't_end_s': run.final.t,
         'violation_steps': dict(events),
+        'first_violated_s': {
+            family: record['first_t']
+            for family, record in plant.log.violations().items()
+            if record['first_t'] is not None
+        },
         'max_torque_step_Nm': max_torque_step(run.array('u')),
         'filter_statuses': dict(statuses),
     }
@@ -179,6 +192,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument('--cone', choices=CONES, default=defaults.cone)
     parser.add_argument('--condim', type=int, default=defaults.condim)
+    parser.add_argument(
+        '--torsional-friction',
+        type=float,
+        default=defaults.torsional_friction,
+        help="MuJoCo's, m (condim 4 and 6)",
+    )
     parser.add_argument('--impratio', type=float, default=defaults.impratio)
     parser.add_argument(
         '--noslip-iterations',
@@ -196,6 +215,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar='NAME=VALUE',
         help='override a safety-filter parameter (repeatable), e.g. torque_rate.enabled=true',
     )
+    parser.add_argument(
+        '--plant-set',
+        action='append',
+        default=[],
+        metavar='NAME=VALUE',
+        help="override a simulator's parameter (repeatable), e.g. model.torsional_friction=0.005",
+    )
     parser.add_argument('--json', type=Path, help='also write the figures here')
     return parser.parse_args(argv)
 
@@ -208,13 +234,16 @@ def main(argv: list[str] | None = None) -> int:
             friction_coefficient=args.friction,
             cone=args.cone,
             condim=args.condim,
+            torsional_friction=args.torsional_friction,
             solref=tuple(args.solref),
             impratio=args.impratio,
             noslip_iterations=args.noslip_iterations,
             timestep=args.timestep,
             integrator=args.integrator,
         )
-        scenario = Scenario.load(args.config, parse_overrides(args.set))
+        scenario = Scenario.load(
+            args.config, parse_overrides(args.set), parse_overrides(args.plant_set)
+        )
     except (ConfigError, ValueError) as error:
         print(config_error_line('mujoco_run', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
@@ -222,6 +251,7 @@ def main(argv: list[str] | None = None) -> int:
     figures = {
         'config': str(args.config),
         'filter_overrides': args.set,
+        'plant_overrides': args.plant_set,
         'duration_s': duration,
         'plant': args.plant,
         'mujoco': {
@@ -229,6 +259,7 @@ def main(argv: list[str] | None = None) -> int:
             'solimp': list(options.solimp),
             'cone': options.cone,
             'condim': options.condim,
+            'torsional_friction': options.torsional_friction,
             'impratio': options.impratio,
             'noslip_iterations': options.noslip_iterations,
             'timestep_s': options.timestep,

@@ -50,12 +50,21 @@ class Scenario:
     filter_config: SafetyFilterConfig
 
     @classmethod
-    def load(cls, config: Path, filter_overrides: dict[str, Any] | None = None) -> Scenario:
-        """Read the scenario; ``filter_overrides`` replaces filter parameters by dotted name.
+    def load(
+        cls,
+        config: Path,
+        filter_overrides: dict[str, Any] | None = None,
+        plant_overrides: dict[str, Any] | None = None,
+    ) -> Scenario:
+        """Read the scenario; the overrides replace parameters by dotted name.
+
+        ``filter_overrides``: the safety filter's; ``plant_overrides``: the simulator's
+        (``hand_sim_node``'s, ``model.*`` among them: the one model every part reads).
 
         Raises:
-            ParameterError: A bad parameter file or override value.
-            ValueError: An override names no safety-filter parameter.
+            ParameterError: A bad parameter file or override value, or a plant override
+                that ``hand_sim_node`` does not declare.
+            ValueError: A filter override names no safety-filter parameter.
         """
         known = SafetyFilterConfig().to_parameters()
         unknown = sorted(set(filter_overrides or {}) - set(known))
@@ -63,7 +72,7 @@ class Scenario:
             raise ValueError(
                 f'filter override {unknown[0]!r}: expected one of {", ".join(sorted(known))}'
             )
-        sim_params = load_node_parameters(config, HAND_SIM_NODE)
+        sim_params = load_node_parameters(config, HAND_SIM_NODE, overrides=plant_overrides)
         filter_params = dict(load_node_parameters(config, SAFETY_FILTER_NODE))
         filter_params.update(filter_overrides or {})
         return cls(
