@@ -9,8 +9,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from grasp_safety_filter.model.dynamics_kernel import TORSIONAL_COMPLIANCE
-
 N_STATES = 20
 EPS = 1e-6
 RTOL = 1e-5
@@ -233,12 +231,6 @@ def test_accelerations_satisfy_the_differentiated_rolling_constraint(model, conf
             lhs = state.J_h @ ddq + state.Jh_dot_dq
             rhs = state.G.T @ x_ddot + state.G_dot_T_twist
             f_c = state.contact_force(u)
-            if model.soft_finger:
-                # Each spin row is compliant: its acceleration is rho (B_ho)_tt tau_i.
-                spin = np.zeros_like(f_c)
-                t = slice(3 * model.n_contacts, None)
-                spin[t] = TORSIONAL_COMPLIANCE * np.diag(state.B_ho)[t] * f_c[t]
-                rhs = rhs + spin
             np.testing.assert_allclose(lhs, rhs, atol=1e-9)
             # And both dynamics hold with the same contact force.
             np.testing.assert_allclose(

@@ -28,7 +28,7 @@ and the torque-affine terms, as augmented matrices ``[matrix | offset]`` acting 
     xi_cf_ddot,i = H_cf,i R_cp,i (J_w,i ddq + alpha_f0,i - alpha_o - w_c × (w_f - w_o))
                    + H_cf_dot w
 
-(soft fingers solve for ``f_c`` with a small torsional compliance: :func:`wrench_solve`).
+(soft fingers take the minimum-norm ``f_c`` where ``B_ho`` is singular: :func:`wrench_solve`).
 Plain loops compiled by numba (:mod:`grasp_safety_filter.model.compiled`): at these sizes
 (k ≤ 16 rows, m ≤ 16 joints) two compiled passes, around LAPACK's solve of ``B_ho``, cost
 less than the calls of the numpy expressions they replace. Units: SI; frames and conventions as in
@@ -143,37 +143,31 @@ def contact_dynamics(
     return J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot
 
 
-#: Relative torsional compliance rho of soft fingers: the spin rows of ``B_ho`` are solved
-#: with their diagonal times ``1 + rho`` (:func:`wrench_solve`).
-TORSIONAL_COMPLIANCE = 1e-2
+#: Singular values of ``B_ho`` below this fraction of its largest are round-off and dropped
+#: by :func:`wrench_solve`: 1e-18 to 1e-16 at the grasps where soft fingers leave an internal
+#: torsion undetermined, 1e-8 and more a millisecond of motion away from them.
+WRENCH_RCOND = 1e-13
 
 
 @kernel
 def wrench_solve(B_ho: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """``X`` of ``(B_ho + rho D_t) X = rhs``: the contact wrench of soft fingers.
+    """Minimum-norm ``X`` of ``B_ho X = rhs``: the contact wrench of soft fingers.
 
-    ``D_t`` is ``B_ho``'s diagonal on the n torsion rows (0 on the 3n force rows) and rho
-    :data:`TORSIONAL_COMPLIANCE`. Rigid no-spin constraints are often redundant: two contacts
-    on opposite faces of a box can squeeze the object with equal torsions (``G v = 0``), and
-    where no joint torque reaches that internal torsion (``J_h^T v = 0``: fingers that cannot
-    twist about their normals, or whose twist is balanced by their tangential forces)
-    ``B_ho`` is singular and the torsion undetermined. Around such grasps it is nearly
-    singular, and the rigid model's torsions grow without bound and jump as the grasp passes
-    it. The regulariser makes each spin constraint slightly compliant, as MuJoCo's soft
-    constraints are (its ``R`` is about ``(1 - d) / d`` of the diagonal, 0.11 with its
-    default impedance d = 0.9): the spin acceleration of contact i is then
-    ``rho (B_ho)_tt tau_i`` instead of 0 (the simulator's stabilisation damps the spin it
-    leaves), every force row is unchanged, and the wrench is bounded and continuous. Point
-    contacts never call this.
+    Rigid no-spin constraints can be redundant: two contacts on opposite faces of a box can
+    squeeze the object with equal torsions (``G v = 0``), and where no joint torque reaches
+    that internal torsion (``J_h^T v = 0``: fingers that cannot twist about their normals,
+    as the paper's at its initial grasp, or whose twist their tangential forces balance, as
+    the four-finger box's) ``B_ho`` is singular and the torsion undetermined. ``rhs`` lies
+    in the range of ``B_ho`` (it is ``J_h (...) + G^T (...)``), so every solution gives the
+    same accelerations; the minimum-norm one (LAPACK's SVD least squares, singular values
+    below :data:`WRENCH_RCOND` of the largest dropped) loads no undetermined internal
+    torsion, as a compliant contact that starts unloaded would not. Where ``B_ho`` is
+    regular, this is ``B_ho^-1 rhs`` (to round-off; point contacts never call this).
 
     Raises:
-        numpy.linalg.LinAlgError: The regularised matrix is singular or not finite.
+        numpy.linalg.LinAlgError: ``B_ho`` or ``rhs`` is not finite.
     """
-    k = B_ho.shape[0]
-    regularised = B_ho.copy()
-    for t in range(3 * (k // 4), k):
-        regularised[t, t] += TORSIONAL_COMPLIANCE * B_ho[t, t]
-    return np.linalg.solve(regularised, rhs)
+    return np.linalg.lstsq(B_ho, rhs, rcond=WRENCH_RCOND)[0]
 
 
 @kernel
