@@ -512,7 +512,8 @@ class EventLog:
         """Smallest margin per barrier family over the run, in its own units.
 
         Keys ``fingertip_workspace`` (rad), ``joint_limits`` (rad) and ``friction``
-        (``min(mu_i - beta_i)``, ``-inf`` if a contact separated); ``inf`` before any record.
+        (``min(mu_i - beta_i)``, soft fingers with their torsion; ``-inf`` if a contact
+        separated); ``inf`` before any record.
         """
         minimum = dict(zip(FAMILIES, self._min_margin.tolist(), strict=True))
         return {
