@@ -9,7 +9,10 @@ Five families are watched, each with a margin ``h`` in its own units (``h < 0``:
 - ``joint_limits``: per joint, ``(q - q_min, q_max - q)``, rad; ``h < 0`` is a violation.
 - ``slip``: per contact, the friction margin ``mu_i - beta_i`` (the contact's own mu) with
   ``beta_i = ||f_t,i|| / f_n,i`` (``beta_i = inf`` when ``f_n,i <= 0``); ``h < 0`` is a
-  violation.
+  violation. A soft finger (torsional friction ``mu_t,i``, m) also slips by spinning:
+  its margin is ``mu_i - max(beta_i, mu_i |tau_i| / (mu_t,i f_n,i))``, negative exactly
+  when ``||f_t,i|| > mu_i f_n,i`` or ``|tau_i| > mu_t,i f_n,i`` (``tau_i``: its torsion
+  about the normal, N·m).
 - ``separation``: per contact, the normal force ``f_n,i``, N; ``f_n,i <= 0`` is a violation.
 - ``object_face``: per contact on a box face ``|u| <= h_u, |v| <= h_v``, how far the contact
   point is inside the face's edges, ``min(h_u - |u|, h_v - |v|)``, m; ``h < 0`` is a
@@ -86,7 +89,8 @@ class ConstraintMargins:
         fingertip_workspace: Shape (n, 4): ``a - a_min, a_max - a, b - b_min, b_max - b``, rad.
         joint_limits: Shape (m, 2): ``q - q_min, q_max - q``, rad.
         required_friction: ``beta_i``, shape (n,) (``inf`` where ``f_n,i <= 0``).
-        friction: ``mu_i - beta_i``, shape (n,).
+        friction: ``mu_i - beta_i``, shape (n,) (soft fingers: with their torsion, see the
+            module docstring).
         normal_force: ``f_n,i``, shape (n,), N.
         object_face: ``min(h_u - |u|, h_v - |v|)`` per contact, shape (n,), m (NaN where
             unknown; all NaN if not given).
@@ -185,6 +189,8 @@ def _per_contact(value: Any, n: int, name: str, shape: tuple[int, ...]) -> np.nd
 
 #: ``xi_co`` and face half widths when unknown (the object-face margins are then NaN).
 _NO_FACES = np.zeros((0, 2))
+#: Torsions and torsional friction of point contacts (or torsions not given).
+_NO_TORSION = np.zeros(0)
 
 
 def _violated(values: np.ndarray, closed: np.ndarray) -> np.ndarray:
@@ -206,6 +212,8 @@ class EventMonitor:
         contact_names: n contact names.
         object_face_half_widths: Half extents ``(h_u, h_v)`` of each contact's face, (n, 2),
             m (``inf``: no edge); None if unknown (object-face margins are then NaN).
+        torsional_friction: Soft fingers' ``mu_t,i`` (> 0, m): one for every contact or one
+            per contact (n,); None: point contacts.
 
     """
 
@@ -218,6 +226,7 @@ class EventMonitor:
         joint_names: list[str] | tuple[str, ...],
         contact_names: list[str] | tuple[str, ...],
         object_face_half_widths: np.ndarray | None = None,
+        torsional_friction: float | Sequence[float] | np.ndarray | None = None,
     ) -> None:
         self.joint_lower_limits = np.array(joint_lower_limits, dtype=float)
         self.joint_upper_limits = np.array(joint_upper_limits, dtype=float)
@@ -246,6 +255,14 @@ class EventMonitor:
         self.workspace_low = box[:, [0, 2]].copy()
         self.workspace_high = box[:, [1, 3]].copy()
         self.friction_coefficient = mu
+        self.torsional_friction = None
+        if torsional_friction is not None:
+            mu_t = _per_contact(torsional_friction, n, 'torsional_friction', ())
+            if not np.all(mu_t > 0.0):
+                raise ValueError(
+                    f'EventMonitor: expected torsional_friction > 0, got {mu_t.tolist()}'
+                )
+            self.torsional_friction = mu_t
         self.joint_names = tuple(joint_names)
         self.contact_names = tuple(contact_names)
         self.object_face_half_widths = None
@@ -278,7 +295,10 @@ class EventMonitor:
 
     @classmethod
     def from_model(cls, model: Any) -> EventMonitor:
-        """Monitor with the limits, workspace, friction coefficient, names and faces of a model."""
+        """Monitor with the limits, workspace, friction, names and faces of a model.
+
+        Soft fingers (the model's ``torsional_friction``) are judged with their torsion.
+        """
         return cls(
             joint_lower_limits=model.joint_lower_limits,
             joint_upper_limits=model.joint_upper_limits,
@@ -287,6 +307,7 @@ class EventMonitor:
             joint_names=model.joint_names,
             contact_names=model.contact_names,
             object_face_half_widths=object_face_half_widths(model),
+            torsional_friction=getattr(model, 'torsional_friction', None),
         )
 
     def margins(self, state: GraspState, contact_force: np.ndarray) -> ConstraintMargins:
@@ -295,7 +316,8 @@ class EventMonitor:
         Args:
             state: The grasp state (reads t, q, xi_cf, xi_co).
             contact_force: Stacked contact forces ``(f_x, f_y, f_n)`` per contact, contact
-                frames, shape (3n,), N.
+                frames, shape (3n,), N; or a soft finger's wrench (4n,) (see
+                :meth:`margins_at`).
 
         """
         return self.margins_at(state.t, state.q, state.xi_cf, contact_force, state.xi_co)
@@ -310,8 +332,9 @@ class EventMonitor:
     ) -> ConstraintMargins:
         """Margins from raw samples: joint angles (m,), fingertip coordinates (n, 2), forces (3n,).
 
-        A soft finger's contact wrench (4n,) has its torsion entries after the forces; they are
-        not read here.
+        A soft finger's contact wrench (4n,) has its torsions ``tau_i`` (N·m) after the forces:
+        a monitor with ``torsional_friction`` judges them in the slip margins. Given the
+        forces alone (3n,), or with point contacts, slip is the force cone's.
 
         With the object surface coordinates ``xi_co`` (n, 2) (m on a face) and the faces'
         half extents, also the object-face margins (else NaN). The bag analysis evaluates
@@ -329,6 +352,9 @@ class EventMonitor:
             )
         # Slip and separation read the forces; a soft finger's torsion entries follow them.
         forces = wrench[: 3 * n].reshape(n, 3)
+        mu_t = self.torsional_friction
+        soft = mu_t is not None and wrench.size == 4 * n
+        torsion = wrench[3 * n :] if soft else _NO_TORSION
         q = np.asarray(q, dtype=float)
         faces = self.object_face_half_widths
         no_faces = xi_co is None or faces is None
@@ -357,6 +383,8 @@ class EventMonitor:
             self.friction_coefficient,
             _NO_FACES if no_faces else faces,
             self._closed,
+            torsion,
+            mu_t if soft else _NO_TORSION,
         )
         return ConstraintMargins(
             t=float(t),
@@ -484,7 +512,8 @@ class EventLog:
         """Smallest margin per barrier family over the run, in its own units.
 
         Keys ``fingertip_workspace`` (rad), ``joint_limits`` (rad) and ``friction``
-        (``min(mu_i - beta_i)``, ``-inf`` if a contact separated); ``inf`` before any record.
+        (``min(mu_i - beta_i)``, soft fingers with their torsion; ``-inf`` if a contact
+        separated); ``inf`` before any record.
         """
         minimum = dict(zip(FAMILIES, self._min_margin.tolist(), strict=True))
         return {

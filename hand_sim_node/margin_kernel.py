@@ -29,6 +29,8 @@ def flat_margins(
     friction_coefficient: np.ndarray,
     face_half_widths: np.ndarray,
     closed: np.ndarray,
+    torsion: np.ndarray,
+    torsional_friction: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return every margin (7n + 2m,), ``beta`` (n,) and the violation flags (7n + 2m,).
 
@@ -44,11 +46,16 @@ def flat_margins(
         friction_coefficient: ``mu_i``, (n,).
         face_half_widths: ``(h_u, h_v)`` per contact, (n, 2), m; (0, 2): unknown.
         closed: Margins violated at 0 (else below 0), (7n + 2m,).
+        torsion: Soft fingers' torsions ``tau_i`` about the contact normals, (n,), N·m;
+            (0,): point contacts, or torsions unknown.
+        torsional_friction: Soft fingers' ``mu_t,i``, (n,), m; (0,): point contacts.
 
     Margins, family after family: workspace ``a - a_min, a_max - a, b - b_min, b_max - b``;
     joints ``q - q_min, q_max - q``; slip ``mu_i - beta_i`` with ``beta_i = |f_t| / f_n``
-    (inf where ``f_n <= 0``, NaN where ``f_n`` is not finite); separation ``f_n``; object
-    face ``min(h_u - |u|, h_v - |v|)`` (NaN if unknown). A NaN margin is not violated.
+    (inf where ``f_n <= 0``, NaN where ``f_n`` is not finite), for soft fingers with known
+    torsions ``mu_i - max(beta_i, mu_i |tau_i| / (mu_t,i f_n))`` (numpy's ``maximum``: NaN
+    if either is); separation ``f_n``; object face ``min(h_u - |u|, h_v - |v|)`` (NaN if
+    unknown). A NaN margin is not violated.
     """
     n, m = xi_cf.shape[0], q.shape[0]
     values = np.empty(7 * n + 2 * m)
@@ -63,6 +70,7 @@ def flat_margins(
         values[at + 2 * j + 1] = joint_upper_limits[j] - q[j]
     at += 2 * m
     known_faces = face_half_widths.shape[0] == n and xi_co.shape[0] == n
+    soft = torsion.shape[0] == n and torsional_friction.shape[0] == n
     for i in range(n):
         normal = forces[i, 2]
         if not math.isfinite(normal):
@@ -71,7 +79,13 @@ def flat_margins(
             beta[i] = np.hypot(forces[i, 0], forces[i, 1]) / normal
         else:
             beta[i] = np.inf
-        values[at + i] = friction_coefficient[i] - beta[i]
+        slip = beta[i]
+        if soft and normal > 0.0:
+            # Torsion over its bound, scaled to the force cone's: mu |tau| / (mu_t f_n).
+            spin = friction_coefficient[i] * abs(torsion[i]) / (torsional_friction[i] * normal)
+            if not (spin <= slip or math.isnan(slip)):
+                slip = spin
+        values[at + i] = friction_coefficient[i] - slip
         values[at + n + i] = normal
         if known_faces:
             u = face_half_widths[i, 0] - abs(xi_co[i, 0])

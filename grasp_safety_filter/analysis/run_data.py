@@ -41,6 +41,7 @@ from grasp_safety_filter.nodes.scenario import (
     scenario_per_contact,
     scenario_workspace,
     ScenarioError,
+    TORSIONAL_FRICTION_KEY,
 )
 
 #: Simulation time at which a run starts, s: ``hand_sim_node`` starts every run at t_0 = 0,
@@ -89,6 +90,8 @@ class RunData:
             last record the simulator published; None for the rigid plant.
         tracking: The object pose against the reference the nominal controller tracked
             (:mod:`~grasp_safety_filter.analysis.tracking`); None without ``/object/odom``.
+        torsion: Soft fingers' torsions about the contact normals at ``t``, shape (K, n),
+            N·m; None for point contacts.
     """
 
     scenario: dict[str, Any]
@@ -111,6 +114,7 @@ class RunData:
     xi_co: np.ndarray | None = None
     plant_events: PlantEvents | None = None
     tracking: ObjectTracking | None = None
+    torsion: np.ndarray | None = None
 
     @property
     def t_filter(self) -> np.ndarray:
@@ -146,6 +150,18 @@ class RunData:
     def mu_per_contact(self) -> np.ndarray:
         """Each contact's friction coefficient mu_i, shape (n,)."""
         return np.asarray(scenario_per_contact(self.scenario, 'friction_coefficient'), float)
+
+    @property
+    def torsional_friction_per_contact(self) -> np.ndarray | None:
+        """Soft fingers' torsional friction mu_t,i, shape (n,), m; None for point contacts.
+
+        From the scenario document's
+        :data:`~grasp_safety_filter.nodes.scenario.TORSIONAL_FRICTION_KEY` (absent: point
+        contacts).
+        """
+        if TORSIONAL_FRICTION_KEY not in self.scenario:
+            return None
+        return np.asarray(scenario_per_contact(self.scenario, TORSIONAL_FRICTION_KEY), float)
 
     @property
     def object_face_half_widths(self) -> np.ndarray | None:
@@ -363,4 +379,5 @@ def _assemble(
         barriers=None if barriers is None else barriers.summary(),
         xi_co=series.xi_co.array()[kept],
         plant_events=diagnostics.plant_events,
+        torsion=None if series.torsion is None else series.torsion.array()[kept],
     )

@@ -55,7 +55,10 @@ statuses after the simulator's end of run (its inputs stop then: expected, not a
 
 Each contact is judged against its own friction coefficient and fingertip workspace (slip
 when beta_i > mu_i): ``min_margin.friction`` is the smallest ``mu_i - beta_i`` and ``mu`` is
-one number when the contacts share it, else the list of mu_i in contact order.
+one number when the contacts share it, else the list of mu_i in contact order. Soft fingers
+(the scenario's ``torsional_friction`` mu_t,i) also slip when their torsion exceeds
+``mu_t,i f_n,i``: their margin is ``mu_i - max(beta_i, mu_i |tau_i| / (mu_t,i f_n,i))``, with
+the torsions of ``/hand/contacts``; ``max_required_friction`` stays the largest ``beta_i``.
 
 A margin is the smallest barrier value h over the run in its own units (negative =
 violated); infinite values (a separated contact) are written as null. ``barriers`` is what
@@ -146,11 +149,15 @@ def constraint_log(run: RunData) -> EventLog:
         run.joint_names,
         run.contact_names,
         run.object_face_half_widths,
+        run.torsional_friction_per_contact,
     )
+    # A soft finger's wrench: the 3n forces, then the n torsions (as the simulator's).
+    forces = run.force.reshape(len(run.t), 3 * len(run.contact_names))
+    wrench = forces if run.torsion is None else np.concatenate((forces, run.torsion), axis=1)
     log = EventLog()
     for k, t in enumerate(run.t):
         xi_co = None if run.xi_co is None else run.xi_co[k]
-        margins = monitor.margins_at(t, run.q[k], run.xi_cf[k], run.force[k].ravel(), xi_co)
+        margins = monitor.margins_at(t, run.q[k], run.xi_cf[k], wrench[k], xi_co)
         log.record(margins, monitor.events(margins))
     return log
 

@@ -33,7 +33,7 @@ from grasp_safety_filter.io.bag import open_bag, OpenBag
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
 from grasp_safety_filter.io.messages import (
     contact_entry_names,
-    CONTACT_QUANTITIES,
+    contact_quantities,
     contacts_from_msg,
     diagnostics_from_msg,
     effort_from_msg,
@@ -42,6 +42,7 @@ from grasp_safety_filter.io.messages import (
 )
 from grasp_safety_filter.io.messages.contacts import positive_inf_allowed
 from grasp_safety_filter.io.sim_diagnostic_keys import PlantEvents, SIM_DIAGNOSTIC, SimKey
+from grasp_safety_filter.nodes.scenario import TORSIONAL_FRICTION_KEY
 
 #: Topics read in the forked child (the object's two odometry streams and the margins:
 #: about half of a run's reading time); the others are read by the caller.
@@ -60,9 +61,12 @@ MIN_SPLIT_MESSAGES = 4000
 
 
 class Series:
-    """Per-tick numbers of a run, packed as the bag streams (see ``run_data``)."""
+    """Per-tick numbers of a run, packed as the bag streams (see ``run_data``).
 
-    def __init__(self, m: int, n: int) -> None:
+    ``torsion``: soft fingers' torsions, kept when the contacts are soft fingers.
+    """
+
+    def __init__(self, m: int, n: int, soft_finger: bool = False) -> None:
         self.joint_stamps = Column((), np.int64)
         self.q = Column((m,))
         self.contact_stamps = Column((), np.int64)
@@ -71,6 +75,7 @@ class Series:
         self.xi_co = Column((n, 2))
         self.force = Column((n, 3))
         self.required_friction = Column((n,))
+        self.torsion = Column((n,)) if soft_finger else None
         self.effort_stamps = {
             topics.EFFORT_NOMINAL: Column((), np.int64),
             topics.EFFORT_COMMAND: Column((), np.int64),
@@ -114,7 +119,9 @@ class TopicReaders:
     """One reader per analysed topic of a run (module docstring).
 
     Args:
-        scenario: The run's scenario document (its joint and contact names).
+        scenario: The run's scenario document (its joint and contact names; with
+            :data:`~grasp_safety_filter.nodes.scenario.TORSIONAL_FRICTION_KEY`, soft fingers,
+            whose ``/hand/contacts`` must carry every contact's torsion).
         margins: Read ``/safety_filter/margins`` too (the bag has it, of its type).
         packed: Keep the JointState topics packed (:data:`PACKED_TOPICS`), checked and
             put into :attr:`series` by :meth:`unpack`; else parse each message.
@@ -124,13 +131,14 @@ class TopicReaders:
     def __init__(self, scenario: dict[str, Any], margins: bool, packed: bool = False) -> None:
         self.joint_names = list(scenario['joint_names'])
         self.contact_names = list(scenario['contact_names'])
-        self.series = Series(len(self.joint_names), len(self.contact_names))
+        self.soft_finger = TORSIONAL_FRICTION_KEY in scenario
+        self.series = Series(len(self.joint_names), len(self.contact_names), self.soft_finger)
         self.diagnostics = Diagnostics(list(self.contact_names))
         self.tracking = TrackingReader()
         self.barriers = BarrierReader() if margins else None
         self.packed: dict[str, JointStateColumns] = {}
         if packed:
-            entries = contact_entry_names(self.contact_names)
+            entries = contact_entry_names(self.contact_names, self.soft_finger)
             for topic, (kind, required) in PACKED_TOPICS.items():
                 names = entries if topic == topics.CONTACTS else self.joint_names
                 self.packed[topic] = JointStateColumns(topic, names, kind, required)
@@ -145,13 +153,17 @@ class TopicReaders:
             series.joint_stamps.append(header_stamp_ns(msg))
             series.q.append(joint_state_from_msg(msg, self.joint_names, source=topic).position)
         elif topic == topics.CONTACTS:
-            contact = contacts_from_msg(msg, self.contact_names)
+            contact = contacts_from_msg(
+                msg, self.contact_names, source=topic, torsion=self.soft_finger
+            )
             series.contact_stamps.append(header_stamp_ns(msg))
             series.contact_t.append(contact.t)
             series.xi_cf.append(contact.xi_cf)
             series.xi_co.append(contact.xi_co)
             series.force.append(contact.force)
             series.required_friction.append(contact.required_friction)
+            if series.torsion is not None:
+                series.torsion.append(contact.torsion)
         elif topic in series.efforts:
             series.effort_stamps[topic].append(header_stamp_ns(msg))
             series.efforts[topic].append(
@@ -193,14 +205,17 @@ class TopicReaders:
         allowed = positive_inf_allowed(tuple(contacts.names or ()))
         stamps, (values, _, _) = contacts.rows(allowed)
         n = len(self.contact_names)
-        values = values.reshape(len(stamps), n, len(CONTACT_QUANTITIES))
-        quantity = CONTACT_QUANTITIES.index
+        quantities = contact_quantities(self.soft_finger)
+        values = values.reshape(len(stamps), n, len(quantities))
+        quantity = quantities.index
         series.contact_stamps = Column.of(stamps)
         series.contact_t = Column.of(stamps / NANOSECONDS_PER_SECOND)
         series.xi_cf = Column.of(values[:, :, quantity('a') : quantity('b') + 1])
         series.xi_co = Column.of(values[:, :, quantity('u') : quantity('v') + 1])
         series.force = Column.of(values[:, :, quantity('force_x') : quantity('force_normal') + 1])
         series.required_friction = Column.of(values[:, :, quantity('required_friction')])
+        if series.torsion is not None:
+            series.torsion = Column.of(values[:, :, quantity('torsion')])
         self.packed = {}
 
 

@@ -166,8 +166,9 @@ TOPICS: tuple[TopicSpec, ...] = (
         'std_msgs/msg/String',
         (HAND_SIM_NODE,),
         LATCHED_QOS,
-        'JSON, once at start-up: joint names and limits, contact names, friction coefficient, '
-        'fingertip workspace, time step, duration, integrator (layout: nodes.scenario).',
+        'JSON, once at start-up: joint names and limits, contact names, friction coefficient '
+        '(and torsional friction of soft fingers), fingertip workspace, time step, duration, '
+        'integrator (layout: nodes.scenario).',
     ),
     TopicSpec(
         JOINT_STATES,
@@ -188,8 +189,9 @@ TOPICS: tuple[TopicSpec, ...] = (
         'sensor_msgs/msg/JointState',
         (HAND_SIM_NODE,),
         STREAM_QOS,
-        'Contact coordinates, rates, forces, required friction and penetration as '
-        "'<contact>/<quantity>' entries (layout: messages.contacts_to_msg).",
+        'Contact coordinates, rates, forces, required friction, penetration and, for soft '
+        "fingers, torsion as '<contact>/<quantity>' entries (layout: "
+        'messages.contacts_to_msg).',
     ),
     TopicSpec(
         OBJECT_REFERENCE,

@@ -35,6 +35,7 @@ from __future__ import annotations
 from grasp_safety_filter.io.messages.contacts import (  # noqa: F401
     contact_entry_names,
     CONTACT_QUANTITIES,
+    contact_quantities,
     ContactData,
     contacts_from_msg,
     contacts_to_msg,

@@ -34,6 +34,14 @@ CONTACT_QUANTITIES: tuple[str, ...] = (
 )
 """Per-contact entries of ``/hand/contacts``, in publishing order."""
 
+TORSION = 'torsion'
+"""A soft finger's extra entry, after those of :data:`CONTACT_QUANTITIES`."""
+
+
+def contact_quantities(torsion: bool) -> tuple[str, ...]:
+    """Per-contact entries: :data:`CONTACT_QUANTITIES`, then ``torsion`` for soft fingers."""
+    return (*CONTACT_QUANTITIES, TORSION) if torsion else CONTACT_QUANTITIES
+
 # ----------------------------------------------------------------------------------------
 # Contacts
 
@@ -52,6 +60,8 @@ class ContactData:
             shape (n, 3), N.
         required_friction: ``|f_t| / f_n``, shape (n,); ``+inf`` when ``f_n <= 0``.
         penetration: Normal interpenetration, shape (n,), m.
+        torsion: Soft fingers: torque the fingertip exerts on the object about each
+            contact normal, shape (n,), N·m; None for point contacts.
 
     """
 
@@ -65,13 +75,18 @@ class ContactData:
     force: np.ndarray
     required_friction: np.ndarray
     penetration: np.ndarray
+    torsion: np.ndarray | None = None
 
     @classmethod
     def from_grasp_state(cls, state: GraspState, force: np.ndarray) -> ContactData:
-        """Take the contact part of a grasp state, with the contact forces ``force`` (3n,)."""
-        # A soft finger's torsion entries follow the 3n forces; they are not published here.
+        """Take the contact part of a grasp state, with the contact wrench ``force``.
+
+        ``force``: the 3n contact forces, or a soft finger's 4n entries (the forces, then
+        the n torsions).
+        """
         n = state.n_contacts
-        forces = np.asarray(force, dtype=np.float64).reshape(-1)[: 3 * n].reshape(n, 3)
+        wrench = np.asarray(force, dtype=np.float64).reshape(-1)
+        forces = wrench[: 3 * n].reshape(n, 3)
         return cls(
             t=state.t,
             xi_cf=np.array(state.xi_cf),
@@ -83,12 +98,14 @@ class ContactData:
             force=forces,
             required_friction=state.required_friction(forces),
             penetration=np.array(state.penetration),
+            torsion=np.array(wrench[3 * n :]) if wrench.size == 4 * n else None,
         )
 
     def _columns(self) -> tuple[np.ndarray, np.ndarray]:
-        """Values and rates, shape (n, len(CONTACT_QUANTITIES)), in publishing order."""
+        """Values and rates, shape (n, len(contact_quantities(...))), in publishing order."""
         n = np.asarray(self.psi).shape[0]
         zeros = np.zeros(n)
+        torsion = () if self.torsion is None else (self.torsion, zeros)
         values = np.column_stack(
             (
                 self.xi_cf,
@@ -97,23 +114,44 @@ class ContactData:
                 self.force,
                 self.required_friction,
                 self.penetration,
+                *torsion[:1],
             )
         )
         rates = np.column_stack(
-            (self.xi_cf_dot, self.xi_co_dot, self.psi_dot, zeros, zeros, zeros, zeros, zeros)
+            (
+                self.xi_cf_dot,
+                self.xi_co_dot,
+                self.psi_dot,
+                zeros,
+                zeros,
+                zeros,
+                zeros,
+                zeros,
+                *torsion[1:],
+            )
         )
         return values, rates
 
 
-def contact_entry_names(contact_names: Sequence[str]) -> list[str]:
-    """Names of ``/hand/contacts`` entries: ``"<contact>/<quantity>"``, contact-major."""
-    return list(_entry_names(tuple(contact_names)))
+def contact_entry_names(contact_names: Sequence[str], torsion: bool = False) -> list[str]:
+    """Names of ``/hand/contacts`` entries: ``"<contact>/<quantity>"``, contact-major.
+
+    ``torsion``: soft fingers (each contact's ``torsion`` entry after its ten others).
+    """
+    return list(_entry_names(tuple(contact_names), torsion))
 
 
 @lru_cache(maxsize=64)
-def _entry_names(contact_names: tuple[str, ...]) -> tuple[str, ...]:
+def _entry_names(contact_names: tuple[str, ...], torsion: bool = False) -> tuple[str, ...]:
     """:func:`contact_entry_names` of a name tuple, built once per tuple."""
-    return tuple(f'{c}/{q}' for c in contact_names for q in CONTACT_QUANTITIES)
+    return tuple(f'{c}/{q}' for c in contact_names for q in contact_quantities(torsion))
+
+
+@lru_cache(maxsize=64)
+def _has_torsion(entry_names: tuple[str, ...]) -> bool:
+    """Whether any received entry is a torsion (the soft-finger layout)."""
+    suffix = f'/{TORSION}'
+    return any(name.endswith(suffix) for name in entry_names)
 
 
 @lru_cache(maxsize=64)
@@ -129,12 +167,14 @@ def contacts_to_msg(
 
     Layout (public): for each contact ``c`` in order, ten entries named
     ``c/a, c/b, c/u, c/v, c/psi, c/force_x, c/force_y, c/force_normal,
-    c/required_friction, c/penetration``;
+    c/required_friction, c/penetration``, and with soft fingers (``data.torsion`` not None)
+    an eleventh, ``c/torsion``;
 
     - ``position`` holds the value: ``a, b`` fingertip surface coordinates (rad), ``u, v``
       object surface coordinates (m on a face), ``psi`` (rad), ``force_*`` the contact
       force on the object in the contact frame (N), ``required_friction`` ``|f_t|/f_n``
-      (``+inf`` when the contact separates), ``penetration`` (m);
+      (``+inf`` when the contact separates), ``penetration`` (m), ``torsion`` the torque
+      the fingertip exerts on the object about the contact normal (N·m);
     - ``velocity`` holds the rate for ``a, b, u, v, psi`` and 0.0 for the others;
     - ``effort`` is empty; ``header.frame_id`` is empty (each value is in its own frame).
     """
@@ -151,35 +191,51 @@ def contacts_to_msg(
         'required_friction': (n,),
         'penetration': (n,),
     }
+    torsion = data.torsion is not None
+    if torsion:
+        shapes['torsion'] = (n,)
     for name, shape in shapes.items():
         shaped_array(f'contacts {name}', getattr(data, name), shape)
     values, rates = data._columns()
     return joint_state_to_msg(
-        msgs, data.t, _entry_names(names), values.ravel(), rates.ravel(), None
+        msgs, data.t, _entry_names(names, torsion), values.ravel(), rates.ravel(), None
     )
 
 
 def contacts_from_msg(
-    msg: Any, contact_names: Sequence[str], source: str = 'contacts'
+    msg: Any,
+    contact_names: Sequence[str],
+    source: str = 'contacts',
+    torsion: bool | None = None,
 ) -> ContactData:
     """Parse a ``/hand/contacts`` message of exactly ``contact_names`` (any entry order).
 
+    Args:
+        msg: The message.
+        contact_names: The contacts it must carry.
+        source: The topic, for the errors.
+        torsion: Whether every contact must have a ``torsion`` entry (soft fingers); None:
+            the soft-finger layout if any entry is a torsion, else the point-contact one.
+
     Raises:
-        MessageError: Duplicate, unknown or missing entries; position or velocity lengths
-            not matching the names; a non-finite value (``required_friction`` may be
-            ``+inf``); a non-empty effort of the wrong length.
+        MessageError: Duplicate, unknown or missing entries (so also a torsion for some
+            contacts only); position or velocity lengths not matching the names; a
+            non-finite value (``required_friction`` may be ``+inf``); a non-empty effort
+            of the wrong length.
 
     """
-    expected = contact_entry_names(contact_names)
-    order = match_names(source, msg.name, expected, 'contact entry')
     names = list(msg.name)
+    if torsion is None:
+        torsion = _has_torsion(tuple(map(str, names)))
+    expected = contact_entry_names(contact_names, torsion)
+    order = match_names(source, names, expected, 'contact entry')
     inf_ok = positive_inf_allowed(tuple(names))
     values = array_field(
         source, msg.position, 'position', names, required=True, allow_positive_inf=inf_ok
     )
     rates = array_field(source, msg.velocity, 'velocity', names, required=True)
     array_field(source, msg.effort, 'effort', names, required=False)
-    n, k = len(contact_names), len(CONTACT_QUANTITIES)
+    n, k = len(contact_names), len(contact_quantities(torsion))
     values = values[order].reshape(n, k)
     rates = rates[order].reshape(n, k)
     t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
@@ -194,4 +250,5 @@ def contacts_from_msg(
         force=values[:, 5:8],
         required_friction=values[:, 8],
         penetration=values[:, 9],
+        torsion=values[:, 10] if torsion else None,
     )
