@@ -39,7 +39,7 @@ from grasp_safety_filter.model.quaternion import quaternion_derivative
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
 
 
-def _solve(B_ho: np.ndarray, b: np.ndarray, torsion: bool) -> np.ndarray:
+def _solve(B_ho: np.ndarray, b: np.ndarray, torsion: bool, compliance: float) -> np.ndarray:
     """Solve ``B_ho x = b`` as the model's kernel does.
 
     Point contacts: LAPACK's gesv; soft fingers: the minimum-norm solution
@@ -49,7 +49,7 @@ def _solve(B_ho: np.ndarray, b: np.ndarray, torsion: bool) -> np.ndarray:
         numpy.linalg.LinAlgError: B_ho is singular (point contacts).
     """
     if torsion:
-        return wrench_solve(B_ho, b)
+        return wrench_solve(B_ho, b, compliance)
     _, _, solution, info = dgesv(B_ho, b)
     if info != 0:
         raise np.linalg.LinAlgError(f'B_ho is singular (LAPACK gesv info {info})')
@@ -152,6 +152,7 @@ def stabilised_rate(
     M_o_inverse: np.ndarray,
     position_gain: float,
     velocity_gain: float,
+    torsional_compliance: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``x_dot`` and the stabilised contact forces from the model's terms at one instant.
 
@@ -167,6 +168,7 @@ def stabilised_rate(
         M_o_inverse: ``M_o^-1`` at the state, (6, 6), read-only.
         position_gain: ``K_p`` of the stabilisation, 1/s².
         velocity_gain: ``K_v`` of the stabilisation, 1/s.
+        torsional_compliance: Soft fingers' relative torsional compliance (the model's).
 
     Returns:
         ``x_dot`` (2m + 13,) with the layout of ``SimState.to_vector``, and ``f_c`` (3n,),
@@ -187,7 +189,7 @@ def stabilised_rate(
     if position_gain != 0.0 or velocity_gain != 0.0:
         # Soft fingers' states have 4n wrench rows for n contacts (one penetration each).
         torsion = state.B_ho.shape[0] != 3 * state.penetration.shape[0]
-        correction = _solve(state.B_ho, stabilisation, torsion)
+        correction = _solve(state.B_ho, stabilisation, torsion, torsional_compliance)
     else:
         correction = stabilisation  # zero
     force, joints, body = state.contact_force, state.joint_acceleration, state.object_acceleration
@@ -352,6 +354,7 @@ def sphere_on_plane_stage_rate(
     position_gain: float,
     velocity_gain: float,
     torsion: bool = False,
+    torsional_compliance: float = 0.0,
 ) -> np.ndarray:
     """``x_dot`` of spherical fingertips on flat faces, from the hand's terms at a stage.
 
@@ -380,6 +383,7 @@ def sphere_on_plane_stage_rate(
         position_gain: ``K_p`` of the stabilisation, 1/s².
         velocity_gain: ``K_v`` of the stabilisation, 1/s.
         torsion: Soft-finger contacts (the model's ``soft_finger``).
+        torsional_compliance: Their relative torsional compliance (the model's).
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
@@ -407,8 +411,8 @@ def sphere_on_plane_stage_rate(
         torsion,
     )
     # Two solves, not one of [force_rhs | s]: LAPACK's bits depend on the number of columns.
-    force = _solve(B_ho, force_rhs, torsion)
-    correction = _solve(B_ho, stabilisation, torsion)
+    force = _solve(B_ho, force_rhs, torsion, torsional_compliance)
+    correction = _solve(B_ho, stabilisation, torsion, torsional_compliance)
     x_dot = _sphere_on_plane_stage_rate(
         force, stabilisation, correction, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
         w_relative, J_fingertip, J_fingertip_dot_dq, R_pc, H_cf, H_cf_dot_w, M_o_inverse,

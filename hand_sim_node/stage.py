@@ -141,7 +141,8 @@ class PlantRate:
         """
         M_o_inv = self._object.inverse_inertia_matrix(state.R_object_to_palm)
         return stabilised_rate(
-            state, effort, quaternion_xyzw, M_o_inv, position_gain, velocity_gain
+            state, effort, quaternion_xyzw, M_o_inv, position_gain, velocity_gain,
+            self._model.torsional_compliance,
         )
 
     def at(
@@ -172,7 +173,7 @@ class PlantRate:
             return sphere_on_plane_stage_rate(
                 self._hand, x[:m], stack.surface_arrays, dq, p_o, R_o, twist_o, quaternion,
                 M_o_inv, C_o_twist, rigid_object.external_wrench(), effort, position_gain,
-                velocity_gain, self._model.soft_finger,
+                velocity_gain, self._model.soft_finger, self._model.torsional_compliance,
             )
         hand = self._hand.terms(x[:m], dq)
         p_f = hand.p_fingertip_in_palm
@@ -198,6 +199,7 @@ class PlantRate:
             rates.sliding_velocity,
             rates.frame_angular_velocity,
             self._model.soft_finger,
+            self._model.torsional_compliance,
         )
         # Read-only, as in a GraspState: the compiled kernels then see one array type.
         for array in (dq, twist_o, geometry.penetration, J_h, G, B_ho, force, ddq, x_ddot):
@@ -214,5 +216,6 @@ class PlantRate:
             AffineMap(x_ddot[:, :m], x_ddot[:, m]),
         )
         return stabilised_rate(
-            terms, effort, quaternion, M_o_inv, position_gain, velocity_gain
+            terms, effort, quaternion, M_o_inv, position_gain, velocity_gain,
+            self._model.torsional_compliance,
         )[0]

@@ -40,6 +40,10 @@ MODELS = {
         'model.object.size': 0.3,
     },
     'paper cube, soft fingers': {'model.torsional_friction': 0.005},
+    'paper cube, compliant soft fingers': {
+        'model.torsional_friction': 0.005,
+        'model.torsional_compliance': 0.1,
+    },
     'sphere object, soft fingers': {
         'model.object.shape': 'sphere',
         'model.object.size': 0.3,
@@ -231,6 +235,10 @@ def test_accelerations_satisfy_the_differentiated_rolling_constraint(model, conf
             lhs = state.J_h @ ddq + state.Jh_dot_dq
             rhs = state.G.T @ x_ddot + state.G_dot_T_twist
             f_c = state.contact_force(u)
+            if model.soft_finger:
+                # A compliant spin row accelerates at rho (B_ho)_tt tau_i (0 when rigid).
+                t = slice(3 * model.n_contacts, None)
+                rhs[t] += model.torsional_compliance * np.diag(state.B_ho)[t] * f_c[t]
             np.testing.assert_allclose(lhs, rhs, atol=1e-9)
             # And both dynamics hold with the same contact force.
             np.testing.assert_allclose(

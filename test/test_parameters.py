@@ -484,7 +484,7 @@ def test_every_schema_parameter_is_documented_and_typed():
 
 def test_model_section_is_shared_and_read_only():
     model = [name for name in NODE_SCHEMAS[HAND_SIM_NODE].names if name.startswith('model.')]
-    assert len(model) == 19
+    assert len(model) == 20
     for schema in NODE_SCHEMAS.values():
         assert [n for n in schema.names if n.startswith('model.')] == model
         assert all(schema[name].read_only for name in model)

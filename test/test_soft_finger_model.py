@@ -10,8 +10,8 @@ import pytest
 
 from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.control.reference import PaperReference, Pose
+from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.model.grasp_check import grasp_findings
-from grasp_safety_filter.model.per_contact import PerContactError
 from grasp_safety_filter.nodes.scenario import (
     scenario_document,
     scenario_from_text,
@@ -24,6 +24,8 @@ from hand_sim_node.config import SimConfig
 SOFT = {'model.torsional_friction': 0.005}
 
 BAD_VALUES = [
+    ({'model.torsional_compliance': -0.1}, 'model.torsional_compliance: expected a finite number'),
+    ({'model.torsional_compliance': float('inf')}, 'torsional_compliance: expected a finite'),
     (-0.001, 'model.torsional_friction: expected >= 0, got -0.001'),
     ([0.0, 0.005, 0.005], 'expected 0 for every contact (point contacts with friction) or > 0'),
     ([0.005, 0.005], 'model.torsional_friction: expected 1 or 3 values'),
@@ -32,9 +34,10 @@ BAD_VALUES = [
 
 
 @pytest.mark.parametrize(('value', 'message'), BAD_VALUES, ids=[m for _, m in BAD_VALUES])
-def test_a_bad_torsional_friction_is_refused_by_name(value, message):
-    with pytest.raises(PerContactError, match=message.replace('(', r'\(').replace(')', r'\)')):
-        paper_model(**{'model.torsional_friction': value})
+def test_a_bad_torsional_friction_or_compliance_is_refused_by_name(value, message):
+    overrides = value if isinstance(value, dict) else {'model.torsional_friction': value}
+    with pytest.raises(ConfigError, match=message.replace('(', r'\(').replace(')', r'\)')):
+        paper_model(**overrides)
 
 
 @pytest.mark.parametrize(('value', 'expected'), [(0.0, None), (0.005, [0.005] * 3)])

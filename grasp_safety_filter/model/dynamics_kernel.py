@@ -70,6 +70,7 @@ def contact_dynamics(
     sliding_velocity: np.ndarray,
     frame_angular_velocity: np.ndarray,
     torsion: bool = False,
+    compliance: float = 0.0,
 ) -> tuple[
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
     np.ndarray, np.ndarray,
@@ -97,6 +98,7 @@ def contact_dynamics(
         torsion: Soft-finger contacts: each contact also transmits a torque about its
             normal and the fingertip cannot spin on the object (k = 4n rows, the n torsion
             rows after the 3n force rows); False: point contacts with friction (k = 3n).
+        compliance: Soft fingers' relative torsional compliance (:func:`wrench_solve`).
 
     Returns:
         ``J_h`` (k, m), ``G`` (6, k), ``J_h_dot dq`` (k,), ``G_dot^T x_o_dot`` (k,),
@@ -130,7 +132,7 @@ def contact_dynamics(
         torsion,
     )
     if torsion:
-        force = wrench_solve(B_ho, force_rhs)
+        force = wrench_solve(B_ho, force_rhs, compliance)
     else:
         # B_ho is at most 12 × 12: LAPACK's dgesv (scipy) in between the two compiled passes.
         _, _, force, info = dgesv(B_ho, force_rhs)
@@ -150,8 +152,15 @@ WRENCH_RCOND = 1e-13
 
 
 @kernel
-def wrench_solve(B_ho: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Minimum-norm ``X`` of ``B_ho X = rhs``: the contact wrench of soft fingers.
+def wrench_solve(B_ho: np.ndarray, rhs: np.ndarray, compliance: float) -> np.ndarray:
+    """Minimum-norm ``X`` of ``(B_ho + rho D_t) X = rhs``: the contact wrench of soft fingers.
+
+    ``D_t`` is ``B_ho``'s diagonal on the n spin rows (0 on the 3n force rows) and rho the
+    relative torsional ``compliance`` (``model.torsional_compliance``; 0: rigid). With rho > 0
+    each spin constraint yields as MuJoCo's soft constraints do (their regulariser is about
+    ``(1 - d) / d`` of the diagonal, 0.11 at MuJoCo's default impedance d = 0.9): contact i's
+    spin acceleration is ``rho (B_ho)_tt tau_i`` instead of 0, and the torsions stay bounded
+    where the rigid ones grow without bound (below).
 
     Rigid no-spin constraints can be redundant: two contacts on opposite faces of a box can
     squeeze the object with equal torsions (``G v = 0``), and where no joint torque reaches
@@ -162,12 +171,21 @@ def wrench_solve(B_ho: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     same accelerations; the minimum-norm one (LAPACK's SVD least squares, singular values
     below :data:`WRENCH_RCOND` of the largest dropped) loads no undetermined internal
     torsion, as a compliant contact that starts unloaded would not. Where ``B_ho`` is
-    regular, this is ``B_ho^-1 rhs`` (to round-off; point contacts never call this).
+    regular, this is ``B_ho^-1 rhs`` (to round-off; point contacts never call this). Around
+    such grasps ``B_ho`` is nearly singular and the rigid internal torsion is about the joint
+    torque over the fingers' small twisting lever: large and sensitive, which is what the
+    compliance is for.
 
     Raises:
         numpy.linalg.LinAlgError: ``B_ho`` or ``rhs`` is not finite.
     """
-    return np.linalg.lstsq(B_ho, rhs, rcond=WRENCH_RCOND)[0]
+    if compliance == 0.0:
+        return np.linalg.lstsq(B_ho, rhs, rcond=WRENCH_RCOND)[0]
+    k = B_ho.shape[0]
+    regularised = B_ho.copy()
+    for t in range(3 * (k // 4), k):
+        regularised[t, t] += compliance * B_ho[t, t]
+    return np.linalg.lstsq(regularised, rhs, rcond=WRENCH_RCOND)[0]
 
 
 @kernel

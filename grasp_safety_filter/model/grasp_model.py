@@ -23,6 +23,7 @@ the contact frame.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+import math
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +71,8 @@ class GraspModel:
             fingers, which also transmit a torque about the normal, ``|tau_n| <= mu_t f_n``,
             and do not spin on the object (the contact wrench then has 4n entries:
             :mod:`~grasp_safety_filter.model.dynamics_kernel`).
+        torsional_compliance: Soft fingers' relative torsional compliance rho >= 0 (0: rigid
+            no-spin constraints; :func:`~grasp_safety_filter.model.dynamics_kernel.wrench_solve`).
     """
 
     def __init__(
@@ -86,6 +89,7 @@ class GraspModel:
         palm_frame: str = 'palm',
         object_frame: str = 'object',
         torsional_friction: float | Sequence[float] = 0.0,
+        torsional_compliance: float = 0.0,
     ) -> None:
         n = len(hand.frame_ids)
         if contacts is not None and len(contacts) != n:
@@ -111,6 +115,13 @@ class GraspModel:
         self.torsional_friction = torsional_friction_coefficients(
             torsional_friction, contact_names
         )
+        rho = float(torsional_compliance)
+        if not (math.isfinite(rho) and rho >= 0.0):
+            raise GraspConfigError(
+                f'model.torsional_compliance: expected a finite number >= 0, got {rho!r}'
+            )
+        #: Soft fingers' relative torsional compliance rho (0: rigid).
+        self.torsional_compliance = rho
         self.object_shape = object_shape
         self.declared_faces = list(declared_faces) if declared_faces is not None else [None] * n
         self._contacts: list[ContactPair] | None = None
@@ -133,7 +144,12 @@ class GraspModel:
         self._contact_stack = contact_stack(self._contacts)
         # Spherical fingertips on flat faces: every term in one compiled pass (packed_terms).
         self._packed_layout = (
-            PackedLayout.of(len(self._contacts), self.hand.n_joints, self.soft_finger)
+            PackedLayout.of(
+                len(self._contacts),
+                self.hand.n_joints,
+                self.soft_finger,
+                self.torsional_compliance,
+            )
             if isinstance(self._contact_stack, SphereOnPlaneStack)
             else None
         )
@@ -414,6 +430,7 @@ class GraspModel:
             R_object_to_palm,
             twist_object,
             torsion=self.soft_finger,
+            torsional_compliance=self.torsional_compliance,
         )
 
 

@@ -238,6 +238,7 @@ def packed_state(
             w_e,
             *stack.surface_arrays,
             layout.torsion,
+            layout.torsional_compliance,
         )
     except np.linalg.LinAlgError:
         return None

@@ -95,6 +95,8 @@ class PackedLayout(NamedTuple):
         n_joints: m.
         n_contacts: n.
         torsion: Whether the contacts are soft fingers (4n wrench entries, not 3n).
+        torsional_compliance: Soft fingers' relative torsional compliance rho
+            (:func:`~grasp_safety_filter.model.dynamics_kernel.wrench_solve`).
     """
 
     size: int
@@ -102,13 +104,16 @@ class PackedLayout(NamedTuple):
     n_joints: int
     n_contacts: int
     torsion: bool = False
+    torsional_compliance: float = 0.0
 
     def start(self, name: str) -> int:
         """Return the index of a term's first entry (its entries follow in C order)."""
         return self.places[name][0]
 
     @classmethod
-    def of(cls, n: int, m: int, torsion: bool = False) -> PackedLayout:
+    def of(
+        cls, n: int, m: int, torsion: bool = False, torsional_compliance: float = 0.0
+    ) -> PackedLayout:
         """Return the layout of :func:`packed_fields` for n contacts and m joints."""
         places = {}
         start = 0
@@ -116,7 +121,7 @@ class PackedLayout(NamedTuple):
             stop = start + int(np.prod(shape))
             places[name] = (start, stop, shape)
             start = stop
-        return cls(start, places, m, n, torsion)
+        return cls(start, places, m, n, torsion, float(torsional_compliance))
 
 
 @kernel
@@ -157,6 +162,7 @@ def sphere_on_plane_terms(
     plane_frame: np.ndarray,
     radius: np.ndarray,
     torsion: bool,
+    torsional_compliance: float,
 ) -> None:
     """Write every term of :func:`packed_fields` into ``out``, in that order.
 
@@ -191,6 +197,7 @@ def sphere_on_plane_terms(
         plane_frame: Each face's ``[e1, e2, n]`` in the object frame, (n, 3, 3).
         radius: Each fingertip's radius, (n,), m.
         torsion: Soft-finger contacts (:attr:`PackedLayout.torsion`).
+        torsional_compliance: Their relative torsional compliance rho.
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
@@ -230,7 +237,10 @@ def sphere_on_plane_terms(
         twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
         contacts[11], contacts[12], contacts[13], torsion,
     )
-    force = wrench_solve(B_ho, force_rhs) if torsion else np.linalg.solve(B_ho, force_rhs)
+    if torsion:
+        force = wrench_solve(B_ho, force_rhs, torsional_compliance)
+    else:
+        force = np.linalg.solve(B_ho, force_rhs)
     ddq, x_ddot, xi_ddot = acceleration_terms(
         force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
         J_s, J_frames_dot_dq, contacts[5], contacts[10], contacts[11],

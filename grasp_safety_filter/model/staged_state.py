@@ -33,6 +33,7 @@ def staged_state(
     twist_object: np.ndarray,
     *,
     torsion: bool = False,
+    torsional_compliance: float = 0.0,
 ) -> GraspState:
     """Every model term at one instant (see :class:`GraspState`), stage by stage.
 
@@ -49,6 +50,7 @@ def staged_state(
             (m/s, rad/s).
         torsion: Soft-finger contacts (4n wrench entries; see
             :mod:`~grasp_safety_filter.model.dynamics_kernel`).
+        torsional_compliance: Their relative torsional compliance rho.
     """
     m = hand_model.n_joints
     q = np.array(q, dtype=float)
@@ -89,6 +91,7 @@ def staged_state(
         rates.sliding_velocity,
         rates.frame_angular_velocity,
         torsion,
+        torsional_compliance,
     )
 
     arrays = {
