@@ -68,8 +68,10 @@ def baumgarte_correction(
 ) -> np.ndarray:
     """``s = K_v e + K_p [0, 0, δ_i]_i`` with ``e = J_h dq - G^T x_o_dot``, shape (k,), m/s².
 
-    With soft fingers (k = 4n) the last n rows are the spin residuals, rad/s², with no
-    position term.
+    With soft fingers (k = 4n) the last n rows, the spin rows, are 0: their residual is left
+    as it is. A compliant spin row's residual is its creep (the model's, as MuJoCo's soft
+    contacts creep), not drift; and near a grasp where an internal torsion is barely
+    reachable, ``B_ho^-1`` turns a tiny spin residual into a huge torsion.
 
     Args:
         J_h: Hand Jacobian (k, m), k = 3n or 4n.
@@ -81,8 +83,8 @@ def baumgarte_correction(
         velocity_gain: ``K_v``, 1/s.
     """
     k, m = J_h.shape
-    correction = np.empty(k)
-    for r in range(k):
+    correction = np.zeros(k)
+    for r in range(3 * penetration.shape[0]):
         residual = 0.0
         for j in range(m):
             residual += J_h[r, j] * dq[j]

@@ -40,9 +40,9 @@ MODELS = {
         'model.object.size': 0.3,
     },
     'paper cube, soft fingers': {'model.torsional_friction': 0.005},
-    'paper cube, compliant soft fingers': {
+    'paper cube, rigid soft fingers': {
         'model.torsional_friction': 0.005,
-        'model.torsional_compliance': 0.1,
+        'model.torsional_compliance': 0.0,
     },
     'sphere object, soft fingers': {
         'model.object.shape': 'sphere',

@@ -154,7 +154,7 @@ def test_compare_command_writes_statistics_and_figure(tmp_path, capsys):
 #: The paper's grasp turned 0.2 rad about the palm z axis: at the paper's own grasp B_ho of
 #: soft fingers is singular (fingers 1 and 2 forbid the same object spin twice).
 TURNED = {'initial.object_orientation': [0.0, 0.0, math.sin(0.1), math.cos(0.1)]}
-SOFT_FINGERS = {**TURNED, 'model.torsional_friction': 0.05}
+SOFT_FINGERS = {**TURNED, 'model.torsional_friction': 0.05, 'model.torsional_compliance': 0.0}
 #: Stiff contacts; with condim 4 a torsional friction so large that nothing spins: MuJoCo's
 #: torsion is a soft constraint whose regulariser grows as 1 / mu_t², so at 0.05 m it creeps.
 STIFF = {'cone': 'elliptic', 'solref': (0.004, 1.0), 'solimp': (0.99, 0.99, 0.001, 0.5, 2.0)}

@@ -26,6 +26,7 @@ SCENARIO = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.y
 #: same object spin twice and B_ho is singular.
 SOFT_FINGERS = {
     'model.torsional_friction': 0.005,
+    'model.torsional_compliance': 0.0,
     'initial.object_orientation': [0.0, 0.0, 0.09983341664682815, 0.9950041652780258],
 }
 
@@ -46,8 +47,9 @@ def oracle_rate(model, x, u, position_gain, velocity_gain):
     state = model.state(0.0, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
     e = state.J_h @ state.dq - state.G.T @ state.twist_object
     correction = velocity_gain * e
-    # The normal rows; a soft finger's spin rows (after the 3n force rows) have no δ.
+    # The normal rows; a soft finger's spin rows (after the 3n force rows) are not stabilised.
     correction[2 : 3 * model.n_contacts : 3] += position_gain * state.penetration
+    correction[3 * model.n_contacts :] = 0.0
     f_c = state.contact_force(u) + np.linalg.solve(state.B_ho, correction)
     ddq = np.linalg.solve(state.M_h, u - state.h_bias - state.J_h.T @ f_c)
     x_o_ddot = np.linalg.solve(state.M_o, state.G @ f_c + state.w_e - state.C_o_twist)

@@ -89,7 +89,7 @@ class GraspModel:
         palm_frame: str = 'palm',
         object_frame: str = 'object',
         torsional_friction: float | Sequence[float] = 0.0,
-        torsional_compliance: float = 0.0,
+        torsional_compliance: float = 0.1,
     ) -> None:
         n = len(hand.frame_ids)
         if contacts is not None and len(contacts) != n:

@@ -200,7 +200,7 @@ def grasp_model_from_parameters(
         palm_frame=palm_frame_name(hand, str(params.get('model.palm_frame', ''))),
         object_frame=str(params.get('model.object_frame', 'object')) or 'object',
         torsional_friction=params.get('model.torsional_friction', 0.0),
-        torsional_compliance=params.get('model.torsional_compliance', 0.0),
+        torsional_compliance=params.get('model.torsional_compliance', 0.1),
     )
     q0, p0 = params.get('initial.joint_positions'), params.get('initial.object_position')
     if not model.contacts_bound and q0 is not None and p0 is not None:

@@ -146,12 +146,12 @@ MODEL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'model.torsional_compliance',
         DOUBLE,
-        0.0,
+        0.1,
         "Soft fingers' relative torsional compliance rho: each no-spin constraint is solved "
         "with its diagonal of B_ho times 1 + rho, as MuJoCo's soft constraints (about 0.11 at "
         'its default impedance); 0: rigid. Where the fingers can hardly twist about their '
-        'contact normals (the paper hand) the rigid torsions are large and sensitive; ignored '
-        'for point contacts [-]',
+        'contact normals (the paper hand) the rigid torsions are large and jump, and the '
+        'filter cannot keep them bounded; ignored for point contacts [-]',
         min_value=0.0,
         read_only=True,
     ),
