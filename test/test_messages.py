@@ -67,7 +67,10 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(7)
 
 
-def contact_data(rng: np.random.Generator, t: float = 1.25) -> ContactData:
+def contact_data(
+    rng: np.random.Generator, t: float = 1.25, torsion: bool = False
+) -> ContactData:
+    """Random contacts; with ``torsion``, a soft finger's torques about the normals too."""
     n = len(CONTACT_NAMES)
     force = rng.normal(size=(n, 3))
     force[:, 2] = np.abs(force[:, 2]) + 0.1
@@ -84,6 +87,7 @@ def contact_data(rng: np.random.Generator, t: float = 1.25) -> ContactData:
         force=force,
         required_friction=required,
         penetration=rng.normal(size=n) * 1e-4,
+        torsion=rng.normal(size=n) * 1e-3 if torsion else None,
     )
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
 from test_fast_analysis import assert_same_run, edited_copy, parsed_load
+from test_messages import contact_data as random_contact_data
 
 from grasp_safety_filter.analysis.run_data import load_run, RunDataError
 from grasp_safety_filter.io import messages as m
@@ -38,25 +39,7 @@ def through_cdr(msg):
 
 
 def contact_data(torsion: bool, seed: int = 11) -> ContactData:
-    rng = np.random.default_rng(seed)
-    n = len(CONTACT_NAMES)
-    force = rng.normal(size=(n, 3))
-    force[:, 2] = np.abs(force[:, 2]) + 0.1
-    required = np.hypot(force[:, 0], force[:, 1]) / force[:, 2]
-    required[1] = math.inf  # a separating contact
-    return ContactData(
-        t=2.5,
-        xi_cf=rng.normal(size=(n, 2)),
-        xi_co=rng.normal(size=(n, 2)),
-        psi=rng.normal(size=n),
-        xi_cf_dot=rng.normal(size=(n, 2)),
-        xi_co_dot=rng.normal(size=(n, 2)),
-        psi_dot=rng.normal(size=n),
-        force=force,
-        required_friction=required,
-        penetration=rng.normal(size=n) * 1e-4,
-        torsion=rng.normal(size=n) * 1e-3 if torsion else None,
-    )
+    return random_contact_data(np.random.default_rng(seed), 2.5, torsion)
 
 
 # ----------------------------------------------------------------------------------------
