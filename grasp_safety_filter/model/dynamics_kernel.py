@@ -177,15 +177,19 @@ def wrench_solve(B_ho: np.ndarray, rhs: np.ndarray, compliance: float) -> np.nda
     compliance is for.
 
     Raises:
-        numpy.linalg.LinAlgError: ``B_ho`` or ``rhs`` is not finite.
+        numpy.linalg.LinAlgError: ``B_ho`` or ``rhs`` is not finite, or (rho > 0) the
+            regularised matrix is singular.
     """
     if compliance == 0.0:
         return np.linalg.lstsq(B_ho, rhs, rcond=WRENCH_RCOND)[0]
+    # Regularised, the matrix is positive definite: B_ho is positive semi-definite, definite
+    # on the force rows alone, so each vector of its null space has a torsion entry, which
+    # the regulariser weights. LAPACK's LU solve then does, at a third of the SVD's cost.
     k = B_ho.shape[0]
     regularised = B_ho.copy()
     for t in range(3 * (k // 4), k):
         regularised[t, t] += compliance * B_ho[t, t]
-    return np.linalg.lstsq(regularised, rhs, rcond=WRENCH_RCOND)[0]
+    return np.linalg.solve(regularised, rhs)
 
 
 @kernel
