@@ -11,6 +11,7 @@ from rosbags.typesys import get_typestore, Stores
 from test_fast_analysis import assert_same_run, edited_copy, parsed_load
 from test_messages import contact_data as random_contact_data
 
+from grasp_safety_filter.analysis.figures import plot_friction, torsion_in_friction_units
 from grasp_safety_filter.analysis.run_data import load_run, RunDataError
 from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io.messages import (
@@ -256,3 +257,13 @@ def test_a_soft_finger_bag_without_torsions_is_refused(soft_nominal_run, tmp_pat
     edited_copy(soft_nominal_run.bag, tmp_path / 'no_torsion', drop_torsions)
     with pytest.raises(RunDataError, match=r'/hand/contacts: missing .*finger1/torsion'):
         load_run(tmp_path / 'no_torsion')
+
+
+def test_the_friction_figure_draws_the_torsions_the_verdict_counts(soft_nominal_run, tmp_path):
+    run_data = load_run(soft_nominal_run.bag)
+    spin = torsion_in_friction_units(run_data)
+    assert spin is not None and spin.shape == run_data.required_friction.shape
+    # Above mu exactly where the event monitor counted slip (the force cone holds here).
+    slipping = np.maximum(spin, run_data.required_friction).max(axis=1) > MU
+    assert slipping.sum() == soft_nominal_run.recording.live_log.violations()[SLIP]['count']
+    assert (tmp_path / 'friction.png') == plot_friction(run_data, tmp_path / 'friction.png')

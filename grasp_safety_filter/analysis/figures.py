@@ -186,17 +186,28 @@ def plot_friction(run: RunData, path: Path) -> Path:
 
     With one mu for every contact, the grey band above it is slip for all of them. With a
     mu_i per contact, each contact's own mu_i is drawn dashed in its colour, and the band
-    starts at the largest mu_i: above it every contact slips.
+    starts at the largest mu_i: above it every contact slips. Soft fingers' torsions are
+    drawn as wide pale lines in their contact's colour, in the same units: ``mu_i |tau_i| / (mu_t,i
+    f_n,i)``, above mu_i exactly when ``|tau_i| > mu_t,i f_n,i`` (the event monitor's slip).
     """
     figure = Figure(figsize=(7, 3.5))
     axes = figure.subplots()
     beta = np.where(np.isfinite(run.required_friction), run.required_friction, np.nan)
     mu = run.mu_per_contact
     shared = bool(np.all(mu == mu[0]))
+    spin = torsion_in_friction_units(run)
     for i, name in enumerate(run.contact_names):
         (line,) = axes.plot(
             *envelope(run.t, beta[:, i]), LINE_STYLES[i % len(LINE_STYLES)], label=name
         )
+        if spin is not None:
+            axes.plot(
+                *envelope(run.t, spin[:, i]),
+                color=line.get_color(),
+                linewidth=3.0,
+                alpha=0.4,
+                label=f'{name} torsion',
+            )
         if not shared:
             axes.axhline(
                 mu[i],
@@ -206,18 +217,34 @@ def plot_friction(run: RunData, path: Path) -> Path:
                 label=f'$\\mu$ of {name} = {mu[i]:g}',
             )
     highest = float(mu.max())
-    top = max(1.5 * highest, float(np.nanmax(beta)) * 1.05 if np.isfinite(beta).any() else 0.0)
+    drawn = beta if spin is None else np.concatenate((beta, spin), axis=1)
+    top = max(1.5 * highest, float(np.nanmax(drawn)) * 1.05 if np.isfinite(drawn).any() else 0.0)
     axes.axhspan(highest, top, **INFEASIBLE)
     if shared:
         axes.axhline(highest, color='k', linewidth=1.0, label=f'$\\mu$ = {highest:g}')
     axes.set_ylim(0.0, top)
     axes.set_xlabel('t [s]')
-    axes.set_ylabel('$\\beta_i$')
+    torsion_label = '$\\beta_i$; torsion: $\\mu_i |\\tau_i| / (\\mu_{t,i} f_{n,i})$'
+    axes.set_ylabel('$\\beta_i$' if spin is None else torsion_label)
     axes.legend(loc='best')
     _stop_marker(axes, run)
     title = 'grey: slip' if shared else "dashed: each contact's mu; grey: above every mu"
     axes.set_title(f'{run.mode}: required friction ({title})')
     return _save(figure, path)
+
+
+def torsion_in_friction_units(run: RunData) -> np.ndarray | None:
+    """``mu_i |tau_i| / (mu_t,i f_n,i)`` per sample and contact, (K, n); None: point contacts.
+
+    NaN where the contact separates (``f_n <= 0``), as its beta is drawn.
+    """
+    mu_t = run.torsional_friction_per_contact
+    if run.torsion is None or mu_t is None:
+        return None
+    normal = run.force[:, :, 2]
+    positive = normal > 0.0
+    ratio = np.abs(run.torsion) / (mu_t * np.where(positive, normal, 1.0))
+    return np.where(positive, run.mu_per_contact * ratio, np.nan)
 
 
 def plot_torques(run: RunData, path: Path, fingers: Sequence[Finger] | None = None) -> Path:
