@@ -230,6 +230,29 @@ def test_json_to_stdout_with_a_filter_override():
     assert document['real_time_factor']['runner_with_bag'] is None
 
 
+def test_a_model_override_reaches_every_part(monkeypatch):
+    """``--set model.*`` builds the model with it (filter and simulator share one model)."""
+    loaded = []
+    original = Scenario.load.__func__
+
+    def spy(cls, config, filter_overrides=None, plant_overrides=None):
+        loaded.append(original(cls, config, filter_overrides, plant_overrides))
+        return loaded[-1]
+
+    monkeypatch.setattr(Scenario, 'load', classmethod(spy))
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        rc = bench_main(
+            '--duration 0.01 --warmup 0 --external-ticks 0 --runner-duration 0 --backends= '
+            '--set model.torsional_friction=0.005 --set osqp.eps_abs=1e-3 --json'.split()
+        )
+    assert rc == 0
+    document = json.loads(out.getvalue())
+    assert document['model_overrides'] == {'model.torsional_friction': 0.005}
+    assert document['filter_parameters']['osqp.eps_abs'] == 1e-3
+    assert loaded and all(scenario.model.soft_finger for scenario in loaded)
+
+
 def test_unknown_filter_override_is_refused():
     with pytest.raises(ValueError, match=r'osqp\.eps_absolute'):
         Scenario.load(config_path(), {'osqp.eps_absolute': 1e-3})

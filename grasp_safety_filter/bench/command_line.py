@@ -12,6 +12,7 @@ from typing import Any
 from grasp_safety_filter.bench.report import benchmark, format_report
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.io.schemas import MODEL_PARAMETERS
 
 
 def _parse_override(text: str) -> tuple[str, Any]:
@@ -69,7 +70,8 @@ def bench_main(argv: list[str] | None = None) -> int:
         type=_parse_override,
         action='append',
         default=[],
-        help='override a safety-filter parameter, e.g. --set osqp.eps_abs=1e-3',
+        help='override a safety-filter parameter, e.g. --set osqp.eps_abs=1e-3, or a model '
+        'parameter, which every part reads, e.g. --set model.torsional_friction=0.005',
     )
     parser.add_argument(
         '--soak',
@@ -112,8 +114,12 @@ def bench_main(argv: list[str] | None = None) -> int:
     from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
     from grasp_safety_filter.model.grasp_check import load_initial_grasp
 
+    overrides = dict(args.overrides)
+    # The model's parameters go to every part (the simulator's model is the filter's).
+    model_names = {spec.name for spec in MODEL_PARAMETERS}
+    model_overrides = {name: overrides.pop(name) for name in model_names & set(overrides)}
     try:
-        load_initial_grasp(args.config)  # the simulator's start-up checks
+        load_initial_grasp(args.config, model_overrides)  # the simulator's start-up checks
     except ConfigError as error:
         print(config_error_line('grasp-bench', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
@@ -126,8 +132,9 @@ def bench_main(argv: list[str] | None = None) -> int:
         warmup=max(0, args.warmup),
         external_ticks=max(0, args.external_ticks),
         runner_duration=max(0.0, args.runner_duration),
-        filter_overrides=dict(args.overrides),
+        filter_overrides=overrides,
         backends=args.backends,
+        model_overrides=model_overrides,
         log=log,
     )
     _print(format_report(document), document, args.json)

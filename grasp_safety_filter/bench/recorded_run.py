@@ -242,8 +242,12 @@ def nominal_loop_rate(scenario: Scenario, duration: float) -> LoopRate:
     return LoopRate.of(plant.simulator, loop.wall)
 
 
-def runner_loop_rate(config: Path, duration: float, time_step: float) -> LoopRate:
+def runner_loop_rate(
+    config: Path, duration: float, time_step: float, overrides: dict[str, Any] | None = None
+) -> LoopRate:
     """Real-time factor of the ROS-free runner's filtered run, recording every message to a bag.
+
+    ``overrides`` replace parameters of every node that declares them, as ``grasp-demo --set``.
 
     Times :func:`grasp_safety_filter.runner.record_run` (the loop and the bag, not the
     analysis and figures :func:`~grasp_safety_filter.runner.run` adds afterwards).
@@ -251,7 +255,9 @@ def runner_loop_rate(config: Path, duration: float, time_step: float) -> LoopRat
     from grasp_safety_filter.runner import record_run, RunOptions
 
     with tempfile.TemporaryDirectory(prefix='grasp-bench-') as directory:
-        options = RunOptions(config, mode='filtered', duration=duration)
+        options = RunOptions(
+            config, mode='filtered', duration=duration, overrides=dict(overrides or {})
+        )
         wall_start = time.perf_counter()
         recording = record_run(options, Path(directory) / 'bag')
         wall = time.perf_counter() - wall_start

@@ -103,6 +103,7 @@ def benchmark(
     runner_duration: float = 2.0,
     filter_overrides: dict[str, Any] | None = None,
     backends: Sequence[str] = tuple(BACKENDS),
+    model_overrides: dict[str, Any] | None = None,
     log: Callable[[str], None] = lambda message: None,
 ) -> dict[str, Any]:
     """Run every measurement and return the figures as a JSON-ready document.
@@ -120,10 +121,12 @@ def benchmark(
             (e.g. ``{"osqp.eps_abs": 1e-3}``).
         backends: QP backends (``qp.solver`` values) to compare on the replayed ticks
             (:mod:`grasp_safety_filter.bench.backends`); none: not compared.
+        model_overrides: ``model.*`` parameters replaced by dotted name, for every part
+            (e.g. ``{"model.torsional_friction": 0.005}``: soft fingers).
         log: Called with a line saying what is being measured.
     """
     machine = machine_info()
-    scenario = Scenario.load(config, filter_overrides)
+    scenario = Scenario.load(config, filter_overrides, model_overrides)
     log(f'recording the filtered run ({duration:g} s simulated)')
     ticks, filtered_rate, sim_step_times, sim_step_cpu_times = record_filtered_run(
         scenario, duration
@@ -185,7 +188,12 @@ def benchmark(
     runner_rate = None
     if runner_duration > 0:
         log(f'timing the runner with bag recording ({runner_duration:g} s simulated)')
-        runner_rate = runner_loop_rate(config, runner_duration, scenario.sim_config.time_step)
+        runner_rate = runner_loop_rate(
+            config,
+            runner_duration,
+            scenario.sim_config.time_step,
+            {**(filter_overrides or {}), **(model_overrides or {})},
+        )
 
     statuses = Counter(status.value for status in measured.status)
     status_values = np.array([status.value for status in measured.status])
@@ -201,6 +209,7 @@ def benchmark(
         'machine': {**machine, 'load_average_after': machine_info()['load_average']},
         'config': str(config),
         'filter_parameters': scenario.filter_config.to_parameters(),
+        'model_overrides': dict(model_overrides or {}),
         'run': {
             'duration_requested_s': duration,
             'time_step_s': scenario.sim_config.time_step,
