@@ -325,6 +325,8 @@ class MuJoCoPlant:
         force = np.einsum('nji,nj->ni', state.R_contact_to_palm, force_in_palm).ravel()
         if not self.model.soft_finger:
             return force
+        # The torque about the normal only: condim 6's rolling torques (about the tangents)
+        # have no place in our wrench, and a point-contact model reads none of the torque.
         torsion = np.einsum('nj,nj->n', state.R_contact_to_palm[:, :, 2], torque_in_palm)
         return np.concatenate((force, torsion))
 

@@ -131,7 +131,7 @@ class StepReport:
         grasp_state: Model terms at ``start``.
         effort: Joint torque applied over the step, shape (m,), N·m.
         contact_force: Contact forces at ``start`` under ``effort`` (with the constraint
-            stabilisation), shape (3n,), contact frames, N.
+            stabilisation), shape (k,) (3n, or 4n with soft fingers), contact frames, N (N·m).
         margins: Every constraint margin at ``start``.
         events: The constraints violated at ``start``.
         stop_reason: None, or why the run stopped at this step (``"fingertip_workspace"``,
@@ -150,7 +150,9 @@ class StepReport:
 
 
 def contact_velocity_residual(state: GraspState) -> np.ndarray:
-    """Rolling-constraint residual ``e = J_h dq - G^T x_o_dot``, shape (3n,), m/s.
+    """Rolling-constraint residual ``e = J_h dq - G^T x_o_dot``, shape (k,), m/s.
+
+    With soft fingers (k = 4n) the last n entries are spin residuals, rad/s.
 
     Per contact, in its contact frame: velocity of the fingertip's material point at the
     contact minus the object's; zero under pure rolling, ``e_n,i`` is the rate of
@@ -250,7 +252,7 @@ class Simulator:
 
     # -------------------------------------------------------------------------- dynamics
     def contact_force(self, state: GraspState, effort: np.ndarray) -> np.ndarray:
-        """Stabilised contact forces ``f_c(u) + B_ho^-1 (K_v e + K_p [0, 0, δ_i])``, (3n,), N."""
+        """Stabilised contact forces ``f_c(u) + B_ho^-1 (K_v e + K_p [0, 0, δ_i])``, (k,), N."""
         return self.derivative(state, effort, from_rotation_matrix(state.R_object_to_palm))[1]
 
     def derivative(
@@ -265,7 +267,8 @@ class Simulator:
                 not unit inside a Runge–Kutta step).
 
         Returns:
-            ``x_dot`` with the layout of :meth:`SimState.to_vector`, and ``f_c`` (3n,).
+            ``x_dot`` with the layout of :meth:`SimState.to_vector`, and ``f_c`` (k,): 3n, or
+            4n with soft fingers.
 
         """
         config = self.config

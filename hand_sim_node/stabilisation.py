@@ -29,21 +29,18 @@ import numpy as np
 from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.dynamics_kernel import (
-    acceleration_terms,
-    velocity_terms,
-    wrench_solve,
-)
+from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.quaternion import quaternion_derivative
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
+from grasp_safety_filter.model.wrench_solve import wrench_solve
 
 
 def _solve(B_ho: np.ndarray, b: np.ndarray, torsion: bool, compliance: float) -> np.ndarray:
     """Solve ``B_ho x = b`` as the model's kernel does.
 
     Point contacts: LAPACK's gesv; soft fingers: the minimum-norm solution
-    (:func:`~grasp_safety_filter.model.dynamics_kernel.wrench_solve`).
+    (:func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular (point contacts).
@@ -68,8 +65,8 @@ def baumgarte_correction(
 ) -> np.ndarray:
     """``s = K_v e + K_p [0, 0, δ_i]_i`` with ``e = J_h dq - G^T x_o_dot``, shape (k,), m/s².
 
-    With soft fingers (k = 4n) the last n rows, the spin rows, are 0: their residual is left
-    as it is. A compliant spin row's residual is its creep (the model's, as MuJoCo's soft
+    With soft fingers (k = 4n) the last n rows, the spin rows (rad/s²), are 0: their residual
+    is left as it is. A compliant spin row's residual is its creep (the model's, as MuJoCo's soft
     contacts creep), not drift; and near a grasp where an internal torsion is barely
     reachable, ``B_ho^-1`` turns a tiny spin residual into a huge torsion.
 
@@ -173,8 +170,8 @@ def stabilised_rate(
         torsional_compliance: Soft fingers' relative torsional compliance (the model's).
 
     Returns:
-        ``x_dot`` (2m + 13,) with the layout of ``SimState.to_vector``, and ``f_c`` (3n,),
-        contact frames, N.
+        ``x_dot`` (2m + 13,) with the layout of ``SimState.to_vector``, and ``f_c`` (3n, or
+        4n with soft fingers), contact frames, N (torsions N·m).
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.

@@ -133,7 +133,7 @@ class PlantRate:
             velocity_gain: ``K_v`` of the stabilisation, 1/s.
 
         Returns:
-            ``x_dot`` (2m + 13,) and ``f_c`` (3n,), contact frames, N.
+            ``x_dot`` (2m + 13,) and ``f_c`` (k,: 3n or 4n), contact frames, N (N·m).
 
         Raises:
             numpy.linalg.LinAlgError: B_ho is singular.

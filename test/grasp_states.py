@@ -58,6 +58,29 @@ def moved(
     )
 
 
+def rolling_motion(
+    model: GraspModel,
+    q: np.ndarray,
+    p_object: np.ndarray,
+    R_object: np.ndarray,
+    twist_object: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Return the admissible ``(dq, x_o_dot)`` nearest to rolling with ``twist_object``.
+
+    ``(rolling_joint_velocity(twist), twist)`` projected onto the null space of
+    ``[J_h, -G^T]``: with soft fingers (4n rows on m joints) a twist is admissible only if
+    the fingers can follow it without spinning on the object.
+    """
+    state = model.state(0.0, q, np.zeros(model.n_joints), p_object, R_object, np.zeros(6))
+    twist = np.asarray(twist_object, dtype=float)
+    motion = np.concatenate(
+        [model.rolling_joint_velocity(q, p_object, R_object, twist), twist]
+    )
+    constraint = np.hstack([state.J_h, -state.G.T])
+    motion -= np.linalg.lstsq(constraint, constraint @ motion, rcond=None)[0]
+    return motion[: model.n_joints], motion[model.n_joints :]
+
+
 def random_configuration(
     model: GraspModel, rng: np.random.Generator, spread: float = 0.25, speed: float = 0.5
 ) -> Configuration:
@@ -88,7 +111,7 @@ def random_configuration(
         twist = rng.normal(0.0, speed, 6) * np.array([0.3, 0.3, 0.3, 1.0, 1.0, 1.0])
         if model.soft_finger:
             # Fingers that cannot spin on the object follow only some twists.
-            dq, twist = model.rolling_motion(q, p_object, R_object, twist)
+            dq, twist = rolling_motion(model, q, p_object, R_object, twist)
         else:
             dq = model.rolling_joint_velocity(q, p_object, R_object, twist)
         return Configuration(q, dq, p_object, R_object, twist)

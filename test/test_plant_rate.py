@@ -31,8 +31,14 @@ SOFT_FINGERS = {
 }
 
 
+#: The default compliant spin rows: B_ho's spin diagonal times 1 + rho in every solve.
+COMPLIANT_SOFT_FINGERS = {**SOFT_FINGERS, 'model.torsional_compliance': 0.1}
+
+
 @pytest.fixture(
-    scope='module', params=[{}, SOFT_FINGERS], ids=['point contacts', 'soft fingers']
+    scope='module',
+    params=[{}, SOFT_FINGERS, COMPLIANT_SOFT_FINGERS],
+    ids=['point contacts', 'soft fingers', 'compliant soft fingers'],
 )
 def scenario(request):
     loaded = Scenario.load(SCENARIO, plant_overrides=request.param)
@@ -50,7 +56,10 @@ def oracle_rate(model, x, u, position_gain, velocity_gain):
     # The normal rows; a soft finger's spin rows (after the 3n force rows) are not stabilised.
     correction[2 : 3 * model.n_contacts : 3] += position_gain * state.penetration
     correction[3 * model.n_contacts :] = 0.0
-    f_c = state.contact_force(u) + np.linalg.solve(state.B_ho, correction)
+    B_ho = state.B_ho.copy()
+    spin_rows = np.arange(3 * model.n_contacts, B_ho.shape[0])
+    B_ho[spin_rows, spin_rows] *= 1.0 + model.torsional_compliance
+    f_c = state.contact_force(u) + np.linalg.solve(B_ho, correction)
     ddq = np.linalg.solve(state.M_h, u - state.h_bias - state.J_h.T @ f_c)
     x_o_ddot = np.linalg.solve(state.M_o, state.G @ f_c + state.w_e - state.C_o_twist)
     quaternion = x[2 * m + 3 : 2 * m + 7]

@@ -17,6 +17,7 @@ from grasp_safety_filter.nodes.scenario import (
     scenario_from_text,
     scenario_to_text,
     ScenarioError,
+    TORSIONAL_COMPLIANCE_KEY,
     TORSIONAL_FRICTION_KEY,
 )
 from hand_sim_node.config import SimConfig
@@ -50,6 +51,9 @@ def test_zero_is_the_point_contact_and_a_positive_value_the_soft_finger(value, e
     else:
         np.testing.assert_array_equal(model.torsional_friction, expected)
         assert not model.torsional_friction.flags.writeable
+    # The compiled pass's layout took it when the contacts were bound: it cannot change.
+    with pytest.raises(AttributeError):
+        model.torsional_compliance = 0.0
 
 
 def test_the_point_contact_rows_of_a_soft_finger_state_are_the_point_contacts():
@@ -65,15 +69,6 @@ def test_the_point_contact_rows_of_a_soft_finger_state_are_the_point_contacts():
         np.testing.assert_array_equal(s.G_dot_T_twist[:9], p.G_dot_T_twist)
         # The extra constraint can only stiffen the grasp: B_ho's force block is the same.
         np.testing.assert_array_equal(s.B_ho[:9, :9], p.B_ho)
-
-
-def test_soft_fingers_transmit_no_torsion_when_nothing_twists_the_contacts():
-    """With the object free of gravity and the hand at rest, zero torque needs no torsion."""
-    model = paper_model(**SOFT, **{'model.gravity': [0.0, 0.0, 0.0]})
-    rng = np.random.default_rng(4)
-    c = random_configuration(model, rng, speed=0.0)
-    state = c.state(model)
-    np.testing.assert_allclose(state.contact_force(np.zeros(9)), 0.0, atol=1e-12)
 
 
 def test_the_nominal_law_plans_on_the_force_rows_of_a_soft_finger_state():
@@ -102,6 +97,7 @@ def test_the_scenario_document_says_which_contact_model_a_run_had(torsional_fric
         assert TORSIONAL_FRICTION_KEY not in document
     else:
         assert document[TORSIONAL_FRICTION_KEY] == torsional_friction
+        assert document[TORSIONAL_COMPLIANCE_KEY] == model.torsional_compliance == 0.1
         document[TORSIONAL_FRICTION_KEY] = -0.005
         with pytest.raises(ScenarioError, match="'torsional_friction'"):
             scenario_from_text(json.dumps(document))

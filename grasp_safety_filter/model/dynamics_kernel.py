@@ -28,7 +28,9 @@ and the torque-affine terms, as augmented matrices ``[matrix | offset]`` acting 
     xi_cf_ddot,i = H_cf,i R_cp,i (J_w,i ddq + alpha_f0,i - alpha_o - w_c × (w_f - w_o))
                    + H_cf_dot w
 
-(soft fingers take the minimum-norm ``f_c`` where ``B_ho`` is singular: :func:`wrench_solve`).
+(soft fingers solve for ``f_c`` with compliant spin rows, or the least-squares solution of
+minimum norm where rigid ones make ``B_ho`` singular:
+:func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
 Plain loops compiled by numba (:mod:`grasp_safety_filter.model.compiled`): at these sizes
 (k ≤ 16 rows, m ≤ 16 joints) two compiled passes, around LAPACK's solve of ``B_ho``, cost
 less than the calls of the numpy expressions they replace. Units: SI; frames and conventions as in
@@ -41,6 +43,7 @@ import numpy as np
 from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.wrench_solve import wrench_solve
 
 
 @kernel
@@ -98,7 +101,8 @@ def contact_dynamics(
         torsion: Soft-finger contacts: each contact also transmits a torque about its
             normal and the fingertip cannot spin on the object (k = 4n rows, the n torsion
             rows after the 3n force rows); False: point contacts with friction (k = 3n).
-        compliance: Soft fingers' relative torsional compliance (:func:`wrench_solve`).
+        compliance: Soft fingers' relative torsional compliance
+            (:func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
 
     Returns:
         ``J_h`` (k, m), ``G`` (6, k), ``J_h_dot dq`` (k,), ``G_dot^T x_o_dot`` (k,),
@@ -143,53 +147,6 @@ def contact_dynamics(
         J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w,
     )
     return J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot
-
-
-#: Singular values of ``B_ho`` below this fraction of its largest are round-off and dropped
-#: by :func:`wrench_solve`: 1e-18 to 1e-16 at the grasps where soft fingers leave an internal
-#: torsion undetermined, 1e-8 and more a millisecond of motion away from them.
-WRENCH_RCOND = 1e-13
-
-
-@kernel
-def wrench_solve(B_ho: np.ndarray, rhs: np.ndarray, compliance: float) -> np.ndarray:
-    """Minimum-norm ``X`` of ``(B_ho + rho D_t) X = rhs``: the contact wrench of soft fingers.
-
-    ``D_t`` is ``B_ho``'s diagonal on the n spin rows (0 on the 3n force rows) and rho the
-    relative torsional ``compliance`` (``model.torsional_compliance``; 0: rigid). With rho > 0
-    each spin constraint yields as MuJoCo's soft constraints do (their regulariser is about
-    ``(1 - d) / d`` of the diagonal, 0.11 at MuJoCo's default impedance d = 0.9): contact i's
-    spin acceleration is ``rho (B_ho)_tt tau_i`` instead of 0, and the torsions stay bounded
-    where the rigid ones grow without bound (below).
-
-    Rigid no-spin constraints can be redundant: two contacts on opposite faces of a box can
-    squeeze the object with equal torsions (``G v = 0``), and where no joint torque reaches
-    that internal torsion (``J_h^T v = 0``: fingers that cannot twist about their normals,
-    as the paper's at its initial grasp, or whose twist their tangential forces balance, as
-    the four-finger box's) ``B_ho`` is singular and the torsion undetermined. ``rhs`` lies
-    in the range of ``B_ho`` (it is ``J_h (...) + G^T (...)``), so every solution gives the
-    same accelerations; the minimum-norm one (LAPACK's SVD least squares, singular values
-    below :data:`WRENCH_RCOND` of the largest dropped) loads no undetermined internal
-    torsion, as a compliant contact that starts unloaded would not. Where ``B_ho`` is
-    regular, this is ``B_ho^-1 rhs`` (to round-off; point contacts never call this). Around
-    such grasps ``B_ho`` is nearly singular and the rigid internal torsion is about the joint
-    torque over the fingers' small twisting lever: large and sensitive, which is what the
-    compliance is for.
-
-    Raises:
-        numpy.linalg.LinAlgError: ``B_ho`` or ``rhs`` is not finite, or (rho > 0) the
-            regularised matrix is singular.
-    """
-    if compliance == 0.0:
-        return np.linalg.lstsq(B_ho, rhs, rcond=WRENCH_RCOND)[0]
-    # Regularised, the matrix is positive definite: B_ho is positive semi-definite, definite
-    # on the force rows alone, so each vector of its null space has a torsion entry, which
-    # the regulariser weights. LAPACK's LU solve then does, at a third of the SVD's cost.
-    k = B_ho.shape[0]
-    regularised = B_ho.copy()
-    for t in range(3 * (k // 4), k):
-        regularised[t, t] += compliance * B_ho[t, t]
-    return np.linalg.solve(regularised, rhs)
 
 
 @kernel

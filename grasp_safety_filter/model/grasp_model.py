@@ -72,7 +72,7 @@ class GraspModel:
             and do not spin on the object (the contact wrench then has 4n entries:
             :mod:`~grasp_safety_filter.model.dynamics_kernel`).
         torsional_compliance: Soft fingers' relative torsional compliance rho >= 0 (0: rigid
-            no-spin constraints; :func:`~grasp_safety_filter.model.dynamics_kernel.wrench_solve`).
+            no-spin constraints; :func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
     """
 
     def __init__(
@@ -120,8 +120,7 @@ class GraspModel:
             raise GraspConfigError(
                 f'model.torsional_compliance: expected a finite number >= 0, got {rho!r}'
             )
-        #: Soft fingers' relative torsional compliance rho (0: rigid).
-        self.torsional_compliance = rho
+        self._torsional_compliance = rho
         self.object_shape = object_shape
         self.declared_faces = list(declared_faces) if declared_faces is not None else [None] * n
         self._contacts: list[ContactPair] | None = None
@@ -158,6 +157,14 @@ class GraspModel:
     def soft_finger(self) -> bool:
         """Whether the contacts are soft fingers (a torque about each normal, no spin)."""
         return self.torsional_friction is not None
+
+    @property
+    def torsional_compliance(self) -> float:
+        """Soft fingers' relative torsional compliance rho (0: rigid), read-only.
+
+        Read-only: the compiled pass's layout takes it when the contacts are bound.
+        """
+        return self._torsional_compliance
 
     @property
     def wrench_size(self) -> int:
@@ -343,7 +350,8 @@ class GraspModel:
         """Joint velocity that rolls the fingertips with the object.
 
         Solves ``J_h dq = G^T x_o_dot`` (least-norm when m > 3n). Soft fingers also forbid
-        spin, which not every twist allows: :meth:`rolling_motion` gives an admissible pair.
+        spin, which not every twist allows: the velocity is then the least-squares one of the
+        force rows.
         """
         state = self.state(
             0.0, q, np.zeros(self.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
@@ -351,33 +359,6 @@ class GraspModel:
         k = 3 * self.n_contacts
         rhs = state.G[:, :k].T @ np.asarray(twist_object, dtype=float)
         return np.linalg.lstsq(state.J_h[:k], rhs, rcond=None)[0]
-
-    def rolling_motion(
-        self,
-        q: np.ndarray,
-        p_object_in_palm: np.ndarray,
-        R_object_to_palm: np.ndarray,
-        twist_object: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Return the admissible ``(dq, x_o_dot)`` nearest to rolling with ``twist_object``.
-
-        ``(rolling_joint_velocity(twist), twist)`` projected onto the null space of
-        ``[J_h, -G^T]``: with soft fingers (4n rows on m joints) an object twist is admissible
-        only if the fingers can follow it without spinning on the object; with point
-        contacts and J_h of full row rank every twist is, and the projection changes it by
-        rounding only.
-        """
-        state = self.state(
-            0.0, q, np.zeros(self.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
-        )
-        twist = np.asarray(twist_object, dtype=float)
-        motion = np.concatenate(
-            [self.rolling_joint_velocity(q, p_object_in_palm, R_object_to_palm, twist), twist]
-        )
-        constraint = np.hstack([state.J_h, -state.G.T])
-        motion -= np.linalg.lstsq(constraint, constraint @ motion, rcond=None)[0]
-        m = self.n_joints
-        return motion[:m], motion[m:]
 
     def total_energy(self, state: GraspState) -> float:
         """Kinetic plus gravitational potential energy of hand and object, J."""

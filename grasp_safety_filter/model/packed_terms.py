@@ -23,14 +23,11 @@ from typing import NamedTuple
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.dynamics_kernel import (
-    acceleration_terms,
-    velocity_terms,
-    wrench_solve,
-)
+from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.object_kernel import object_dynamics
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
+from grasp_safety_filter.model.wrench_solve import wrench_solve
 
 
 def packed_fields(
@@ -96,7 +93,7 @@ class PackedLayout(NamedTuple):
         n_contacts: n.
         torsion: Whether the contacts are soft fingers (4n wrench entries, not 3n).
         torsional_compliance: Soft fingers' relative torsional compliance rho
-            (:func:`~grasp_safety_filter.model.dynamics_kernel.wrench_solve`).
+            (:func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
     """
 
     size: int

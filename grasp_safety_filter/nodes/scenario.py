@@ -14,7 +14,8 @@ later still gets it) as one JSON object::
       "integrator": "ode3", "lockstep": true,
       "stop_on_slip": false, "stop_on_workspace_exit": true,
       "object_face_half_widths": [[h_u, h_v], ...],  # m, per contact; null: no edge
-      "torsional_friction": 0.005    # m; soft fingers only (absent: point contacts)
+      "torsional_friction": 0.005,   # m; soft fingers only (absent: point contacts)
+      "torsional_compliance": 0.1    # soft fingers' relative torsional compliance
     }
 
 ``friction_coefficient`` and each workspace bound are one number when every contact has the
@@ -87,6 +88,9 @@ def _floats(values: Any) -> list[float]:
 #: Key of the ``/grasp/scenario`` document holding each contact's torsional friction mu_t, m,
 #: present only with soft-finger contacts (``model.torsional_friction`` > 0).
 TORSIONAL_FRICTION_KEY = 'torsional_friction'
+#: Key of the soft fingers' relative torsional compliance rho (``model.torsional_compliance``),
+#: present with :data:`TORSIONAL_FRICTION_KEY`.
+TORSIONAL_COMPLIANCE_KEY = 'torsional_compliance'
 
 #: Key of the ``/grasp/scenario`` document holding each contact's face half extents
 #: ``[h_u, h_v]``, m (absent for a sphere object), for judging a bag's object-face margins.
@@ -143,6 +147,7 @@ def scenario_document(model: Any, sim_config: Any) -> dict[str, Any]:
     torsional = getattr(model, 'torsional_friction', None)
     if torsional is not None:
         document[TORSIONAL_FRICTION_KEY] = compact(torsional)
+        document[TORSIONAL_COMPLIANCE_KEY] = float(model.torsional_compliance)
     half = object_face_half_widths(model)
     if half is not None:
         document[OBJECT_FACES_KEY] = [
@@ -275,6 +280,9 @@ def _check_physical(document: Mapping[str, Any]) -> None:
                 f'numbers > 0 m, 1 or {contacts} (one per contact)',
                 document[TORSIONAL_FRICTION_KEY],
             )
+        compliance = document.get(TORSIONAL_COMPLIANCE_KEY, 0.0)
+        if not (_finite(compliance) and compliance >= 0):
+            raise _bad(TORSIONAL_COMPLIANCE_KEY, 'a finite number >= 0', compliance)
     box = scenario_workspace(document)
     for row in box:
         for low, high in ((0, 1), (2, 3)):

@@ -83,9 +83,17 @@ class ContactData:
 
         ``force``: the 3n contact forces, or a soft finger's 4n entries (the forces, then
         the n torsions).
+
+        Raises:
+            ValueError: ``force`` has neither 3n nor 4n entries.
         """
         n = state.n_contacts
         wrench = np.asarray(force, dtype=np.float64).reshape(-1)
+        if wrench.size not in (3 * n, 4 * n):
+            raise ValueError(
+                f'contacts: expected a contact wrench of {3 * n} entries ({n} contacts) or '
+                f'{4 * n} (soft fingers), got {wrench.size}'
+            )
         forces = wrench[: 3 * n].reshape(n, 3)
         return cls(
             t=state.t,
