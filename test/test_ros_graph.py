@@ -124,15 +124,20 @@ def test_start_waits_for_the_recorder_on_every_published_topic():
 # Graph runs
 
 
-def runner_bag(tmp_path: Path, mode: str, duration: float) -> Path:
+def runner_bag(
+    tmp_path: Path, mode: str, duration: float, overrides: dict | None = None
+) -> Path:
     """Record the in-process lockstep runner's run of the same scenario."""
     bag = tmp_path / f'runner_{mode}'
-    record_run(RunOptions(CONFIG, mode, duration=duration), bag)
+    record_run(RunOptions(CONFIG, mode, duration=duration, overrides=dict(overrides or {})), bag)
     return bag
 
 
-def analyze(bag: Path, out: Path) -> dict:
-    """Run ``grasp-analyze BAG --out OUT`` and return its ``summary.json``."""
+def analyze(bag: Path, out: Path, paper: bool = True) -> dict:
+    """Run ``grasp-analyze BAG --out OUT`` and return its ``summary.json``.
+
+    ``paper``: the bag is of the paper's scenario, whose outcome the analysis then judges.
+    """
     result = subprocess.run(
         [str(BIN / 'grasp-analyze'), str(bag), '--out', str(out)],
         capture_output=True,
@@ -141,7 +146,7 @@ def analyze(bag: Path, out: Path) -> dict:
         check=False,
     )
     assert result.returncode == 0, result.stdout + result.stderr
-    assert 'paper outcome reproduced' in result.stdout, result.stdout
+    assert ('paper outcome reproduced' in result.stdout) == paper, result.stdout
     return json.loads((out / 'summary.json').read_text())
 
 
@@ -230,6 +235,22 @@ def test_nominal_graph_reproduces_the_paper_failure_tick_by_tick(tmp_path):
     assert summary['missed_start'] == {}
     ok, verdict = paper_verdict('nominal', summary)
     assert ok, verdict
+
+
+def test_soft_finger_graph_records_the_runner_stream_with_the_torsions(tmp_path):
+    """Soft fingers through every node's parameters: the graph is the runner, exactly."""
+    soft = {'model.torsional_friction': 0.005}
+    nodes = [with_overrides(node, **soft) for node in demo_nodes('filtered', 0.2)]
+    run = run_graph(tmp_path / 'graph', nodes, RUN_TIMEOUT)
+    assert all(code == 0 for code in run.returncodes.values()), (run.returncodes, run.logs)
+    assert_same_stream(run.bag, runner_bag(tmp_path, 'filtered', 0.2, soft))
+    contacts = read_bag(run.bag)[topics.CONTACTS]
+    assert [n for n in contacts[-1][1].name if n.endswith('/torsion')] == [
+        f'finger{i}/torsion' for i in (1, 2, 3)
+    ]
+    # Not the paper's scenario (its contacts are soft), so its outcome is not judged.
+    summary = analyze(run.bag, tmp_path / 'analysis', paper=False)
+    assert summary['completed'] and summary['violations']['slip']['count'] == 0
 
 
 def test_simulator_waits_for_a_recorder_that_starts_late(tmp_path):
