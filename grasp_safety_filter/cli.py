@@ -91,8 +91,11 @@ def _progress_printer(label: str) -> Callable[[float, float], None] | None:
     return show
 
 
-def _override(text: str) -> tuple[str, Any]:
-    """Parse ``NAME=VALUE``, the value typed as in a parameter file (``1e-5`` a double)."""
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse ``NAME=VALUE``, the value typed as in a parameter file (``1e-5`` a double).
+
+    The argparse type of ``--set`` (``grasp-demo``) and of the MuJoCo tools' overrides.
+    """
     name, separator, value = text.partition('=')
     if not separator or not name:
         raise argparse.ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
@@ -173,7 +176,7 @@ def _demo(argv: list[str] | None) -> int:
         action='append',
         default=[],
         metavar='NAME=VALUE',
-        type=_override,
+        type=parse_override,
         help='override a parameter of every node that declares it, e.g. '
         'barrier.alpha1.gain=10.0 (YAML value, repeatable)',
     )

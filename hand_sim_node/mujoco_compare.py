@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.bench.recorded_run import Scenario
-from grasp_safety_filter.cli import _override as parameter_override
+from grasp_safety_filter.cli import parse_override
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from hand_sim_node.mjcf import CONDIMS, CONES, MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
@@ -207,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--noslip-iterations', type=int, default=defaults.noslip_iterations)
     parser.add_argument(
         '--plant-set',
-        type=parameter_override,
+        type=parse_override,
         action='append',
         default=[],
         dest='overrides',

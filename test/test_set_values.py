@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from grasp_safety_filter.cli import _override, demo_main
+from grasp_safety_filter.cli import demo_main, parse_override
 from grasp_safety_filter.io.parameters import load_parameter_file, parse_parameter_value
 
 
@@ -16,7 +16,7 @@ from grasp_safety_filter.io.parameters import load_parameter_file, parse_paramet
 def test_set_types_a_value_as_a_file_and_dash_p_do(tmp_path: Path, text: str) -> None:
     path = tmp_path / 'p.yaml'
     path.write_text(f'/**:\n  ros__parameters:\n    x: {text}\n', encoding='utf-8')
-    name, value = _override(f'x={text}')
+    name, value = parse_override(f'x={text}')
     assert name == 'x'
     expected = parse_parameter_value(text)
     assert (value, type(value).__name__) == (expected, type(expected).__name__)
@@ -24,14 +24,14 @@ def test_set_types_a_value_as_a_file_and_dash_p_do(tmp_path: Path, text: str) ->
 
 
 def test_set_reads_an_exponent_without_a_dot_as_a_double() -> None:
-    assert _override('osqp.eps_abs=1e-5') == ('osqp.eps_abs', 1e-5)
-    assert isinstance(_override('osqp.eps_abs=1e-5')[1], float)
+    assert parse_override('osqp.eps_abs=1e-5') == ('osqp.eps_abs', 1e-5)
+    assert isinstance(parse_override('osqp.eps_abs=1e-5')[1], float)
 
 
 @pytest.mark.parametrize('text', ['x', '=1', 'x=', 'x={a: 1}', 'x=[1'])
 def test_set_refuses_a_malformed_value_as_an_argument_error(text: str) -> None:
     with pytest.raises(argparse.ArgumentTypeError):
-        _override(text)
+        parse_override(text)
 
 
 def test_demo_reports_a_malformed_set_as_a_usage_error(capsys) -> None:
