@@ -187,6 +187,14 @@ def _per_contact(value: Any, n: int, name: str, shape: tuple[int, ...]) -> np.nd
     return array.copy()
 
 
+def _positive_per_contact(value: Any, n: int, name: str) -> np.ndarray:
+    """:func:`_per_contact` of a coefficient that must be > 0 (mu_i, mu_t,i), shape (n,)."""
+    array = _per_contact(value, n, name, ())
+    if not np.all(array > 0.0):
+        raise ValueError(f'EventMonitor: expected {name} > 0, got {array.tolist()}')
+    return array
+
+
 #: ``xi_co`` and face half widths when unknown (the object-face margins are then NaN).
 _NO_FACES = np.zeros((0, 2))
 #: Torsions and torsional friction of point contacts (or torsions not given).
@@ -248,21 +256,16 @@ class EventMonitor:
                 'EventMonitor: expected fingertip_workspace (a_min < a_max, b_min < b_max), '
                 f'got {box.tolist()}'
             )
-        mu = _per_contact(friction_coefficient, n, 'friction_coefficient', ())
-        if not np.all(mu > 0.0):
-            raise ValueError(f'EventMonitor: expected friction_coefficient > 0, got {mu.tolist()}')
+        mu = _positive_per_contact(friction_coefficient, n, 'friction_coefficient')
         # Per contact (n, 2): (a_min, b_min) and (a_max, b_max); mu_i, (n,).
         self.workspace_low = box[:, [0, 2]].copy()
         self.workspace_high = box[:, [1, 3]].copy()
         self.friction_coefficient = mu
         self.torsional_friction = None
         if torsional_friction is not None:
-            mu_t = _per_contact(torsional_friction, n, 'torsional_friction', ())
-            if not np.all(mu_t > 0.0):
-                raise ValueError(
-                    f'EventMonitor: expected torsional_friction > 0, got {mu_t.tolist()}'
-                )
-            self.torsional_friction = mu_t
+            self.torsional_friction = _positive_per_contact(
+                torsional_friction, n, 'torsional_friction'
+            )
         self.joint_names = tuple(joint_names)
         self.contact_names = tuple(contact_names)
         self.object_face_half_widths = None

@@ -151,6 +151,7 @@ def stabilised_rate(
     M_o_inverse: np.ndarray,
     position_gain: float,
     velocity_gain: float,
+    torsion: bool = False,
     torsional_compliance: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``x_dot`` and the stabilised contact forces from the model's terms at one instant.
@@ -167,7 +168,8 @@ def stabilised_rate(
         M_o_inverse: ``M_o^-1`` at the state, (6, 6), read-only.
         position_gain: ``K_p`` of the stabilisation, 1/s².
         velocity_gain: ``K_v`` of the stabilisation, 1/s.
-        torsional_compliance: Soft fingers' relative torsional compliance (the model's).
+        torsion: Soft-finger contacts (the model's ``soft_finger``).
+        torsional_compliance: Their relative torsional compliance (the model's).
 
     Returns:
         ``x_dot`` (2m + 13,) with the layout of ``SimState.to_vector``, and ``f_c`` (3n, or
@@ -186,8 +188,6 @@ def stabilised_rate(
         velocity_gain,
     )
     if position_gain != 0.0 or velocity_gain != 0.0:
-        # Soft fingers' states have 4n wrench rows for n contacts (one penetration each).
-        torsion = state.B_ho.shape[0] != 3 * state.penetration.shape[0]
         correction = _solve(state.B_ho, stabilisation, torsion, torsional_compliance)
     else:
         correction = stabilisation  # zero

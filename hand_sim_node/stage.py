@@ -142,7 +142,7 @@ class PlantRate:
         M_o_inv = self._object.inverse_inertia_matrix(state.R_object_to_palm)
         return stabilised_rate(
             state, effort, quaternion_xyzw, M_o_inv, position_gain, velocity_gain,
-            self._model.torsional_compliance,
+            self._model.soft_finger, self._model.torsional_compliance,
         )
 
     def at(
@@ -217,5 +217,5 @@ class PlantRate:
         )
         return stabilised_rate(
             terms, effort, quaternion, M_o_inv, position_gain, velocity_gain,
-            self._model.torsional_compliance,
+            self._model.soft_finger, self._model.torsional_compliance,
         )[0]
