@@ -24,6 +24,7 @@ from pathlib import Path
 from grasp_states import paper_model, random_configuration
 import numpy as np
 import pytest
+from test_simulator import hand_kinetic_energy, unactuated_run
 
 from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.model.quaternion import from_rotation_matrix
@@ -182,27 +183,17 @@ def test_the_spin_residual_is_held_not_stabilised():
         np.testing.assert_allclose(spin_dot, 0.0, rtol=0, atol=1e-6 * scale)
 
 
+def object_spin_about_normals(state):
+    """Largest ``|n_i^T w_o|``, rad/s: how fast the object turns about a contact normal."""
+    normals = state.R_contact_to_palm[:, :, 2]
+    return np.abs(normals @ state.twist_object[3:]).max()
+
+
 def energy_drift(model, config, time_step, duration):
     """Largest |E(t) - E(0)| of the unactuated plant (u = 0, ode3, no stabilisation), E(0)."""
-    plain = dataclasses.replace(
-        config,
-        integrator='ode3',
-        time_step=time_step,
-        position_gain=0.0,
-        velocity_gain=0.0,
-        stop_on_workspace_exit=False,
+    drift, energy_0, (kinetic_peak, spin_peak) = unactuated_run(
+        model, config, time_step, duration, hand_kinetic_energy, object_spin_about_normals
     )
-    simulator = Simulator(model, plain)
-    energy_0 = model.total_energy(simulator.grasp_state())
-    drift, kinetic_peak, spin_peak = 0.0, 0.0, 0.0
-    for _ in range(round(duration / time_step)):
-        simulator.step(np.zeros(model.n_joints))
-        state = simulator.grasp_state()
-        drift = max(drift, abs(model.total_energy(state) - energy_0))
-        kinetic_peak = max(kinetic_peak, 0.5 * state.dq @ state.M_h @ state.dq)
-        normals = state.R_contact_to_palm[:, :, 2]
-        spin_peak = max(spin_peak, np.abs(normals @ state.twist_object[3:]).max())
-    assert simulator.stop_reason is None and simulator.t == pytest.approx(duration)
     assert kinetic_peak > 0.1 * abs(energy_0)  # the system really moved
     assert spin_peak > 0.1  # rad/s: the fingertips turned with the object about the normals
     return drift, energy_0
