@@ -123,11 +123,35 @@ class PackedLayout(NamedTuple):
 
 @kernel
 def _put(out: np.ndarray, start: int, values: np.ndarray) -> int:
-    """Copy ``values`` (C-contiguous) to ``out[start:]``; return the index after them."""
-    flat = values.ravel()
-    for i in range(flat.size):
-        out[start + i] = flat[i]
-    return start + flat.size
+    """Copy a vector to ``out[start:]``; return the index after it."""
+    for i in range(values.shape[0]):
+        out[start + i] = values[i]
+    return start + values.shape[0]
+
+
+@kernel
+def _put2(out: np.ndarray, start: int, values: np.ndarray) -> int:
+    """Copy a matrix to ``out[start:]`` in C order; return the index after it.
+
+    Indexed entry by entry: a reshaped view (``ravel``) costs a call into numba's runtime
+    per array, more than copying the few entries.
+    """
+    rows, columns = values.shape
+    for r in range(rows):
+        for c in range(columns):
+            out[start + r * columns + c] = values[r, c]
+    return start + rows * columns
+
+
+@kernel
+def _put3(out: np.ndarray, start: int, values: np.ndarray) -> int:
+    """Copy a 3-D array to ``out[start:]`` in C order; return the index after it."""
+    blocks, rows, columns = values.shape
+    for b in range(blocks):
+        for r in range(rows):
+            for c in range(columns):
+                out[start + (b * rows + r) * columns + c] = values[b, r, c]
+    return start + blocks * rows * columns
 
 
 @kernel
@@ -246,37 +270,37 @@ def sphere_on_plane_terms(
     at = _put(out, 0, q)
     at = _put(out, at, dq)
     at = _put(out, at, p_object_in_palm)
-    at = _put(out, at, R_object_to_palm)
+    at = _put2(out, at, R_object_to_palm)
     at = _put(out, at, twist_object)
-    at = _put(out, at, p_f)
-    at = _put(out, at, R_f)
-    at = _put(out, at, twist_f)
-    at = _put(out, at, J_s)
-    at = _put(out, at, M_h)
+    at = _put2(out, at, p_f)
+    at = _put3(out, at, R_f)
+    at = _put2(out, at, twist_f)
+    at = _put3(out, at, J_s)
+    at = _put2(out, at, M_h)
     at = _put(out, at, h_bias)
     at = _put(out, at, gravity)
-    for array in contacts[:2]:  # xi_cf, xi_co
-        at = _put(out, at, array)
-    for array in contacts[2:4]:  # psi, penetration
-        at = _put(out, at, array)
-    at = _put(out, at, contacts[4])  # p_contact
-    for array in contacts[5:7]:  # R_pc, R_fc
-        at = _put(out, at, array)
-    for array in contacts[7:9]:  # xi_cf_dot, xi_co_dot
-        at = _put(out, at, array)
+    at = _put2(out, at, contacts[0])  # xi_cf
+    at = _put2(out, at, contacts[1])  # xi_co
+    at = _put(out, at, contacts[2])  # psi
+    at = _put(out, at, contacts[3])  # penetration
+    at = _put2(out, at, contacts[4])  # p_contact
+    at = _put3(out, at, contacts[5])  # R_pc
+    at = _put3(out, at, contacts[6])  # R_fc
+    at = _put2(out, at, contacts[7])  # xi_cf_dot
+    at = _put2(out, at, contacts[8])  # xi_co_dot
     at = _put(out, at, contacts[9])  # psi_dot
-    at = _put(out, at, contacts[10])  # H_cf
-    for array in contacts[11:13]:  # H_cf_dot_w, sliding
-        at = _put(out, at, array)
-    at = _put(out, at, contacts[13])  # Omega
-    at = _put(out, at, J_h)
-    at = _put(out, at, G)
+    at = _put3(out, at, contacts[10])  # H_cf
+    at = _put2(out, at, contacts[11])  # H_cf_dot_w
+    at = _put2(out, at, contacts[12])  # sliding
+    at = _put2(out, at, contacts[13])  # Omega
+    at = _put2(out, at, J_h)
+    at = _put2(out, at, G)
     at = _put(out, at, Jh_dot_dq)
     at = _put(out, at, G_dot_T_twist)
-    at = _put(out, at, B_ho)
-    at = _put(out, at, force)
-    at = _put(out, at, ddq)
-    at = _put(out, at, x_ddot)
-    at = _put(out, at, xi_ddot)
-    at = _put(out, at, M_o)
+    at = _put2(out, at, B_ho)
+    at = _put2(out, at, force)
+    at = _put2(out, at, ddq)
+    at = _put2(out, at, x_ddot)
+    at = _put2(out, at, xi_ddot)
+    at = _put2(out, at, M_o)
     _put(out, at, C_o_twist)
