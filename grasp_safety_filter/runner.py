@@ -219,17 +219,26 @@ Progress = Callable[[float, float], None]
 """Called with (simulated time, duration) as the run advances."""
 
 
+Callback = Callable[[Any], list[Any]]
+"""A subscriber callback: a delivered message in, the messages it publishes out."""
+
+
 def _subscribers(
     sim: HandSimEndpoint,
     nominal: NominalControllerEndpoint,
     safety_filter: SafetyFilterEndpoint,
-) -> dict[str, list[Callable[[Any], list[Any]]]]:
-    """Return each topic's subscriber callbacks, wired as the ROS graph wires the nodes."""
+    wrap_filter_callback: Callable[[Callback], Callback] | None = None,
+) -> dict[str, list[Callback]]:
+    """Return each topic's subscriber callbacks, wired as the ROS graph wires the nodes.
+
+    ``wrap_filter_callback``: see :func:`record_run`.
+    """
+    wrap = wrap_filter_callback or (lambda callback: callback)
     return {
-        topics.JOINT_STATES: [nominal.on_joint_states, safety_filter.on_joint_states],
-        topics.OBJECT_ODOM: [nominal.on_odom, safety_filter.on_odom],
+        topics.JOINT_STATES: [nominal.on_joint_states, wrap(safety_filter.on_joint_states)],
+        topics.OBJECT_ODOM: [nominal.on_odom, wrap(safety_filter.on_odom)],
         topics.OBJECT_REFERENCE: [nominal.on_reference],
-        topics.EFFORT_NOMINAL: [safety_filter.on_effort_nominal],
+        topics.EFFORT_NOMINAL: [wrap(safety_filter.on_effort_nominal)],
         topics.EFFORT_COMMAND: [sim.on_command],
     }
 
@@ -304,6 +313,7 @@ def record_run(
     progress: Progress | None = None,
     replaces: tuple[Path, ...] = (),
     on_start: Callable[[], None] | None = None,
+    wrap_filter_callback: Callable[[Callback], Callback] | None = None,
 ) -> Recording:
     """Run the scenario in lockstep and record every message to ``bag_path`` (replaced).
 
@@ -318,6 +328,10 @@ def record_run(
         replaces: Files removed with the earlier bag (both or neither: an outcome of the
             earlier run never stays beside this run's bag).
         on_start: Called once the earlier bag and ``replaces`` are gone.
+        wrap_filter_callback: Called once with each of the safety filter's subscriber
+            callbacks; the loop calls what it returns instead, which must hand the message
+            to the callback and return its messages unchanged (e.g. a callback that times
+            it: :mod:`grasp_safety_filter.bench.node_callbacks`). None: the callbacks.
 
     """
     typestore = get_typestore(Stores.ROS2_JAZZY)
@@ -332,7 +346,9 @@ def record_run(
         if on_start is not None:
             on_start()
         with BagRecorder(bag_path, storage=options.storage, typestore=typestore) as bag:
-            return _record(sim, nominal, safety_filter, bag, typestore, progress)
+            return _record(
+                sim, nominal, safety_filter, bag, typestore, progress, wrap_filter_callback
+            )
 
 
 def _record(
@@ -342,9 +358,10 @@ def _record(
     bag: BagRecorder,
     typestore: Any,
     progress: Progress | None,
+    wrap_filter_callback: Callable[[Callback], Callback] | None = None,
 ) -> Recording:
     """Run the lockstep loop into an open bag (see :func:`record_run`)."""
-    subscribers = _subscribers(sim, nominal, safety_filter)
+    subscribers = _subscribers(sim, nominal, safety_filter, wrap_filter_callback)
     duration = sim.config.duration
     interrupted = None
     try:

@@ -8,13 +8,16 @@ import contextlib
 import importlib.util
 import io
 import json
+import math
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from grasp_safety_filter.bench import (
     bench_main,
+    CALLBACKS_LABEL,
     COMPONENTS,
     CPU_COMPONENTS,
     DenseQP,
@@ -22,6 +25,8 @@ from grasp_safety_filter.bench import (
     external_solvers,
     ExternalAnswer,
     ExternalSolver,
+    FilterCallbackTimes,
+    fixed_work,
     format_report,
     general_form,
     replay_backends,
@@ -29,11 +34,14 @@ from grasp_safety_filter.bench import (
     Scenario,
 )
 from grasp_safety_filter.control.qp_solvers import BACKENDS
+from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.runner import _subscribers, build_endpoints, RunOptions
 
 DURATION = 0.05  # s: 50 ticks of 1 ms
 TICKS = 40
 EXTERNAL_TICKS = 12
+RUNNER_DURATION = 0.01  # s
 
 #: Solvers accurate enough to check our u* against: Clarabel with tight tolerances (an
 #: interior-point method at its default gap is only accurate to ~1e-4 N·m here) and daqp.
@@ -72,7 +80,7 @@ def bench(tmp_path_factory):
                 '--external-ticks',
                 str(EXTERNAL_TICKS),
                 '--runner-duration',
-                '0.01',
+                str(RUNNER_DURATION),
                 '--json',
                 str(path),
             ]
@@ -176,7 +184,91 @@ def test_real_time_factors_are_simulated_over_wall_seconds(bench):
         assert rate['simulated_s'] > 0.0 and rate['wall_s'] > 0.0, key
         assert rate['real_time_factor'] == pytest.approx(rate['simulated_s'] / rate['wall_s'])
     assert rates['filtered_loop']['simulated_s'] == pytest.approx(DURATION)
-    assert rates['runner_with_bag']['simulated_s'] == pytest.approx(0.01)
+    assert rates['runner_with_bag']['simulated_s'] == pytest.approx(RUNNER_DURATION)
+
+
+def positive_spread(stats):
+    """Whether ``stats`` has a finite positive median and a finite p99 at least the median."""
+    median, p99 = stats['median'], stats['p99']
+    return math.isfinite(median) and math.isfinite(p99) and 0.0 < median <= p99
+
+
+def test_noise_floor_times_the_same_work_once_per_replayed_tick(bench):
+    _, document, table = bench
+    floor = document['noise_floor']
+    assert floor['iterations'] >= 1
+    assert floor['cpu_us']['n'] == TICKS
+    assert positive_spread(floor['cpu_us'])
+    assert floor['p99_over_median'] == pytest.approx(
+        floor['cpu_us']['p99'] / floor['cpu_us']['median']
+    )
+    line = next(line for line in table.splitlines() if 'noise floor' in line)
+    assert f'CPU median {floor["cpu_us"]["median"]:,.1f} µs' in line
+    assert f'p99/median {floor["p99_over_median"]:.2f}' in line
+    # Printed right after the per-tick table, whose last rows are the node's.
+    lines = table.splitlines()
+    assert lines.index(line) == lines.index(next(x for x in lines if CALLBACKS_LABEL in x)) + 1
+
+
+def test_fixed_work_is_deterministic():
+    assert fixed_work(1000) == fixed_work(1000)
+    assert fixed_work(0) == 0.5
+    assert fixed_work(1) == pytest.approx(3.9 * 0.5 * 0.5)
+
+
+def test_filter_node_callbacks_are_timed_per_tick_in_the_runner_run(bench):
+    _, document, table = bench
+    callbacks = document['filter_node_callbacks_cpu_us']
+    # One tick per simulator state, the start's included, each with its three callbacks.
+    assert callbacks['n'] == document['real_time_factor']['runner_with_bag']['steps'] + 1
+    assert positive_spread(callbacks)
+    row = next(line for line in table.splitlines() if line.startswith(CALLBACKS_LABEL))
+    assert f'{callbacks["median"]:,.1f}' in row and f'{callbacks["n"]:d}' in row
+
+
+def test_the_runner_hands_exactly_the_filters_callbacks_to_the_wrapper():
+    from rosbags.typesys import get_typestore, Stores
+
+    msgs = MessageNamespace.from_typestore(get_typestore(Stores.ROS2_JAZZY))
+    sim, nominal, safety_filter = build_endpoints(RunOptions(config_path()), msgs)
+    wrapped = []
+
+    def wrap(callback):
+        wrapped.append(callback)
+        return lambda msg: ['wrapped', msg]
+
+    subscribers = _subscribers(sim, nominal, safety_filter, wrap)
+    assert wrapped == [
+        safety_filter.on_joint_states,
+        safety_filter.on_odom,
+        safety_filter.on_effort_nominal,
+    ]
+    unwrapped = _subscribers(sim, nominal, safety_filter)
+    for topic, callbacks in subscribers.items():
+        for callback, original in zip(callbacks, unwrapped[topic], strict=True):
+            if original in wrapped:
+                assert callback('m') == ['wrapped', 'm']
+            else:
+                assert callback == original
+
+
+def test_callback_times_pass_messages_through_and_sum_complete_ticks():
+    times = FilterCallbackTimes()
+    outgoing = {name: [object()] for name in ('joint_states', 'odom', 'effort_nominal')}
+    callbacks = {name: times.wrap(lambda msg, name=name: outgoing[name]) for name in outgoing}
+
+    def message(sec, nanosec):
+        return SimpleNamespace(
+            header=SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec))
+        )
+
+    for stamp in ((0, 0), (0, 1_000_000)):
+        for name, callback in callbacks.items():
+            assert callback(message(*stamp)) is outgoing[name]
+    callbacks['joint_states'](message(0, 2_000_000))  # a tick whose other inputs never came
+    per_tick = times.per_tick()
+    assert per_tick.shape == (2,)
+    assert np.all(per_tick >= 0.0)
 
 
 @pytest.mark.parametrize('key', [key for key, _, _ in EXTERNAL_SOLVERS])
@@ -206,8 +298,8 @@ def test_external_solvers_agree_with_the_filter(bench, key):
 
 
 def test_json_to_stdout_with_a_filter_override():
-    out = io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         rc = bench_main(
             [
                 '--duration',
@@ -228,6 +320,11 @@ def test_json_to_stdout_with_a_filter_override():
     assert document['filter_parameters']['osqp.eps_abs'] == 1e-3
     assert document['external']['qps'] == 0
     assert document['real_time_factor']['runner_with_bag'] is None
+    assert document['filter_node_callbacks_cpu_us'] is None
+    assert positive_spread(document['noise_floor']['cpu_us'])
+    table = err.getvalue()
+    row = next(line for line in table.splitlines() if line.startswith(CALLBACKS_LABEL))
+    assert row.endswith('not measured (runner not run)')
 
 
 def test_a_model_override_reaches_every_part(monkeypatch):

@@ -4,8 +4,10 @@
    safety filter called directly, no messages) for ``--duration`` simulated seconds; every
    tick's plant state and u_nom are kept. Its wall time gives the filtered loop's
    real-time factor.
-2. **Replay.** The recorded ticks are replayed in order through fresh instances, so every
-   timing sees the same inputs and the filter the same warm starts as in the run. Per tick,
+2. **Replay.** First the machine's own spread: a fixed compiled loop timed as many times
+   as there are ticks (the noise floor, :mod:`.machine`). Then the recorded ticks are
+   replayed in order through fresh instances, so every timing sees the same inputs and the
+   filter the same warm starts as in the run. Per tick,
    each piece is timed on its own: the model terms (``GraspModel.state``), the nominal
    controller (reference sample and computed torque), the QP assembly
    (``SafetyFilter.assemble``), OSQP alone on the assembled hard QP (a second solver with the
@@ -20,7 +22,9 @@
    times are compared with the filter step on the same ticks and their solutions with ours
    (``max |Δu|``, on ticks whose hard QP is feasible).
 4. **Closed loops.** Real-time factors (simulated seconds per wall second) of the nominal
-   loop (simulator + nominal controller) and of the ROS-free runner recording to a bag.
+   loop (simulator + nominal controller) and of the ROS-free runner recording to a bag; in
+   the runner's run, the safety filter endpoint's three callbacks per tick in thread CPU
+   time (:mod:`.node_callbacks`).
 
 Timings are wall-clock (``time.perf_counter``) with the garbage collector on, as in a
 node. Nothing here asserts a time: the figures are for reading.
@@ -30,7 +34,8 @@ recording runner, bag size per simulated second, memory of the analysis):
 :mod:`grasp_safety_filter.soak`.
 
 Modules: :mod:`.recorded_run` (1, 4), :mod:`.replay` (2), :mod:`.external_solvers` (3),
-:mod:`.backends` (the QP backends on the same ticks),
+:mod:`.backends` (the QP backends on the same ticks), :mod:`.machine` (machine facts and
+noise floor), :mod:`.node_callbacks` (4),
 :mod:`.report` (the document and its table), :mod:`.command_line`.
 """
 
@@ -54,6 +59,13 @@ from grasp_safety_filter.bench.external_solvers import (  # noqa: F401
     run_external,
     SolverInput,
 )
+from grasp_safety_filter.bench.machine import (  # noqa: F401
+    fixed_work,
+    machine_info,
+    noise_floor,
+    VERSIONED_PACKAGES,
+)
+from grasp_safety_filter.bench.node_callbacks import FilterCallbackTimes  # noqa: F401
 from grasp_safety_filter.bench.recorded_run import (  # noqa: F401
     LoopRate,
     nominal_loop_rate,
@@ -73,7 +85,6 @@ from grasp_safety_filter.bench.replay import (  # noqa: F401
 )
 from grasp_safety_filter.bench.report import (  # noqa: F401
     benchmark,
+    CALLBACKS_LABEL,
     format_report,
-    machine_info,
-    VERSIONED_PACKAGES,
 )

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.bench.node_callbacks import FilterCallbackTimes
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.reference import Pose, ReferenceSource
 from grasp_safety_filter.control.safety_filter import (
@@ -243,11 +244,17 @@ def nominal_loop_rate(scenario: Scenario, duration: float) -> LoopRate:
 
 
 def runner_loop_rate(
-    config: Path, duration: float, time_step: float, overrides: dict[str, Any] | None = None
+    config: Path,
+    duration: float,
+    time_step: float,
+    overrides: dict[str, Any] | None = None,
+    callback_times: FilterCallbackTimes | None = None,
 ) -> LoopRate:
     """Real-time factor of the ROS-free runner's filtered run, recording every message to a bag.
 
     ``overrides`` replace parameters of every node that declares them, as ``grasp-demo --set``.
+    ``callback_times``: times the safety filter's callbacks in the same run (the wall time
+    then includes its two clock reads per callback).
 
     Times :func:`grasp_safety_filter.runner.record_run` (the loop and the bag, not the
     analysis and figures :func:`~grasp_safety_filter.runner.run` adds afterwards).
@@ -259,7 +266,11 @@ def runner_loop_rate(
             config, mode='filtered', duration=duration, overrides=dict(overrides or {})
         )
         wall_start = time.perf_counter()
-        recording = record_run(options, Path(directory) / 'bag')
+        recording = record_run(
+            options,
+            Path(directory) / 'bag',
+            wrap_filter_callback=None if callback_times is None else callback_times.wrap,
+        )
         wall = time.perf_counter() - wall_start
     steps = round(recording.t_end / time_step)
     return LoopRate(recording.t_end, wall, steps, recording.stop_reason or 'duration')

@@ -1,20 +1,18 @@
-"""The benchmark document: statistics, machine facts, and the printed table."""
+"""The benchmark document and its printed table."""
 
 from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable, Sequence
-import importlib
-import importlib.metadata
-import os
 from pathlib import Path
-import platform
 from typing import Any
 
 import numpy as np
 
 from grasp_safety_filter.bench.backends import backend_table, replay_backends
 from grasp_safety_filter.bench.external_solvers import external_solvers, run_external
+from grasp_safety_filter.bench.machine import machine_info, noise_floor
+from grasp_safety_filter.bench.node_callbacks import FilterCallbackTimes
 from grasp_safety_filter.bench.recorded_run import (
     nominal_loop_rate,
     record_filtered_run,
@@ -33,8 +31,8 @@ from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
 )
 
-#: Distribution packages whose versions the report lists.
-VERSIONED_PACKAGES = ('numpy', 'numba', 'scipy', 'osqp', 'cvxpy', 'qpsolvers', 'daqp', 'clarabel')
+#: The per-tick table's row of the runner's filter-node callbacks.
+CALLBACKS_LABEL = 'filter node callbacks (parse, model, filter step, messages)'
 
 
 # --------------------------------------------------------------------------------------------
@@ -48,37 +46,6 @@ def _counts(values: np.ndarray) -> dict[str, float | int]:
         'median': float(np.median(values)),
         'p99': float(np.percentile(values, 99)),
         'max': int(values.max()),
-    }
-
-
-def machine_info() -> dict[str, Any]:
-    """Python and package versions, CPU count and model, load average (1, 5, 15 min)."""
-    versions = {}
-    for package in VERSIONED_PACKAGES:
-        try:
-            versions[package] = importlib.metadata.version(package)
-        except importlib.metadata.PackageNotFoundError:
-            versions[package] = None
-    cpu_model = platform.processor() or platform.machine()
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                cpu_model = line.split(':', 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        load_average: list[float] | None = [round(x, 2) for x in os.getloadavg()]
-    except OSError:
-        load_average = None
-    return {
-        'python': platform.python_version(),
-        'implementation': platform.python_implementation(),
-        'platform': platform.platform(),
-        'cpu_count': os.cpu_count(),
-        'cpu_model': cpu_model,
-        'load_average': load_average,
-        'packages': versions,
     }
 
 
@@ -138,6 +105,8 @@ def benchmark(
         log(f'warming up on {min(warmup, len(replayed))} ticks')
         replay(scenario, replayed[:warmup])
     qp_ticks = _evenly_spaced(len(replayed), external_ticks)
+    log(f'timing the same compiled work {len(replayed)} times (the noise floor)')
+    floor = noise_floor(len(replayed))
     log(f'replaying {len(replayed)} ticks')
     measured = replay(scenario, replayed, qp_ticks)
 
@@ -186,6 +155,7 @@ def benchmark(
         }
 
     runner_rate = None
+    callback_times = FilterCallbackTimes()
     if runner_duration > 0:
         log(f'timing the runner with bag recording ({runner_duration:g} s simulated)')
         runner_rate = runner_loop_rate(
@@ -193,6 +163,7 @@ def benchmark(
             runner_duration,
             scenario.sim_config.time_step,
             {**(filter_overrides or {}), **(model_overrides or {})},
+            callback_times,
         )
 
     statuses = Counter(status.value for status in measured.status)
@@ -233,6 +204,11 @@ def benchmark(
         },
         'timings_us': timings,
         'cpu_timings_us': cpu_timings,
+        # The runner's lockstep run (None: not run): the endpoint's three callbacks a tick.
+        'filter_node_callbacks_cpu_us': (
+            None if runner_rate is None else statistics(callback_times.per_tick())
+        ),
+        'noise_floor': floor,
         'backends': backend_figures,
         'external': {
             'qps': len(measured.qps),
@@ -268,6 +244,7 @@ def format_report(document: dict[str, Any]) -> str:
     run = document['run']
     replayed = document['replay']
     statuses = ', '.join(f'{k} {v}' for k, v in sorted(replayed['statuses'].items()))
+    width = max(42, len(CALLBACKS_LABEL) + 2)  # the per-tick table's label column
     lines = [
         f'grasp-bench: {document["config"]}',
         f'machine: {machine["implementation"]} {machine["python"]}, {packages}',
@@ -294,7 +271,7 @@ def format_report(document: dict[str, Any]) -> str:
             for status, s in replayed['node_tick_cpu_us_by_status'].items()
         ),
         '',
-        f'{"per tick":42s}{"wall median":>12s}{"p99":>9s}{"max":>9s}'
+        f'{"per tick":{width}s}{"wall median":>12s}{"p99":>9s}{"max":>9s}'
         f'{"CPU median":>12s}{"p99":>9s}{"ticks":>8s}   (µs)',
     ]
     for key, label in COMPONENTS.items():
@@ -304,9 +281,24 @@ def format_report(document: dict[str, Any]) -> str:
             f'{_us(cpu["median"]):>12s}{_us(cpu["p99"]):>9s}' if cpu else f'{"-":>12s}{"-":>9s}'
         )
         lines.append(
-            f'{label:42s}{_us(s["median"]):>12s}{_us(s["p99"]):>9s}{_us(s["max"]):>9s}'
+            f'{label:{width}s}{_us(s["median"]):>12s}{_us(s["p99"]):>9s}{_us(s["max"]):>9s}'
             f'{cpu_columns}{s["n"]:>8d}'
         )
+    callbacks = document['filter_node_callbacks_cpu_us']
+    if callbacks is None:
+        lines.append(f'{CALLBACKS_LABEL:{width}s}not measured (runner not run)')
+    else:
+        lines.append(
+            f'{CALLBACKS_LABEL:{width}s}{"-":>12s}{"-":>9s}{"-":>9s}'
+            f'{_us(callbacks["median"]):>12s}{_us(callbacks["p99"]):>9s}{callbacks["n"]:>8d}'
+            '   (runner, lockstep)'
+        )
+    floor = document['noise_floor']
+    lines.append(
+        "  noise floor (the same compiled work every call: the spread is the machine's): "
+        f'CPU median {_us(floor["cpu_us"]["median"])} µs, p99 {_us(floor["cpu_us"]["p99"])} '
+        f'µs, p99/median {floor["p99_over_median"]:.2f}'
+    )
     if document['backends']:
         lines += [
             '',
