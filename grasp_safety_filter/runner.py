@@ -63,7 +63,7 @@ from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
-from hand_sim_node.events import EventLog
+from hand_sim_node.event_log import EventLog
 from hand_sim_node.plant import PlantConfig
 
 MODES = ('nominal', 'filtered')
