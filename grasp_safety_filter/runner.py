@@ -30,7 +30,7 @@ from grasp_safety_filter.analysis.figures import plot_run
 from grasp_safety_filter.analysis.run_data import load_run, RunDataError
 from grasp_safety_filter.analysis.summary import summarize
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
-from grasp_safety_filter.control.nominal import NominalConfig
+from grasp_safety_filter.control.nominal_config import NominalConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder
