@@ -135,7 +135,8 @@ def _demo(argv: list[str] | None) -> int:
     from grasp_safety_filter.demo_runs import fork_available, one_after_the_other, side_by_side
     from grasp_safety_filter.io.files import OutputError, write_file
     from grasp_safety_filter.model.grasp_check import load_initial_grasp
-    from grasp_safety_filter.runner import check_output_dir, RunOptions, VERDICT_FILE
+    from grasp_safety_filter.output_dir import check_output_dir, VERDICT_FILE
+    from grasp_safety_filter.run_types import RunOptions
 
     parser = argparse.ArgumentParser(
         prog='grasp-demo',
@@ -313,11 +314,8 @@ def _analyze(argv: list[str] | None) -> int:
     from grasp_safety_filter.io.bag_recovery import needs_recovery, recover_bag
     from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS
     from grasp_safety_filter.io.files import OutputError
-    from grasp_safety_filter.runner import (
-        ANALYSIS_DIRECTORY,
-        analyze_bag,
-        SUMMARY_FILE,
-    )
+    from grasp_safety_filter.output_dir import ANALYSIS_DIRECTORY, SUMMARY_FILE
+    from grasp_safety_filter.runner import analyze_bag
 
     parser = argparse.ArgumentParser(
         prog='grasp-analyze',

@@ -35,7 +35,8 @@ from grasp_safety_filter.analysis.forked import ForkedCall, ForkedCallError
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.files import OutputError
 from grasp_safety_filter.io.interrupts import interrupt_on_signals, SignalInterrupt
-from grasp_safety_filter.runner import Progress, run, RunInterrupted, RunOptions
+from grasp_safety_filter.run_types import RunOptions
+from grasp_safety_filter.runner import Progress, run, RunInterrupted
 
 #: Exit status of a run that failed (its process raised or died).
 EXIT_RUN_FAILED = 1

@@ -8,21 +8,16 @@ lockstep makes this the same stream a ``ros2 launch`` run of the paper demo reco
 Results (figures and ``summary.json``) are then produced from the bag alone, by the same
 analysis ``grasp-analyze`` runs on any recording.
 
-Output directories: a run writes only into a directory that is empty, new, or a previous
-output of this package, i.e. one holding nothing but :data:`OUTPUT_NAMES` (``bag`` with
-only bag files in it, ``summary.json``, ``verdict.json``, the figures, and ``nominal``,
-``filtered`` and ``analysis`` directories of the same kind). Anything else, or a symbolic
-link in the place of one of them, raises :class:`OutputError` unless ``force`` is given.
-Files are written to a temporary file and renamed into place, so a planted symbolic link
-is replaced, never followed, and a reader never sees half a file.
+A run's options and results are in :mod:`~grasp_safety_filter.run_types`, what it may write
+into an output directory in :mod:`~grasp_safety_filter.output_dir`; their public names are
+importable from here as well.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 import dataclasses
-from dataclasses import dataclass, field
 import json
 from pathlib import Path
 import shutil
@@ -31,22 +26,21 @@ from typing import Any
 
 from rosbags.typesys import get_typestore, Stores
 
-from grasp_safety_filter.analysis.figures import FIGURE_FILES, plot_run
+from grasp_safety_filter.analysis.figures import plot_run
 from grasp_safety_filter.analysis.run_data import load_run, RunDataError
 from grasp_safety_filter.analysis.summary import summarize
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
-from grasp_safety_filter.control.nominal import NominalConfig
+from grasp_safety_filter.control.nominal_config import NominalConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder
-from grasp_safety_filter.io.files import OutputError, write_file
+from grasp_safety_filter.io.files import write_file
 from grasp_safety_filter.io.interrupts import (
     deferred_interrupts,
     interrupt_on_signals,
     signal_name,
 )
 from grasp_safety_filter.io.messages import MessageNamespace
-from grasp_safety_filter.io.parameters import ParameterError, suggestion
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
     load_node_parameters,
@@ -61,86 +55,43 @@ from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoi
 from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
 from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
 from grasp_safety_filter.nodes.shared_parse import SharedParse
+from grasp_safety_filter.output_dir import (
+    ANALYSIS_DIRECTORY,
+    BAG_DIRECTORY,
+    BAG_FILE_SUFFIXES,
+    check_output_dir,
+    OUTPUT_NAMES,
+    OUTPUT_SUBDIRECTORIES,
+    SUMMARY_FILE,
+    VERDICT_FILE,
+)
+from grasp_safety_filter.run_types import MODES, Recording, RunOptions, RunResult
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
-from hand_sim_node.events import EventLog
 from hand_sim_node.plant import PlantConfig
 
-MODES = ('nominal', 'filtered')
-BAG_DIRECTORY = 'bag'
-SUMMARY_FILE = 'summary.json'
-VERDICT_FILE = 'verdict.json'
-ANALYSIS_DIRECTORY = 'analysis'
-#: Directories of an output directory that are outputs of their own (``--mode both``,
-#: ``grasp-analyze`` next to a run that has a summary).
-OUTPUT_SUBDIRECTORIES = (*MODES, ANALYSIS_DIRECTORY)
-#: Every name this package writes into an output directory.
-OUTPUT_NAMES = (BAG_DIRECTORY, SUMMARY_FILE, VERDICT_FILE, *FIGURE_FILES, *OUTPUT_SUBDIRECTORIES)
-#: Files of a bag directory written by this package's recorder (rosbags) or ``ros2 bag``.
-BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-journal', '.db3-wal', '.db3-shm')
-
-
-def _foreign_entries(directory: Path, inputs: frozenset[Path]) -> list[str]:
-    """Entries of ``directory`` that are not outputs of this package (see the module doc)."""
-    foreign = []
-    for entry in sorted(directory.iterdir()):
-        if entry.resolve() in inputs and not entry.is_symlink():
-            continue
-        if entry.is_symlink():
-            foreign.append(f'{entry} (a symbolic link)')
-        elif entry.name not in OUTPUT_NAMES:
-            foreign.append(str(entry))
-        elif entry.name == BAG_DIRECTORY:
-            if not entry.is_dir():
-                foreign.append(f'{entry} (not a bag directory)')
-            else:
-                foreign.extend(
-                    f'{f} (in a bag)'
-                    for f in sorted(entry.iterdir())
-                    if f.is_symlink()
-                    or not f.is_file()
-                    or (f.name != 'metadata.yaml' and not f.name.endswith(BAG_FILE_SUFFIXES))
-                )
-        elif entry.name in OUTPUT_SUBDIRECTORIES:
-            if not entry.is_dir():
-                foreign.append(str(entry))
-            else:
-                foreign.extend(_foreign_entries(entry, inputs))
-        elif not entry.is_file():
-            foreign.append(str(entry))
-    return foreign
-
-
-def check_output_dir(out_dir: Path, force: bool = False, inputs: tuple[Path, ...] = ()) -> None:
-    """Refuse ``out_dir`` unless it is new, empty or a previous output (module doc).
-
-    Args:
-        out_dir: The output directory.
-        force: Write into it anyway (symbolic links are still replaced, never followed).
-        inputs: Paths inside it that are read, not written (the bag ``grasp-analyze`` reads).
-
-    Raises:
-        OutputError: Not ours, without ``force``; or it is not a directory.
-
-    """
-    out_dir = Path(out_dir)
-    if not out_dir.exists():
-        if out_dir.is_symlink():
-            raise OutputError(f'{out_dir}: a dangling symbolic link, not an output directory')
-        return
-    if not out_dir.is_dir():
-        raise OutputError(f'{out_dir}: exists and is not a directory')
-    if force:
-        return
-    foreign = _foreign_entries(out_dir, frozenset(Path(p).resolve() for p in inputs))
-    if foreign:
-        shown = ', '.join(foreign[:3]) + (
-            f' and {len(foreign) - 3} more' if len(foreign) > 3 else ''
-        )
-        raise OutputError(
-            f'{out_dir}: not an output directory of this package (has {shown}); '
-            'choose another or pass --force to write into it'
-        )
+__all__ = [
+    'ANALYSIS_DIRECTORY',
+    'BAG_DIRECTORY',
+    'BAG_FILE_SUFFIXES',
+    'MODES',
+    'OUTPUT_NAMES',
+    'OUTPUT_SUBDIRECTORIES',
+    'SUMMARY_FILE',
+    'VERDICT_FILE',
+    'Callback',
+    'Progress',
+    'Recording',
+    'RunInterrupted',
+    'RunOptions',
+    'RunResult',
+    'analyze_bag',
+    'build_endpoints',
+    'check_output_dir',
+    'record_run',
+    'run',
+    'scenario_fingers',
+]
 
 
 def _remove(path: Path) -> None:
@@ -149,70 +100,6 @@ def _remove(path: Path) -> None:
         path.unlink()
     elif path.exists():
         shutil.rmtree(path)
-
-
-@dataclass(frozen=True)
-class RunOptions:
-    """What to run.
-
-    Attributes:
-        config: Scenario parameter file (ROS 2 format).
-        mode: ``"nominal"`` (filter off: u* = u_nom) or ``"filtered"``.
-        duration: Overrides the scenario's ``duration`` (s), if given.
-        time_step: Overrides ``time_step`` (s), if given.
-        integrator: Overrides ``integrator`` (``"ode3"`` or ``"rk4"``), if given.
-        storage: Bag storage, ``"mcap"`` (default, as ``ros2 bag record``) or ``"sqlite3"``.
-        overrides: ``{dotted name: value}`` replacing the scenario file's parameters, for
-            every node that declares the name (e.g. ``{"barrier.alpha1.gain": 10.0}``).
-    """
-
-    config: Path
-    mode: str = 'filtered'
-    duration: float | None = None
-    time_step: float | None = None
-    integrator: str | None = None
-    storage: str = 'mcap'
-    overrides: Mapping[str, Any] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if self.mode not in MODES:
-            raise ValueError(f'mode: expected one of {list(MODES)}, got {self.mode!r}')
-        for name in self.overrides:
-            if not any(schema.get(name) for schema in NODE_SCHEMAS.values()):
-                known = sorted({n for schema in NODE_SCHEMAS.values() for n in schema.names})
-                hint = suggestion(name, known)
-                raise ParameterError(f"override '{name}': no node declares it{hint}")
-
-
-@dataclass(frozen=True)
-class Recording:
-    """What the live run itself observed, to compare with what its bag says.
-
-    Attributes:
-        interrupted: None when the simulator finished (ran to its duration or stopped on a
-            violation), else the signal that interrupted it (``"SIGINT"`` or ``"SIGTERM"``;
-            a run ended by another exception raises it instead).
-        live_log: The plant's own constraint record of the run.
-        stop_reason: The plant's stop reason (``"duration"`` when it ran to the end).
-        t_end: Simulated time reached, s.
-    """
-
-    interrupted: str | None
-    live_log: EventLog
-    stop_reason: str | None
-    t_end: float
-
-
-@dataclass(frozen=True)
-class RunResult:
-    """Where a run's results are and what they say."""
-
-    out_dir: Path
-    bag: Path
-    summary: dict[str, Any]
-    figures: list[Path]
-    wall_time: float
-    recording: Recording
 
 
 Progress = Callable[[float, float], None]

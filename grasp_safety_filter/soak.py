@@ -31,7 +31,8 @@ from typing import Any
 import numpy as np
 from rosbags.highlevel import AnyReader
 
-from grasp_safety_filter.runner import record_run, RunOptions
+from grasp_safety_filter.run_types import RunOptions
+from grasp_safety_filter.runner import record_run
 
 #: Fraction of the run left out of the growth fit (start-up allocations).
 WARMUP_FRACTION = 0.1

@@ -39,6 +39,8 @@ end-of-run status.
 Without lockstep, :meth:`HandSimEndpoint.on_command` only stores the latest valid
 command and :meth:`HandSimEndpoint.advance` (called by a wall-clock timer) integrates one
 step with it, zero-order hold, whatever its stamp.
+
+The ``hand_sim`` statuses themselves are built in :mod:`hand_sim_node.sim_status`.
 """
 
 from __future__ import annotations
@@ -49,24 +51,19 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.io.messages import (
-    bounded_text,
     clock_to_msg,
     ContactData,
     contacts_to_msg,
-    DiagnosticLevel,
     DiagnosticReport,
     diagnostics_to_msg,
     effort_from_msg,
-    header_stamp_ns,
     joint_state_to_msg,
     MessageError,
     MessageNamespace,
-    name_list,
     nanoseconds_to_seconds,
     odometry_to_msg,
     seconds_to_nanoseconds,
 )
-from grasp_safety_filter.io.sim_diagnostic_keys import SIM_DIAGNOSTIC, SimKey
 from grasp_safety_filter.io.topics import (
     CLOCK,
     CONTACTS,
@@ -84,13 +81,18 @@ from grasp_safety_filter.nodes.scenario import (
 from hand_sim_node.config import SimConfig
 from hand_sim_node.contact_events import ContactEventTracker
 from hand_sim_node.plant import Plant, PlantConfig
-from hand_sim_node.simulator import NUMERICAL_FAILURE, Simulator
+from hand_sim_node.sim_status import (
+    clip_to_limits,
+    command_timeout_report,
+    command_warning,
+    contact_event_report,
+    DIAGNOSTIC_NAME,
+    DURATION,
+    end_of_run_report,
+)
+from hand_sim_node.simulator import Simulator
 
-#: Name of the simulator's ``DiagnosticStatus``.
-DIAGNOSTIC_NAME = SIM_DIAGNOSTIC
-
-#: ``run.stop_reason`` of a run that reached its duration.
-DURATION = 'duration'
+__all__ = ['DIAGNOSTIC_NAME', 'DURATION', 'LIVE_FIELDS', 'HandSimEndpoint']
 
 #: SimConfig fields that may change while the simulator runs (the others are read-only).
 LIVE_FIELDS = (
@@ -306,13 +308,7 @@ class HandSimEndpoint:
         if waited < self.command_timeout:
             return []
         self._waiting_since = float(now)
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            f'no command stamped {self.t:.9f} s after {waited:.3f} s (command_timeout '
-            f'{self.command_timeout} s); publishing the state again',
-            {'t': self.t, 'waited': waited, 'command_timeout': self.command_timeout},
-        )
+        report = command_timeout_report(self.t, waited, self.command_timeout)
         return [self._diagnostics(report), *self._state_messages()]
 
     def update_config(self, sim_config: SimConfig) -> None:
@@ -361,46 +357,14 @@ class HandSimEndpoint:
         onsets = self._contact_events.update(self.plant.contact_report())
         if not onsets:
             return []
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            bounded_text('; '.join(onsets)),
-            {'t': self.t, **self._contact_events.events().to_values()},
-        )
+        report = contact_event_report(onsets, self.t, self._contact_events.events().to_values())
         return [self._diagnostics(report)]
 
     def _clip_to_limits(self, effort: np.ndarray) -> tuple[np.ndarray, Outgoing | None]:
-        """Clip a command to the URDF effort limits, as a driver does; WARN if it was over.
-
-        Returns:
-            The applied torque, N·m, and the ``hand_sim`` WARN status naming the joints over
-            their limit and by how much (None if none was).
-
-        """
-        limits = np.asarray(self.model.effort_limits, dtype=float)
-        effort = np.asarray(effort, dtype=float)
-        applied = np.clip(effort, -limits, limits)
-        over = np.flatnonzero(applied != effort)
-        if over.size == 0:
-            return applied, None
-        excess = np.abs(effort - applied)
-        names = [self._joint_names[i] for i in over]
-        worst = int(over[np.argmax(excess[over])])
-        text = (
-            f'command over the effort limits of {len(names)} joints {name_list(names)}: '
-            f'clipped (largest excess {excess[worst]:.6g} N·m on {self._joint_names[worst]!r}, '
-            f'limit {limits[worst]:.6g} N·m)'
-        )
-        values: dict[str, Any] = {
-            't': self.t,
-            'effort.clipped': ','.join(names),
-            'effort.max_excess': float(excess[worst]),
-        }
-        values.update({f'effort.excess.{self._joint_names[i]}': float(excess[i]) for i in over})
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME, DiagnosticLevel.WARN, bounded_text(text), values
-        )
-        return applied, self._diagnostics(report)
+        """Return the applied torque, N·m, and a WARN if it was clipped: :func:`clip_to_limits`."""
+        limits, names = self.model.effort_limits, self._joint_names
+        applied, report = clip_to_limits(effort, limits, names, self.t)
+        return applied, None if report is None else self._diagnostics(report)
 
     def _state_messages(self) -> list[Outgoing]:
         state = self.plant.observe()
@@ -433,33 +397,17 @@ class HandSimEndpoint:
 
     def _end_of_run(self) -> Outgoing:
         self._reported_end = True
-        reason = self.stop_reason
-        if reason == DURATION:
-            level, text = DiagnosticLevel.OK, f'run complete at t = {self.t:.9f} s'
-        else:
-            level = DiagnosticLevel.ERROR if reason == NUMERICAL_FAILURE else DiagnosticLevel.WARN
-            text = f'run stopped at t = {self.t:.9f} s: {reason}'
-        values: dict[str, Any] = {
-            SimKey.RUN_FINISHED: True,
-            SimKey.RUN_STOP_REASON: reason,
-            SimKey.RUN_T_END: self.t,
-            SimKey.RUN_STEPS: self.plant.step_index,
-        }
-        if self._contact_events is not None:
-            values.update(self._contact_events.events().to_values())
-        report = DiagnosticReport.create(DIAGNOSTIC_NAME, level, text, values)
+        events = None if self._contact_events is None else self._contact_events.events()
+        report = end_of_run_report(
+            self.stop_reason,
+            self.t,
+            self.plant.step_index,
+            None if events is None else events.to_values(),
+        )
         return self._diagnostics(report)
 
     def _warn(self, text: str, msg: Any) -> list[Outgoing]:
-        values: dict[str, Any] = {'t': self.t}
-        try:
-            values['command_stamp'] = nanoseconds_to_seconds(header_stamp_ns(msg))
-        except (AttributeError, MessageError):
-            values['command_stamp'] = 'unreadable'
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME, DiagnosticLevel.WARN, bounded_text(text), values
-        )
-        return [self._diagnostics(report)]
+        return [self._diagnostics(command_warning(text, msg, self.t))]
 
     def _diagnostics(self, report: DiagnosticReport) -> Outgoing:
         return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, self.t, report))

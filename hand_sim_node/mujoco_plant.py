@@ -35,7 +35,8 @@ from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.model.grasp_model import GraspModel, state_of
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.config import SimConfig
-from hand_sim_node.events import EventLog, EventMonitor
+from hand_sim_node.event_log import EventLog
+from hand_sim_node.events import EventMonitor
 from hand_sim_node.mjcf import (
     fingertip_geom_name,
     mjcf_from_model,

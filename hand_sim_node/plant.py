@@ -31,7 +31,7 @@ from grasp_safety_filter.io.plant_schema import MUJOCO_PLANT, PLANTS, RIGID_PLAN
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.config import SimConfig
-from hand_sim_node.events import EventLog
+from hand_sim_node.event_log import EventLog
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.simulator import SimState, Simulator, StepReport
 

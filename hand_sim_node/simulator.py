@@ -48,14 +48,14 @@ from grasp_safety_filter.model.quaternion import (
     rotation_matrix,
 )
 from hand_sim_node.config import SimConfig
-from hand_sim_node.events import (
+from hand_sim_node.constraint_margins import (
     ConstraintMargins,
     Event,
-    EventLog,
-    EventMonitor,
     FINGERTIP_WORKSPACE,
     SLIP,
 )
+from hand_sim_node.event_log import EventLog
+from hand_sim_node.events import EventMonitor
 from hand_sim_node.integrators import integrator
 from hand_sim_node.stage import PlantRate
 

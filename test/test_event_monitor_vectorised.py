@@ -1,9 +1,10 @@
 """The vectorised constraint monitor against a per-row evaluation of the same definitions.
 
-A plain loop over contacts, joints and bounds (the definitions in hand_sim_node/events.py's
-docstring, written out) is the oracle; random instants with margins on both sides of
-every bound, margins exactly at a bound, and unknown or separating contact forces must give
-the same margins, the same events in the same order, and the same run record.
+A plain loop over contacts, joints and bounds (the definitions in
+hand_sim_node/constraint_margins.py's docstring, written out) is the oracle; random instants
+with margins on both sides of every bound, margins exactly at a bound, and unknown or
+separating contact forces must give the same margins, the same events in the same order, and
+the same run record.
 """
 
 import math

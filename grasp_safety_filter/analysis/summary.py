@@ -93,7 +93,8 @@ from grasp_safety_filter.io.diagnostic_keys import (
 )
 from grasp_safety_filter.io.plant_schema import RIGID_PLANT
 from grasp_safety_filter.model.per_contact import compact
-from hand_sim_node.events import EventLog, EventMonitor
+from hand_sim_node.event_log import EventLog
+from hand_sim_node.events import EventMonitor
 
 
 def _finite_or_none(value: float) -> float | None:

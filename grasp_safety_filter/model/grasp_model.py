@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from grasp_safety_filter.model import grasp_configuration
 from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -300,26 +301,10 @@ class GraspModel:
     ) -> np.ndarray:
         """Smallest joint correction that makes every fingertip touch its surface exactly.
 
-        Gauss–Newton on the penetrations δ_i(q), with ``dδ_i/dq = -n_i^T J_v,i`` (n_i the
-        object's outward normal at the contact, J_v,i the fingertip centre's Jacobian).
+        Gauss–Newton on the penetrations (:mod:`~grasp_safety_filter.model.grasp_configuration`).
         """
-        q = np.array(q, dtype=float)
-        self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
-        for _ in range(max_iterations):
-            p_f, R_f, J_f = self.hand.fingertip_placements(q)
-            delta = np.empty(self.n_contacts)
-            jacobian = np.empty((self.n_contacts, self.n_joints))
-            for i, contact in enumerate(self.contacts):
-                geometry = contact.geometry(p_f[i], R_f[i], p_object_in_palm, R_object_to_palm)
-                delta[i] = geometry.penetration
-                n_object = -geometry.R_contact_to_palm[:, 2]
-                jacobian[i] = -n_object @ J_f[i, :3]
-            if np.max(np.abs(delta)) <= tolerance:
-                return q
-            q -= np.linalg.lstsq(jacobian, delta, rcond=None)[0]
-        raise GraspConfigError(
-            f'cannot bring every fingertip onto the object: penetrations {delta} m after '
-            f'{max_iterations} iterations'
+        return grasp_configuration.project_to_contact(
+            self, q, p_object_in_palm, R_object_to_palm, tolerance, max_iterations
         )
 
     def check_grasp(
@@ -349,16 +334,12 @@ class GraspModel:
     ) -> np.ndarray:
         """Joint velocity that rolls the fingertips with the object.
 
-        Solves ``J_h dq = G^T x_o_dot`` (least-norm when m > 3n). Soft fingers also forbid
-        spin, which not every twist allows: the velocity is then the least-squares one of the
-        force rows.
+        Solves ``J_h dq = G^T x_o_dot`` (least-norm when m > 3n; soft fingers: see
+        :func:`~grasp_safety_filter.model.grasp_configuration.rolling_joint_velocity`).
         """
-        state = self.state(
-            0.0, q, np.zeros(self.n_joints), p_object_in_palm, R_object_to_palm, np.zeros(6)
+        return grasp_configuration.rolling_joint_velocity(
+            self, q, p_object_in_palm, R_object_to_palm, twist_object
         )
-        k = 3 * self.n_contacts
-        rhs = state.G[:, :k].T @ np.asarray(twist_object, dtype=float)
-        return np.linalg.lstsq(state.J_h[:k], rhs, rcond=None)[0]
 
     def total_energy(self, state: GraspState) -> float:
         """Kinetic plus gravitational potential energy of hand and object, J."""
