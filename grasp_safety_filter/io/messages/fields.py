@@ -37,8 +37,18 @@ _INT32_MAX = 2**31 - 1
 # Time
 
 
+#: The last float converted by :func:`seconds_to_nanoseconds` and its ns: one tick's
+#: stamp is converted for each input checked and each message built (one tuple: replaced
+#: whole, so a reader in another thread never pairs a time with another's ns).
+_LAST_CONVERSION: tuple[float, int] = (0.0, 0)
+
+
 def seconds_to_nanoseconds(t: float) -> int:
     """Time in s to the nearest integer ns; raise MessageError unless finite and >= 0."""
+    global _LAST_CONVERSION
+    last = _LAST_CONVERSION
+    if t.__class__ is float and t == last[0]:
+        return last[1]
     if not math.isfinite(t) or t < 0.0:
         raise MessageError(f'time: expected a finite number of seconds >= 0, got {t!r}')
     # Exact rational product: a float product could round a time ns / 1e9 to ns +- 1.
@@ -51,6 +61,7 @@ def seconds_to_nanoseconds(t: float) -> int:
     twice = 2 * remainder
     if twice > denominator or (twice == denominator and ns & 1):
         ns += 1
+    _LAST_CONVERSION = (t, ns)
     return ns
 
 
@@ -192,6 +203,14 @@ def _match_names(
     return np.array([index[n] for n in expected_names], dtype=int)
 
 
+def _is_empty(values: Any) -> bool:
+    """Whether ``values`` is a sequence of length 0 (a message's empty field)."""
+    try:
+        return len(values) == 0
+    except TypeError:  # no length: checked as an array
+        return False
+
+
 def array_field(
     source: str,
     values: Any,
@@ -212,6 +231,8 @@ def array_field(
         allow_positive_inf: Per name, whether ``+inf`` is admissible there.
 
     """
+    if not required and _is_empty(values):  # an empty optional field: nothing to check
+        return None
     array = np.asarray(values, dtype=np.float64).ravel()
     if array.size == 0 and not required:
         return None
@@ -222,9 +243,10 @@ def array_field(
             f'({len(names)})'
         )
     # Not a sum of the entries: NaN, inf or an overflowing sum would warn in a validator.
-    bad = ~np.isfinite(array)
-    if not bad.any():
+    finite = np.isfinite(array)
+    if finite.all():
         return array
+    bad = ~finite
     if allow_positive_inf is not None:
         bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
     if bad.any():
