@@ -52,9 +52,6 @@ class EffortData:
     effort: np.ndarray
 
 
-_EMPTY = np.zeros(0)
-_EMPTY.flags.writeable = False
-
 #: The float fields of a JointState, in message order.
 _FIELDS = ('position', 'velocity', 'effort')
 
@@ -84,7 +81,7 @@ def joint_state_to_msg(
     fields = {}
     for field_name, values in zip(_FIELDS, (position, velocity, effort), strict=True):
         if values is None:
-            fields[field_name] = msgs.float_array(_EMPTY)
+            fields[field_name] = msgs.empty_float_array()
             continue
         array = msgs.float_array(values)
         if len(array) != len(name):
