@@ -138,7 +138,7 @@ def effort_from_msg(
 
     """
     order = match_names(source, msg.name, joint_names, 'joint')
-    names = list(msg.name)
+    names = msg.name  # matched: a sequence of distinct names (its length and error texts)
     effort = array_field(source, msg.effort, 'effort', names, required=True)
     for f in ('position', 'velocity'):
         array_field(source, getattr(msg, f), f, names, required=False)
