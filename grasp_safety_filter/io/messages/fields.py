@@ -159,6 +159,9 @@ def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
 _MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
 #: Most name lists remembered (a stream sends one or two; the cache is emptied when full).
 _MAX_MATCHED = 256
+#: The last list of received names matched, the expected names (by identity) and the
+#: index (one tuple: replaced whole, so a reader in another thread never mixes two).
+_LAST_MATCHED: tuple[list[Any], Any, np.ndarray | None] = ([], None, None)
 
 
 def match_names(
@@ -170,6 +173,16 @@ def match_names(
     once gives the same (read-only) index without checking again; one that did not is
     checked, and refused, every time.
     """
+    global _LAST_MATCHED
+    last_received, last_expected, last_index = _LAST_MATCHED
+    # One list comparison, not a key of two tuples, for the names of the last message
+    # (the expected names by identity: a tuple, which nobody can change meanwhile).
+    if (
+        expected_names is last_expected
+        and received_names.__class__ is list
+        and received_names == last_received
+    ):
+        return last_index
     key = (tuple(map(str, received_names)), tuple(expected_names))
     index = _MATCHED.get(key)
     if index is None:
@@ -178,6 +191,8 @@ def match_names(
         if len(_MATCHED) >= _MAX_MATCHED:
             _MATCHED.clear()
         _MATCHED[key] = index
+    if received_names.__class__ is list and expected_names.__class__ is tuple:
+        _LAST_MATCHED = (list(received_names), expected_names, index)
     return index
 
 
