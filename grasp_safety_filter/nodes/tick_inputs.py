@@ -13,9 +13,8 @@ simulator that re-sent its state) is a replay: the endpoint sends the same answe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -48,9 +47,8 @@ STATE_INPUTS = (JOINT_STATES, OBJECT_ODOM)
 TimedState = tuple[GraspState | Exception, float]
 
 
-@dataclass(frozen=True)
-class TickInputs:
-    """The three validated inputs of one tick.
+class TickInputs(NamedTuple):
+    """The three validated inputs of one tick (a named tuple: made on every tick).
 
     Attributes:
         joint_states: Joint positions, velocities and efforts, model joint order.
