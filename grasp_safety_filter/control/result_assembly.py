@@ -97,13 +97,12 @@ class ResultAssembler:
             smallest = residuals(*rows, u, slack)  # slack[:k] = A u - lower
         else:
             slack, smallest = computed
-        residual = slack[:k]
         relaxed_families: tuple[str, ...] = ()
         worst = 0.0
         # The minimum is NaN when a row is: NaN rows count as violated, as in the test below.
         if k and not smallest >= -FEASIBILITY_TOLERANCE:
             violated = np.zeros(len(self.families), dtype=np.bool_)
-            worst = violations(residual, self._row_family, FEASIBILITY_TOLERANCE, violated)
+            worst = violations(slack[:k], self._row_family, FEASIBILITY_TOLERANCE, violated)
             relaxed_families = tuple(
                 family.family
                 for family, bad in zip(self.families, violated.tolist(), strict=True)
