@@ -159,9 +159,10 @@ def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
 _MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
 #: Most name lists remembered (a stream sends one or two; the cache is emptied when full).
 _MAX_MATCHED = 256
-#: The last list of received names matched, the expected names (by identity) and the
-#: index (one tuple: replaced whole, so a reader in another thread never mixes two).
-_LAST_MATCHED: tuple[list[Any], Any, np.ndarray | None] = ([], None, None)
+#: Per tuple of expected names (by id; the tuple is kept, so its id is not reused): the
+#: tuple, the last list of received names matched to it and the index (one tuple per
+#: entry, replaced whole, so a reader in another thread never mixes two).
+_LAST_MATCHED: dict[int, tuple[tuple[str, ...], list[Any], np.ndarray]] = {}
 
 
 def match_names(
@@ -173,16 +174,16 @@ def match_names(
     once gives the same (read-only) index without checking again; one that did not is
     checked, and refused, every time.
     """
-    global _LAST_MATCHED
-    last_received, last_expected, last_index = _LAST_MATCHED
     # One list comparison, not a key of two tuples, for the names of the last message
-    # (the expected names by identity: a tuple, which nobody can change meanwhile).
+    # matched to these expected names (a tuple, by identity: nobody can change it).
+    last = _LAST_MATCHED.get(id(expected_names))
     if (
-        expected_names is last_expected
+        last is not None
+        and last[0] is expected_names
         and received_names.__class__ is list
-        and received_names == last_received
+        and received_names == last[1]
     ):
-        return last_index
+        return last[2]
     key = (tuple(map(str, received_names)), tuple(expected_names))
     index = _MATCHED.get(key)
     if index is None:
@@ -192,7 +193,9 @@ def match_names(
             _MATCHED.clear()
         _MATCHED[key] = index
     if received_names.__class__ is list and expected_names.__class__ is tuple:
-        _LAST_MATCHED = (list(received_names), expected_names, index)
+        if len(_LAST_MATCHED) >= _MAX_MATCHED:
+            _LAST_MATCHED.clear()
+        _LAST_MATCHED[id(expected_names)] = (expected_names, list(received_names), index)
     return index
 
 
