@@ -251,7 +251,9 @@ def array_field(
     """
     if not required and _is_empty(values):  # an empty optional field: nothing to check
         return None
-    array = np.asarray(values, dtype=np.float64).ravel()
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim != 1:
+        array = array.ravel()
     if array.size == 0 and not required:
         return None
     if array.size != len(names):
