@@ -106,7 +106,9 @@ def contact_gap_findings(
 
     """
     findings = []
-    for name, depth in zip(contact_names, np.asarray(penetration, dtype=float), strict=True):
+    # Python floats: one conversion, not a numpy scalar per contact.
+    depths = np.asarray(penetration, dtype=float).tolist()
+    for name, depth in zip(contact_names, depths, strict=True):
         if not math.isfinite(depth):
             problem = f'penetration is {depth} (expected a finite distance)'
         elif depth < -gap_tolerance:
@@ -155,6 +157,7 @@ class GraspWatch:
         self.started = False
         self.findings: list[GraspFinding] = []
         self._log: deque[LogLine] = deque(maxlen=MAX_LOG_LINES)
+        self._contact_names = list(model.contact_names)
 
     @property
     def gap_tolerance(self) -> float:
@@ -170,7 +173,7 @@ class GraspWatch:
         """
         if self.started:
             findings = contact_gap_findings(
-                list(self.model.contact_names), state.penetration, self.gap_tolerance
+                self._contact_names, state.penetration, self.gap_tolerance
             )
         else:
             findings = grasp_findings(

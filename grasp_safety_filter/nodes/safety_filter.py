@@ -76,7 +76,7 @@ from grasp_safety_filter.nodes.filter_status import status_message, tick_status,
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig, GraspWatch, LogLine
 from grasp_safety_filter.nodes.held_commands import HeldCommands
 from grasp_safety_filter.nodes.input_watchdog import InputWatchdog, WAITING_REPORT_PERIOD
-from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRate, PublicationRateConfig
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 from grasp_safety_filter.nodes.tick_inputs import (
@@ -156,7 +156,7 @@ class SafetyFilterEndpoint:
         self.margin_stream = MarginEncoder()
         self.grasp = GraspWatch(model, grasp_check_config)
         self.last_result: FilterResult | None = None
-        self._joint_names = list(model.joint_names)
+        self._joint_names = tuple(model.joint_names)
         self._last_outputs: list[Outgoing] = []
         self.held = HeldCommands(model, self.hold, msgs, self.rate, self._status_message)
         self.input_watchdog = InputWatchdog(INPUTS)
@@ -346,13 +346,15 @@ class SafetyFilterEndpoint:
         self.held.last_positions = np.array(inputs.joint_states.position)
         self.inputs.close(stamp)
         resumed_after = None if wall is None else self.input_watchdog.accepted(wall)
-        outgoing = [stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u))]
+        # Both messages are stamped t, whose ns is the tick's stamp.
+        command = effort_to_msg(self.msgs, t, self._joint_names, u)
+        outgoing = [Outgoing(EFFORT_COMMAND, stamp, command)]
         # A result's margins and active rows are computed only when read: on the ticks
         # that publish them.
         if self.rate.margins_due(stamp):
             margins = disabled_margins if result is None else result.margins
             message = self.margin_stream.encode(self.msgs, t, margins.names, margins.array)
-            outgoing.append(stamped(MARGINS, message))
+            outgoing.append(Outgoing(MARGINS, stamp, message))
         status = TickStatus.DISABLED if result is None else TickStatus.of(result.status)
         if self.rate.status_due(stamp, status, force=resumed_after is not None):
             tick_time = time.perf_counter() - start

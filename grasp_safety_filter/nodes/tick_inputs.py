@@ -13,9 +13,8 @@ simulator that re-sent its state) is a replay: the endpoint sends the same answe
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -48,9 +47,8 @@ STATE_INPUTS = (JOINT_STATES, OBJECT_ODOM)
 TimedState = tuple[GraspState | Exception, float]
 
 
-@dataclass(frozen=True)
-class TickInputs:
-    """The three validated inputs of one tick.
+class TickInputs(NamedTuple):
+    """The three validated inputs of one tick (a named tuple: made on every tick).
 
     Attributes:
         joint_states: Joint positions, velocities and efforts, model joint order.
@@ -88,8 +86,7 @@ class TickAssembler:
         self._parse = parse_directly if parse is None else parse
         self.last_tick_ns: int | None = None
         self.model = model
-        self._joint_names = list(model.joint_names)
-        self._joint_name_tuple = tuple(self._joint_names)
+        self._joint_name_tuple = tuple(model.joint_names)
         self._pending: dict[int, dict[str, Any]] = {}
         self._states: dict[int, TimedState] = {}
         self._replay: dict[str, Any] = {}
@@ -106,7 +103,7 @@ class TickAssembler:
             return self._parse(odometry_from_msg, msg, *frames, OBJECT_ODOM)
         if topic == JOINT_STATES:
             return self._parse(joint_state_from_msg, msg, self._joint_name_tuple, JOINT_STATES)
-        return effort_from_msg(msg, self._joint_names, EFFORT_NOMINAL)
+        return effort_from_msg(msg, self._joint_name_tuple, EFFORT_NOMINAL)
 
     def timed_state(self, joint_states: JointStateData, odometry: ObjectStateData) -> TimedState:
         """Compute a state's model terms (or the model's refusal of it), timed in s."""
@@ -172,7 +169,7 @@ class TickAssembler:
         inputs = self._pending.setdefault(stamp, {})
         inputs[topic] = data
         if len(inputs) < len(INPUTS):
-            if topic in STATE_INPUTS and all(name in inputs for name in STATE_INPUTS):
+            if topic in STATE_INPUTS and JOINT_STATES in inputs and OBJECT_ODOM in inputs:
                 # The state is complete before u_nom: the model terms need not wait for it.
                 self._states[stamp] = self.timed_state(inputs[JOINT_STATES], inputs[OBJECT_ODOM])
             while len(self._pending) > MAX_PENDING:

@@ -37,8 +37,18 @@ _INT32_MAX = 2**31 - 1
 # Time
 
 
+#: The last float converted by :func:`seconds_to_nanoseconds` and its ns: one tick's
+#: stamp is converted for each input checked and each message built (one tuple: replaced
+#: whole, so a reader in another thread never pairs a time with another's ns).
+_LAST_CONVERSION: tuple[float, int] = (0.0, 0)
+
+
 def seconds_to_nanoseconds(t: float) -> int:
     """Time in s to the nearest integer ns; raise MessageError unless finite and >= 0."""
+    global _LAST_CONVERSION
+    last = _LAST_CONVERSION
+    if t.__class__ is float and t == last[0]:
+        return last[1]
     if not math.isfinite(t) or t < 0.0:
         raise MessageError(f'time: expected a finite number of seconds >= 0, got {t!r}')
     # Exact rational product: a float product could round a time ns / 1e9 to ns +- 1.
@@ -51,6 +61,7 @@ def seconds_to_nanoseconds(t: float) -> int:
     twice = 2 * remainder
     if twice > denominator or (twice == denominator and ns & 1):
         ns += 1
+    _LAST_CONVERSION = (t, ns)
     return ns
 
 
@@ -148,6 +159,10 @@ def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
 _MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
 #: Most name lists remembered (a stream sends one or two; the cache is emptied when full).
 _MAX_MATCHED = 256
+#: Per tuple of expected names (by id; the tuple is kept, so its id is not reused): the
+#: tuple, the last list of received names matched to it and the index (one tuple per
+#: entry, replaced whole, so a reader in another thread never mixes two).
+_LAST_MATCHED: dict[int, tuple[tuple[str, ...], list[Any], np.ndarray]] = {}
 
 
 def match_names(
@@ -159,6 +174,16 @@ def match_names(
     once gives the same (read-only) index without checking again; one that did not is
     checked, and refused, every time.
     """
+    # One list comparison, not a key of two tuples, for the names of the last message
+    # matched to these expected names (a tuple, by identity: nobody can change it).
+    last = _LAST_MATCHED.get(id(expected_names))
+    if (
+        last is not None
+        and last[0] is expected_names
+        and received_names.__class__ is list
+        and received_names == last[1]
+    ):
+        return last[2]
     key = (tuple(map(str, received_names)), tuple(expected_names))
     index = _MATCHED.get(key)
     if index is None:
@@ -167,6 +192,10 @@ def match_names(
         if len(_MATCHED) >= _MAX_MATCHED:
             _MATCHED.clear()
         _MATCHED[key] = index
+    if received_names.__class__ is list and expected_names.__class__ is tuple:
+        if len(_LAST_MATCHED) >= _MAX_MATCHED:
+            _LAST_MATCHED.clear()
+        _LAST_MATCHED[id(expected_names)] = (expected_names, list(received_names), index)
     return index
 
 
@@ -192,6 +221,14 @@ def _match_names(
     return np.array([index[n] for n in expected_names], dtype=int)
 
 
+def _is_empty(values: Any) -> bool:
+    """Whether ``values`` is a sequence of length 0 (a message's empty field)."""
+    try:
+        return len(values) == 0
+    except TypeError:  # no length: checked as an array
+        return False
+
+
 def array_field(
     source: str,
     values: Any,
@@ -212,7 +249,11 @@ def array_field(
         allow_positive_inf: Per name, whether ``+inf`` is admissible there.
 
     """
-    array = np.asarray(values, dtype=np.float64).ravel()
+    if not required and _is_empty(values):  # an empty optional field: nothing to check
+        return None
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim != 1:
+        array = array.ravel()
     if array.size == 0 and not required:
         return None
     if array.size != len(names):
@@ -222,9 +263,10 @@ def array_field(
             f'({len(names)})'
         )
     # Not a sum of the entries: NaN, inf or an overflowing sum would warn in a validator.
-    bad = ~np.isfinite(array)
-    if not bad.any():
+    finite = np.isfinite(array)
+    if finite.all():
         return array
+    bad = ~finite
     if allow_positive_inf is not None:
         bad &= ~(np.asarray(allow_positive_inf, dtype=bool) & (array == np.inf))
     if bad.any():

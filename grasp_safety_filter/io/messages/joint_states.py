@@ -52,9 +52,6 @@ class EffortData:
     effort: np.ndarray
 
 
-_EMPTY = np.zeros(0)
-_EMPTY.flags.writeable = False
-
 #: The float fields of a JointState, in message order.
 _FIELDS = ('position', 'velocity', 'effort')
 
@@ -84,7 +81,7 @@ def joint_state_to_msg(
     fields = {}
     for field_name, values in zip(_FIELDS, (position, velocity, effort), strict=True):
         if values is None:
-            fields[field_name] = msgs.float_array(_EMPTY)
+            fields[field_name] = msgs.empty_float_array()
             continue
         array = msgs.float_array(values)
         if len(array) != len(name):
@@ -124,8 +121,24 @@ def joint_state_from_msg(
 def effort_to_msg(
     msgs: MessageNamespace, t: float, names: Sequence[str], effort: np.ndarray
 ) -> Any:
-    """Build a JointState with names and efforts (N·m) only: position and velocity empty."""
-    return joint_state_to_msg(msgs, t, names, None, None, effort)
+    """Build a JointState with names and efforts (N·m) only: position and velocity empty.
+
+    :func:`joint_state_to_msg` with ``position`` and ``velocity`` None, written out for the
+    one field (a command every tick).
+    """
+    name = unique_names('message', names, 'entry')
+    array = msgs.float_array(effort)
+    if len(array) != len(name):
+        raise MessageError(
+            f"message: 'effort' has {len(array)} entries, expected {len(name)} (one per name)"
+        )
+    return msgs.JointState(
+        header=header_msg(msgs, t, ''),
+        name=list(name),
+        position=msgs.empty_float_array(),
+        velocity=msgs.empty_float_array(),
+        effort=array,
+    )
 
 
 def effort_from_msg(
@@ -141,7 +154,7 @@ def effort_from_msg(
 
     """
     order = match_names(source, msg.name, joint_names, 'joint')
-    names = list(msg.name)
+    names = msg.name  # matched: a sequence of distinct names (its length and error texts)
     effort = array_field(source, msg.effort, 'effort', names, required=True)
     for f in ('position', 'velocity'):
         array_field(source, getattr(msg, f), f, names, required=False)

@@ -52,22 +52,22 @@ def margins_to_msg(
     Without ``h_dot`` the velocity is empty (8 bytes per row and message, not 16); ``h_dot``
     entries that are NaN (not defined for that row) are sent as 0.0. Effort is empty.
     """
-    h_array = np.asarray(h, dtype=np.float64).ravel()
-    if len(names) != h_array.size:
-        raise ValueError(f'margins: {len(names)} names for {h_array.size} values')
-    rates = None
-    if h_dot is not None:
+    position = msgs.float_array(h)
+    if len(names) != len(position):
+        raise ValueError(f'margins: {len(names)} names for {len(position)} values')
+    if h_dot is None:
+        velocity = msgs.empty_float_array()
+    else:
         rates = np.asarray(h_dot, dtype=np.float64).ravel()
-        if rates.shape != h_array.shape:
-            raise ValueError(f'margins: {rates.size} rates for {h_array.size} values')
-        rates = np.where(np.isnan(rates), 0.0, rates)
-    empty = np.zeros(0)
+        if rates.size != len(position):
+            raise ValueError(f'margins: {rates.size} rates for {len(position)} values')
+        velocity = msgs.float_array(np.where(np.isnan(rates), 0.0, rates))
     return msgs.JointState(
         header=header_msg(msgs, t, ''),
         name=[str(n) for n in names] if with_names else [],
-        position=msgs.float_array(h_array),
-        velocity=msgs.float_array(empty if rates is None else rates),
-        effort=msgs.float_array(empty),
+        position=position,
+        velocity=velocity,
+        effort=msgs.empty_float_array(),
     )
 
 

@@ -89,9 +89,15 @@ class MessageNamespace:
         return cls(**classes, sequences_as_lists=True, byte_as_bytes=True)
 
     def float_array(self, values: np.ndarray) -> Any:
-        """Return a float array in the form this namespace's sequence fields take."""
-        array = np.array(values, dtype=np.float64).ravel()
-        return [float(v) for v in array] if self.sequences_as_lists else array
+        """Return a float array in the form this namespace's sequence fields take (a copy)."""
+        array = np.array(values, dtype=np.float64)
+        if array.ndim != 1:
+            array = array.ravel()
+        return array.tolist() if self.sequences_as_lists else array
+
+    def empty_float_array(self) -> Any:
+        """Return an empty float array in the form this namespace's sequence fields take."""
+        return [] if self.sequences_as_lists else np.empty(0)
 
     def byte(self, value: int) -> Any:
         """Return a ``byte`` field value."""
