@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import array as array_module  # rclpy's float fields
 from collections import Counter
 from collections.abc import Sequence
 from fractions import Fraction
@@ -192,7 +193,13 @@ def match_names(
         if len(_MATCHED) >= _MAX_MATCHED:
             _MATCHED.clear()
         _MATCHED[key] = index
-    if received_names.__class__ is list and expected_names.__class__ is tuple:
+    # Only names that are str: the check above compares str() of each, a list compares
+    # the objects (1 == 1.0, but '1' != '1.0').
+    if (
+        received_names.__class__ is list
+        and expected_names.__class__ is tuple
+        and all(name.__class__ is str for name in received_names)
+    ):
         if len(_LAST_MATCHED) >= _MAX_MATCHED:
             _LAST_MATCHED.clear()
         _LAST_MATCHED[id(expected_names)] = (expected_names, list(received_names), index)
@@ -222,11 +229,8 @@ def _match_names(
 
 
 def _is_empty(values: Any) -> bool:
-    """Whether ``values`` is a sequence of length 0 (a message's empty field)."""
-    try:
-        return len(values) == 0
-    except TypeError:  # no length: checked as an array
-        return False
+    """Whether ``values`` is a message's empty float field (a list, array or tuple)."""
+    return isinstance(values, (list, tuple, np.ndarray, array_module.array)) and len(values) == 0
 
 
 def array_field(
