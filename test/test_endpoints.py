@@ -684,6 +684,7 @@ class RestatingFilter(CountingFilter):
 
 def test_every_qp_status_is_a_tick_status_and_a_failed_one_is_an_error(params):
     assert {TickStatus.of(s).value for s in FilterStatus} == {s.value for s in FilterStatus}
+    assert all(TickStatus.of(s) is s for s in TickStatus)  # a tick status is its own
     assert FAILED_STATUSES == {
         TickStatus.of(FilterStatus.FALLBACK_LAST_GOOD),
         TickStatus.of(FilterStatus.FALLBACK_NOMINAL),

@@ -55,8 +55,9 @@ class TickStatus(str, Enum):
 
     @classmethod
     def of(cls, status: FilterStatus) -> TickStatus:
-        """Return the tick status of a QP outcome."""
-        return _OF_FILTER_STATUS[status]
+        """Return the tick status of a QP outcome (or of a tick status: itself)."""
+        of = _OF_FILTER_STATUS.get(status)
+        return of if of is not None else cls(status.value)
 
 
 #: :meth:`TickStatus.of`, looked up (an Enum call by value costs a tick a few microseconds).
