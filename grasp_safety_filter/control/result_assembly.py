@@ -134,9 +134,6 @@ class ResultAssembler:
             ),
         )
 
-    # Non-finite terms give non-finite margins, reported as such, not as warnings. As a
-    # decorator, np.errstate costs half of a with statement's entry and exit.
-    @np.errstate(all='ignore')
     def _write_margins(
         self,
         state: GraspState,
@@ -148,12 +145,14 @@ class ResultAssembler:
 
         ``rate_rows``: the torque-rate rows to evaluate instead of the family's current ones.
         """
-        for family, rows in zip(self.families, self.slices, strict=True):
-            if rate_rows is not None and family is self._torque_rate:
-                values[rows] = rate_rows.A @ u - rate_rows.lower  # TorqueRateBound.values
-            else:
-                values[rows] = family.values(state, u).h
-        self._write_box(u, values[len(self.row_names) :])
+        # Non-finite terms give non-finite margins, reported as such, not as warnings.
+        with np.errstate(all='ignore'):
+            for family, rows in zip(self.families, self.slices, strict=True):
+                if rate_rows is not None and family is self._torque_rate:
+                    values[rows] = rate_rows.A @ u - rate_rows.lower  # TorqueRateBound.values
+                else:
+                    values[rows] = family.values(state, u).h
+            self._write_box(u, values[len(self.row_names) :])
 
     def _write_box(self, u: np.ndarray, out: np.ndarray) -> None:
         """Write the box rows, joint by joint: ``u_j - u_min,j`` then ``u_max,j - u_j`` (N·m)."""
