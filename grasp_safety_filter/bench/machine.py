@@ -76,15 +76,20 @@ def fixed_work(iterations: int) -> float:
     return x
 
 
-def _call_time(iterations: int, calls: int = 21) -> float:
-    """Median thread CPU time of ``calls`` calls of :func:`fixed_work`, s."""
+def _thread_times(iterations: int, calls: int) -> np.ndarray:
+    """Thread CPU time of each of ``calls`` calls of :func:`fixed_work`, s."""
     clock = time.thread_time_ns
-    times = np.zeros(calls)
-    for i in range(calls):
+    times = np.zeros(max(1, calls))
+    for i in range(times.size):
         start = clock()
         fixed_work(iterations)
         times[i] = clock() - start
-    return 1e-9 * float(np.median(times))
+    return 1e-9 * times
+
+
+def _call_time(iterations: int, calls: int = 21) -> float:
+    """Median thread CPU time of ``calls`` calls of :func:`fixed_work`, s."""
+    return float(np.median(_thread_times(iterations, calls)))
 
 
 def calibrate(target: float = TARGET_CALL_TIME) -> int:
@@ -108,13 +113,7 @@ def noise_floor(calls: int, target: float = TARGET_CALL_TIME) -> dict[str, Any]:
         thread CPU times, µs) and ``p99_over_median``.
     """
     iterations = calibrate(target)
-    clock = time.thread_time_ns
-    times = np.zeros(max(1, calls))
-    for i in range(times.size):
-        start = clock()
-        fixed_work(iterations)
-        times[i] = clock() - start
-    cpu = statistics(1e-9 * times)
+    cpu = statistics(_thread_times(iterations, calls))
     return {
         'iterations': iterations,
         'cpu_us': cpu,

@@ -78,19 +78,26 @@ def joint_state_to_msg(
 
     """
     name = unique_names('message', names, 'entry')
-    fields = {}
-    for field_name, values in zip(_FIELDS, (position, velocity, effort), strict=True):
-        if values is None:
-            fields[field_name] = msgs.empty_float_array()
-            continue
-        array = msgs.float_array(values)
-        if len(array) != len(name):
-            raise MessageError(
-                f"message: '{field_name}' has {len(array)} entries, expected "
-                f'{len(name)} (one per name)'
-            )
-        fields[field_name] = array
+    fields = {
+        field_name: (
+            msgs.empty_float_array()
+            if values is None
+            else _sized_field(msgs, field_name, values, len(name))
+        )
+        for field_name, values in zip(_FIELDS, (position, velocity, effort), strict=True)
+    }
     return msgs.JointState(header=header_msg(msgs, t, frame_id), name=list(name), **fields)
+
+
+def _sized_field(msgs: MessageNamespace, field_name: str, values: Any, n_names: int) -> Any:
+    """Return ``values`` as a message float array; raise MessageError unless one per name."""
+    array = msgs.float_array(values)
+    if len(array) != n_names:
+        raise MessageError(
+            f"message: '{field_name}' has {len(array)} entries, expected "
+            f'{n_names} (one per name)'
+        )
+    return array
 
 
 def joint_state_from_msg(
@@ -127,11 +134,7 @@ def effort_to_msg(
     one field (a command every tick).
     """
     name = unique_names('message', names, 'entry')
-    array = msgs.float_array(effort)
-    if len(array) != len(name):
-        raise MessageError(
-            f"message: 'effort' has {len(array)} entries, expected {len(name)} (one per name)"
-        )
+    array = _sized_field(msgs, 'effort', effort, len(name))
     return msgs.JointState(
         header=header_msg(msgs, t, ''),
         name=list(name),
