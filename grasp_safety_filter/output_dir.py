@@ -5,8 +5,8 @@ output of this package, i.e. one holding nothing but :data:`OUTPUT_NAMES` (``bag
 only bag files in it, ``summary.json``, ``verdict.json``, the figures, and ``nominal``,
 ``filtered`` and ``analysis`` directories of the same kind). Anything else, or a symbolic
 link in the place of one of them, raises :class:`OutputError` unless ``force`` is given.
-Files are written to a temporary file and renamed into place, so a planted symbolic link
-is replaced, never followed, and a reader never sees half a file.
+The files themselves are written by :func:`grasp_safety_filter.io.files.write_file`
+(a temporary file renamed into place: a planted symbolic link is replaced, never followed).
 """
 
 from __future__ import annotations

@@ -46,6 +46,7 @@ __all__ = [
     'EventLog',
     'EventMonitor',
     'FamilyRecord',
+    'closed_mask',
 ]
 
 

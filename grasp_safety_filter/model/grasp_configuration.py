@@ -6,15 +6,18 @@ terms; the model's methods of the same names call them.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from grasp_safety_filter.model.fingertip_workspace import GraspConfigError
 
+if TYPE_CHECKING:  # the model's module imports this one
+    from grasp_safety_filter.model.grasp_model import GraspModel
+
 
 def project_to_contact(
-    model: Any,
+    model: GraspModel,
     q: np.ndarray,
     p_object_in_palm: np.ndarray,
     R_object_to_palm: np.ndarray,
@@ -63,7 +66,7 @@ def project_to_contact(
 
 
 def rolling_joint_velocity(
-    model: Any,
+    model: GraspModel,
     q: np.ndarray,
     p_object_in_palm: np.ndarray,
     R_object_to_palm: np.ndarray,
