@@ -183,7 +183,6 @@ def test_a_name_list_that_matched_once_is_still_checked_when_it_changes(rng):
         m.effort_from_msg(good, [*JOINTS, 'extra'])
 
 
-
 def test_names_that_equal_the_last_matched_but_spell_differently_are_refused():
     # Names are matched by their text: 1 and 1.0 are equal objects, not equal names.
     expected = ('1', '2')
@@ -192,6 +191,7 @@ def test_names_that_equal_the_last_matched_but_spell_differently_are_refused():
         with pytest.raises(MessageError, match='unknown joint names'):
             m.match_names('test', [1.0, 2.0], expected, 'joint')
     assert list(m.match_names('test', ['2', '1'], expected, 'joint')) == [1, 0]
+
 
 def test_effort_round_trip_is_exact_and_carries_effort_only(rng):
     effort = rng.normal(size=len(JOINTS))
