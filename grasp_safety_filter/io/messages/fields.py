@@ -160,10 +160,6 @@ def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
 _MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
 #: Most name lists remembered (a stream sends one or two; the cache is emptied when full).
 _MAX_MATCHED = 256
-#: Per tuple of expected names (by id; the tuple is kept, so its id is not reused): the
-#: tuple, the last list of received names matched to it and the index (one tuple per
-#: entry, replaced whole, so a reader in another thread never mixes two).
-_LAST_MATCHED: dict[int, tuple[tuple[str, ...], list[Any], np.ndarray]] = {}
 
 
 def match_names(
@@ -175,16 +171,6 @@ def match_names(
     once gives the same (read-only) index without checking again; one that did not is
     checked, and refused, every time.
     """
-    # One list comparison, not a key of two tuples, for the names of the last message
-    # matched to these expected names (a tuple, by identity: nobody can change it).
-    last = _LAST_MATCHED.get(id(expected_names))
-    if (
-        last is not None
-        and last[0] is expected_names
-        and received_names.__class__ is list
-        and received_names == last[1]
-    ):
-        return last[2]
     key = (tuple(map(str, received_names)), tuple(expected_names))
     index = _MATCHED.get(key)
     if index is None:
@@ -193,16 +179,6 @@ def match_names(
         if len(_MATCHED) >= _MAX_MATCHED:
             _MATCHED.clear()
         _MATCHED[key] = index
-    # Only names that are str: the check above compares str() of each, a list compares
-    # the objects (1 == 1.0, but '1' != '1.0').
-    if (
-        received_names.__class__ is list
-        and expected_names.__class__ is tuple
-        and all(name.__class__ is str for name in received_names)
-    ):
-        if len(_LAST_MATCHED) >= _MAX_MATCHED:
-            _LAST_MATCHED.clear()
-        _LAST_MATCHED[id(expected_names)] = (expected_names, list(received_names), index)
     return index
 
 
