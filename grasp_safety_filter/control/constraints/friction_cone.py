@@ -296,12 +296,10 @@ class FrictionPyramid:
         if packed is None:
             forces = state.contact_force(u)
         else:
-            # f_c(u) from [F | f_0] in the packed buffer (the views state.contact_force is
-            # made of, without building that AffineMap or the state's view of the term).
-            terms, layout = packed
-            start, stop, shape = layout.places['contact_force_augmented']
-            augmented = terms[start:stop].reshape(shape)
-            m = layout.n_joints
+            # f_c(u) from the packed [F | f_0] (the views state.contact_force is made of,
+            # without building that AffineMap: most of this call's time on a fresh state).
+            m = packed[1].n_joints
+            augmented = state.contact_force_augmented
             forces = augmented[:, :m] @ u + augmented[:, m]
         if self.torsional_friction is None:
             forces = forces.reshape(n, 3, 1)
