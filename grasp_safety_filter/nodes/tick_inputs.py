@@ -169,7 +169,7 @@ class TickAssembler:
         inputs = self._pending.setdefault(stamp, {})
         inputs[topic] = data
         if len(inputs) < len(INPUTS):
-            if topic in STATE_INPUTS and JOINT_STATES in inputs and OBJECT_ODOM in inputs:
+            if topic in STATE_INPUTS and all(name in inputs for name in STATE_INPUTS):
                 # The state is complete before u_nom: the model terms need not wait for it.
                 self._states[stamp] = self.timed_state(inputs[JOINT_STATES], inputs[OBJECT_ODOM])
             while len(self._pending) > MAX_PENDING:
