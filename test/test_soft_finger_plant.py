@@ -27,6 +27,7 @@ import pytest
 from test_simulator import hand_kinetic_energy, unactuated_run
 
 from grasp_safety_filter.bench.recorded_run import Scenario
+from grasp_safety_filter.model.arrays import skew
 from grasp_safety_filter.model.quaternion import from_rotation_matrix
 from hand_sim_node.simulator import SimState, Simulator
 from hand_sim_node.stage import PlantRate
@@ -45,10 +46,6 @@ def soft():
     scenario = Scenario.load(SCENARIO, plant_overrides=SOFT_FINGERS)
     assert scenario.model.soft_finger and scenario.model.wrench_size == 12
     return scenario.model, scenario.sim_config
-
-
-def skew(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def spin_residual(state):
