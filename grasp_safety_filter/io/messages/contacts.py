@@ -113,7 +113,9 @@ class ContactData:
         """Values and rates, shape (n, len(contact_quantities(...))), in publishing order."""
         n = np.asarray(self.psi).shape[0]
         zeros = np.zeros(n)
-        torsion = () if self.torsion is None else (self.torsion, zeros)
+        # Soft fingers: one more column, the torsion, whose rate is not published (0).
+        torsion_value = () if self.torsion is None else (self.torsion,)
+        torsion_rate = () if self.torsion is None else (zeros,)
         values = np.column_stack(
             (
                 self.xi_cf,
@@ -122,7 +124,7 @@ class ContactData:
                 self.force,
                 self.required_friction,
                 self.penetration,
-                *torsion[:1],
+                *torsion_value,
             )
         )
         rates = np.column_stack(
@@ -135,7 +137,7 @@ class ContactData:
                 zeros,
                 zeros,
                 zeros,
-                *torsion[1:],
+                *torsion_rate,
             )
         )
         return values, rates
