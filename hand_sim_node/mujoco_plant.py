@@ -314,7 +314,8 @@ class MuJoCoPlant:
         """
         n = self.model.n_contacts
         force_in_palm = np.zeros((n, 3))
-        torque_in_palm = np.zeros((n, 3))
+        # A point-contact model reads none of the torque.
+        torque_in_palm = np.zeros((n, 3)) if self.model.soft_finger else None
         for i, contact, wrench in self.fingertip_contacts():
             # The wrench of geom1 on geom2, in the contact frame whose rows are its axes
             # (the first the normal from geom1 to geom2); the torque is about the contact
@@ -322,12 +323,13 @@ class MuJoCoPlant:
             axes = np.asarray(contact.frame).reshape(3, 3).T
             sign = 1.0 if int(contact.geom2) == self.object_geom else -1.0
             force_in_palm[i] += sign * (axes @ wrench[:3])
-            torque_in_palm[i] += sign * (axes @ wrench[3:])
+            if torque_in_palm is not None:
+                torque_in_palm[i] += sign * (axes @ wrench[3:])
         force = np.einsum('nji,nj->ni', state.R_contact_to_palm, force_in_palm).ravel()
-        if not self.model.soft_finger:
+        if torque_in_palm is None:
             return force
         # The torque about the normal only: condim 6's rolling torques (about the tangents)
-        # have no place in our wrench, and a point-contact model reads none of the torque.
+        # have no place in our wrench.
         torsion = np.einsum('nj,nj->n', state.R_contact_to_palm[:, :, 2], torque_in_palm)
         return np.concatenate((force, torsion))
 
