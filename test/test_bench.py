@@ -167,6 +167,11 @@ def test_every_qp_backend_replays_the_same_ticks_and_agrees(bench):
             assert entry[key]['n'] == TICKS and entry[key]['median'] > 0.0, (backend, key)
         assert entry['max_abs_du_vs_first'] <= 1e-8, backend
         assert entry['compared_ticks'] >= TICKS // 2, backend
+        # The QP solve is part of the node tick that brackets it, tick by tick.
+        solve = entry['qp_solve_wall_us']
+        assert 0 < solve['n'] <= TICKS and 0.0 < solve['median'] <= solve['max'], backend
+        assert solve['max'] <= entry['node_tick_wall_us']['max'], backend
+        assert entry['node_tick_over_qp_solve'] > 1.0, backend
         assert backend in table
     assert backends[next(iter(BACKENDS))]['max_abs_du_vs_first'] == 0.0
 

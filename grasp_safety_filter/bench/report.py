@@ -304,17 +304,26 @@ def format_report(document: dict[str, Any]) -> str:
             '',
             'QP backends (qp.solver) on the same ticks, interleaved; node tick in µs:',
             f'{"backend":12s}{"CPU median":>12s}{"p99":>9s}{"wall median":>13s}{"p99":>9s}'
+            f'{"QP solve":>10s}{"p99":>9s}{"tick/QP":>9s}'
             f'{"max |Δu*| N·m":>15s}{"compared":>10s}   statuses',
         ]
         for backend, entry in document['backends'].items():
             cpu, wall = entry['node_tick_cpu_us'], entry['node_tick_wall_us']
+            solve, ratio = entry['qp_solve_wall_us'], entry['node_tick_over_qp_solve']
             counts = ', '.join(f'{k} {v}' for k, v in sorted(entry['statuses'].items()))
             lines.append(
                 f'{backend:12s}{_us(cpu["median"]):>12s}{_us(cpu["p99"]):>9s}'
                 f'{_us(wall["median"]):>13s}{_us(wall["p99"]):>9s}'
+                f'{_us(solve["median"]):>10s}{_us(solve["p99"]):>9s}'
+                f'{_times(ratio):>9s}'
                 f'{entry["max_abs_du_vs_first"]:>15.1e}{entry["compared_ticks"]:>10d}   {counts}'
             )
-        lines.append('  (max |Δu*|: against the first backend, on ticks both certified optimal)')
+        lines += [
+            "  (QP solve: the filter's solve_time, wall, on the ticks that solved a QP; tick/QP:"
+            " their node tick's",
+            '   median wall time over it; max |Δu*|: against the first backend, on ticks both'
+            ' certified optimal)',
+        ]
 
     external = document['external']
     step, solve = external['filter_step_us'], external['filter_qp_solve_us']
