@@ -39,9 +39,9 @@ import sys
 from typing import Any
 
 import numpy as np
-import yaml
 
 from grasp_safety_filter.bench.recorded_run import Scenario
+from grasp_safety_filter.cli import parse_override
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from hand_sim_node.closed_loop import LoopRun
 from hand_sim_node.mjcf import CONES, INTEGRATORS, MjcfOptions
@@ -111,21 +111,6 @@ def measure(run: LoopRun, reports: list[ContactReport], plant: MuJoCoPlant) -> d
 def max_torque_step(u: np.ndarray) -> float:
     """Largest ``|u_k,j - u_k-1,j|`` over ticks k and joints j (u shape (ticks, m)), N·m."""
     return float(np.max(np.abs(np.diff(u, axis=0)))) if len(u) > 1 else 0.0
-
-
-def parse_overrides(pairs: list[str]) -> dict[str, Any]:
-    """``["name=value", ...]`` as ``{name: value}``, each value read as YAML.
-
-    Raises:
-        ValueError: A pair without ``=``.
-    """
-    overrides: dict[str, Any] = {}
-    for pair in pairs:
-        name, sep, value = pair.partition('=')
-        if not sep or not name:
-            raise ValueError(f'--set {pair!r}: expected NAME=VALUE')
-        overrides[name.strip()] = yaml.safe_load(value)
-    return overrides
 
 
 def run_on_mujoco(
@@ -210,6 +195,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--friction', type=float, help="plant mu (default: the model's)")
     parser.add_argument(
         '--set',
+        type=parse_override,
         action='append',
         default=[],
         metavar='NAME=VALUE',
@@ -217,6 +203,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument(
         '--plant-set',
+        type=parse_override,
         action='append',
         default=[],
         metavar='NAME=VALUE',
@@ -241,17 +228,15 @@ def main(argv: list[str] | None = None) -> int:
             timestep=args.timestep,
             integrator=args.integrator,
         )
-        scenario = Scenario.load(
-            args.config, parse_overrides(args.set), parse_overrides(args.plant_set)
-        )
+        scenario = Scenario.load(args.config, dict(args.set), dict(args.plant_set))
     except (ConfigError, ValueError) as error:
         print(config_error_line('mujoco_run', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
     duration = args.duration or scenario.sim_config.duration
     figures = {
         'config': str(args.config),
-        'filter_overrides': args.set,
-        'plant_overrides': args.plant_set,
+        'filter_overrides': dict(args.set),
+        'plant_overrides': dict(args.plant_set),
         'duration_s': duration,
         'plant': args.plant,
         'mujoco': {

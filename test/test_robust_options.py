@@ -24,7 +24,7 @@ from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
 from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.model.affine import AffineMap
-from hand_sim_node import mujoco_run
+from hand_sim_node import mujoco_compare, mujoco_run
 from hand_sim_node.closed_loop import DURATION, run_closed_loop
 from hand_sim_node.plant import RigidPlant
 
@@ -312,9 +312,29 @@ def test_measurement_command_takes_filter_overrides(tmp_path):
     ]
     assert mujoco_run.main(argv) == 0
     figures = json.loads(out.read_text())
-    assert figures['filter_overrides'] == argv[-3::2]
+    overrides = {'torque_rate.enabled': True, 'torque_rate.max_step': 0.01}
+    assert figures['filter_overrides'] == overrides
     assert figures['filtered']['max_torque_step_Nm'] <= 0.01 + 1e-6
     assert mujoco_run.main(['--config', str(CONFIG), '--set', 'no_such=1']) != 0
+
+
+@pytest.mark.parametrize(
+    ('main', 'option', 'dest'),
+    [
+        (mujoco_run.main, '--set', 'set'),
+        (mujoco_run.main, '--plant-set', 'plant_set'),
+        (mujoco_compare.main, '--plant-set', None),
+    ],
+)
+def test_measurement_commands_read_overrides_as_a_parameter_file_does(main, option, dest, capsys):
+    """The MuJoCo tools type ``NAME=VALUE`` as grasp-demo does: ``1e-5`` is a double."""
+    if dest is not None:
+        parsed = mujoco_run.parse_args([option, 'osqp.eps_abs=1e-5'])
+        assert getattr(parsed, dest) == [('osqp.eps_abs', 1e-5)]
+    with pytest.raises(SystemExit) as exit_info:
+        main([option, 'model.torsional_friction'])
+    assert exit_info.value.code == 2
+    assert "expected NAME=VALUE, got 'model.torsional_friction'" in capsys.readouterr().err
 
 
 def test_measurement_command_runs_the_same_loop_on_our_plant(tmp_path):
