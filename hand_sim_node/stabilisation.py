@@ -26,31 +26,13 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.quaternion import quaternion_derivative
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
-from grasp_safety_filter.model.wrench_solve import wrench_solve
-
-
-def _solve(B_ho: np.ndarray, b: np.ndarray, torsion: bool, compliance: float) -> np.ndarray:
-    """Solve ``B_ho x = b`` as the model's kernel does.
-
-    Point contacts: LAPACK's gesv; soft fingers: the minimum-norm solution
-    (:func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
-
-    Raises:
-        numpy.linalg.LinAlgError: B_ho is singular (point contacts).
-    """
-    if torsion:
-        return wrench_solve(B_ho, b, compliance)
-    _, _, solution, info = dgesv(B_ho, b)
-    if info != 0:
-        raise np.linalg.LinAlgError(f'B_ho is singular (LAPACK gesv info {info})')
-    return solution
+from grasp_safety_filter.model.wrench_solve import contact_wrench
 
 
 @kernel
@@ -188,7 +170,7 @@ def stabilised_rate(
         velocity_gain,
     )
     if position_gain != 0.0 or velocity_gain != 0.0:
-        correction = _solve(state.B_ho, stabilisation, torsion, torsional_compliance)
+        correction = contact_wrench(state.B_ho, stabilisation, torsion, torsional_compliance)
     else:
         correction = stabilisation  # zero
     force, joints, body = state.contact_force, state.joint_acceleration, state.object_acceleration
@@ -410,8 +392,8 @@ def sphere_on_plane_stage_rate(
         torsion,
     )
     # Two solves, not one of [force_rhs | s]: LAPACK's bits depend on the number of columns.
-    force = _solve(B_ho, force_rhs, torsion, torsional_compliance)
-    correction = _solve(B_ho, stabilisation, torsion, torsional_compliance)
+    force = contact_wrench(B_ho, force_rhs, torsion, torsional_compliance)
+    correction = contact_wrench(B_ho, stabilisation, torsion, torsional_compliance)
     x_dot = _sphere_on_plane_stage_rate(
         force, stabilisation, correction, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
         w_relative, J_fingertip, J_fingertip_dot_dq, R_pc, H_cf, H_cf_dot_w, M_o_inverse,

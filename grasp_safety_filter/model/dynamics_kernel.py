@@ -40,10 +40,9 @@ less than the calls of the numpy expressions they replace. Units: SI; frames and
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.wrench_solve import wrench_solve
+from grasp_safety_filter.model.wrench_solve import contact_wrench
 
 
 @kernel
@@ -135,13 +134,8 @@ def contact_dynamics(
         frame_angular_velocity,
         torsion,
     )
-    if torsion:
-        force = wrench_solve(B_ho, force_rhs, compliance)
-    else:
-        # B_ho is at most 12 × 12: LAPACK's dgesv (scipy) in between the two compiled passes.
-        _, _, force, info = dgesv(B_ho, force_rhs)
-        if info > 0:
-            raise np.linalg.LinAlgError('Singular matrix')
+    # B_ho is at most 16 × 16: LAPACK (scipy) in between the two compiled passes.
+    force = contact_wrench(B_ho, force_rhs, torsion, compliance)
     ddq, x_ddot, xi_ddot = acceleration_terms(
         force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
         J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w,

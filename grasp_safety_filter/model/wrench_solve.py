@@ -3,12 +3,15 @@
 :mod:`~grasp_safety_filter.model.dynamics_kernel` forms ``B_ho`` and the right-hand side;
 point contacts solve them by LAPACK's gesv. Soft fingers add a no-spin row per contact
 (after the 3n force rows), which can make ``B_ho`` singular or nearly so, and take
-:func:`wrench_solve` instead.
+:func:`wrench_solve` instead. :func:`contact_wrench` chooses between the two for the
+model's and the simulator's Python callers; the compiled one-pass kernel
+(:mod:`~grasp_safety_filter.model.packed_terms`) makes the same choice inside.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.lapack import dgesv
 
 from grasp_safety_filter.model.compiled import kernel
 
@@ -60,3 +63,23 @@ def wrench_solve(B_ho: np.ndarray, rhs: np.ndarray, compliance: float) -> np.nda
     for t in range(3 * (k // 4), k):
         regularised[t, t] += compliance * B_ho[t, t]
     return np.linalg.solve(regularised, rhs)
+
+
+def contact_wrench(
+    B_ho: np.ndarray, rhs: np.ndarray, torsion: bool, compliance: float
+) -> np.ndarray:
+    """Solve ``B_ho X = rhs`` for the contact wrench (or its affine map).
+
+    Point contacts: LAPACK's gesv (scipy), the solve numpy's would make; soft fingers
+    (``torsion``): :func:`wrench_solve` with the relative torsional ``compliance``.
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular (point contacts; the contact forces are
+            not determined).
+    """
+    if torsion:
+        return wrench_solve(B_ho, rhs, compliance)
+    _, _, solution, info = dgesv(B_ho, rhs)
+    if info != 0:
+        raise np.linalg.LinAlgError(f'B_ho is singular (LAPACK gesv info {info})')
+    return solution
