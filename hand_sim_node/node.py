@@ -56,7 +56,7 @@ from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
 from hand_sim_node.plant import PlantConfig
-from hand_sim_node.start_up import GraphSnapshot, start_blockers
+from hand_sim_node.start_up import GraphSnapshot, load_step_kernels, start_blockers
 
 #: Wall-clock period of the start-up and watchdog checks, s.
 CHECK_PERIOD = 0.05
@@ -99,6 +99,7 @@ class HandSimNode(EndpointNode):
             self.msgs,
             plant_config=PlantConfig.from_parameters(self.parameters),
         )
+        load_step_kernels(self.endpoint)  # before the check timer can start the run
         self._command_subscription = self.subscribe(EFFORT_COMMAND, self._on_command)
         # Timers on the steady clock: simulation time stands still while the simulator waits.
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)

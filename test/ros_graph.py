@@ -311,9 +311,12 @@ def run_stream(
     return during, after
 
 
-#: The simulator's lockstep watchdog statuses: a command it waited for in vain (and so
-#: published its state again), or one that came after it had stepped on.
-WATCHDOG_TEXTS = ('no command stamped', 'is late')
+#: The simulator's lockstep watchdog statuses: a command it waited for in vain (it then
+#: published its state again), and a command that came after it had stepped on (an answer
+#: to a state it published again, when the first answer came after all).
+RESENT_TEXT = 'no command stamped'
+LATE_TEXT = 'is late'
+WATCHDOG_TEXTS = (RESENT_TEXT, LATE_TEXT)
 
 
 def _waiting_for_a_first_tick(status: Any) -> bool:
@@ -394,6 +397,55 @@ def stream_differences(
                     break
             differences += found[:6]
     return differences
+
+
+def lockstep_watchdog_counts(bag: Path) -> dict[str, int]:
+    """Count the simulator's lockstep watchdog statuses during a graph run, by text.
+
+    Returns:
+        ``{RESENT_TEXT: states published again, LATE_TEXT: commands that came late}``.
+
+    """
+    during, _ = run_stream(bag, [topics.DIAGNOSTICS])
+    counts = dict.fromkeys(WATCHDOG_TEXTS, 0)
+    for msg in during[topics.DIAGNOSTICS]:
+        for status in msg.status:
+            for text in WATCHDOG_TEXTS:
+                if status.name == 'hand_sim' and text in status.message:
+                    counts[text] += 1
+    return counts
+
+
+def unexplained_repeats(repeats: Mapping[str, int], resent: int, late: int) -> list[str]:
+    """Return which dropped repeats the lockstep watchdog does not explain (empty: all).
+
+    Each state the simulator published again (``resent``, one status each) repeats one
+    ``/hand/joint_states`` and one ``/object/odom``; the controllers answer it again, so a
+    repeated command and, if the first answer came after all, one command the simulator
+    reports as late (``late``) belong to it. The simulator steps once per stamp: no
+    ``/hand/contacts`` repeats.
+
+    Args:
+        repeats: Messages dropped per (sub)stream (:func:`stream_differences`).
+        resent: The simulator's statuses saying it published its state again.
+        late: Its statuses saying a command came late.
+
+    """
+    found = [
+        f'{topic}: {repeats.get(topic, 0)} repeated, {resent} states published again'
+        for topic in (topics.JOINT_STATES, topics.OBJECT_ODOM)
+        if repeats.get(topic, 0) != resent
+    ]
+    if late > resent:
+        found.append(f'{late} late commands, {resent} states published again')
+    if repeats.get(topics.EFFORT_COMMAND, 0) > resent:
+        found.append(
+            f'{topics.EFFORT_COMMAND}: {repeats[topics.EFFORT_COMMAND]} repeated, '
+            f'{resent} states published again'
+        )
+    if repeats.get(topics.CONTACTS, 0):
+        found.append(f'{topics.CONTACTS}: {repeats[topics.CONTACTS]} repeated')
+    return found
 
 
 # ----------------------------------------------------------------------------------------

@@ -825,6 +825,32 @@ def test_watchdog_names_the_input_that_stopped_and_ticks_say_when_they_resume(pa
     assert Key.INPUT_RESUMED_AFTER not in report.values
 
 
+def test_a_tick_answered_again_keeps_the_watchdog_away(params):
+    """A simulator that waited in vain sends its state again: the inputs did not stop."""
+    sim, safety_filter, safe, inputs = filter_after_one_wall_tick(params)
+    hold_timeout = safety_filter.hold.hold_timeout
+    resent = WALL + 0.9 * hold_timeout
+    joints, odometry, effort_nominal = inputs
+    assert safety_filter.on_joint_states(joints, wall=resent) == []
+    assert safety_filter.on_odom(odometry, wall=resent) == []
+    (again,) = commands(
+        safety_filter.on_effort_nominal(effort_nominal, wall=resent), sim.model.joint_names
+    )
+    np.testing.assert_array_equal(again, safe)
+    # A hold timeout after the first answer, not after the second: no fallback yet.
+    assert safety_filter.watchdog(WALL + 1.5 * hold_timeout, now=0.0) == []
+    # Silent after it: the fallback a hold timeout after the second answer.
+    outgoing = safety_filter.watchdog(resent + hold_timeout + WATCHDOG_PERIOD, now=0.0)
+    assert [o.topic for o in outgoing] == [topics.EFFORT_COMMAND, topics.DIAGNOSTICS]
+    (report,) = statuses(outgoing, 'safety_filter')
+    elapsed = float(report.values[Key.INPUT_WALL_TIME_SINCE_ACCEPTED])
+    assert elapsed == pytest.approx(hold_timeout + WATCHDOG_PERIOD)
+    # Once the watchdog has taken over, a state sent again does not end it.
+    assert next_tick(safety_filter, inputs, 0.0, wall=resent + 2 * hold_timeout) != []
+    assert safety_filter.watchdog(resent + 2 * hold_timeout + 0.001, now=0.0) != []
+    assert safety_filter.filter.calls == 1
+
+
 def test_watchdog_waits_for_a_first_tick_with_wall_times(params):
     fresh = make_filter(params)
     assert fresh.watchdog(WALL + 100.0, now=0.0) == []

@@ -232,6 +232,47 @@ def test_nodes_run_the_lockstep_loop_to_the_end(ros_context):
             node.destroy_node()
 
 
+def test_the_simulator_node_loads_its_kernels_before_the_first_step():
+    """Under load, numba loading kernels at the first step would stall the lockstep loop."""
+    pytest.importorskip('rclpy')
+    code = textwrap.dedent(
+        f"""
+        import numpy as np
+        from numba.core.dispatcher import Dispatcher
+        import rclpy
+        from rclpy.parameter import Parameter
+
+        from grasp_safety_filter.io.messages import effort_to_msg
+        from hand_sim_node.node import HandSimNode
+
+        rclpy.init()
+        node = HandSimNode(
+            cli_args=['--ros-args', '--params-file', {str(CONFIG)!r}],
+            parameter_overrides=[Parameter('use_sim_time', value=True)],
+        )
+        loaded = []
+        load = Dispatcher._compile_for_args
+
+        def counted(self, *args, **kwargs):
+            loaded.append(self.py_func.__name__)
+            return load(self, *args, **kwargs)
+
+        Dispatcher._compile_for_args = counted
+        sim = node.endpoint
+        sim.start()
+        joints = list(sim.model.joint_names)
+        sim.on_command(effort_to_msg(sim.msgs, sim.t, joints, np.zeros(len(joints))))
+        assert sim.plant.step_index == 1
+        print(loaded)
+        """
+    )
+    result = subprocess.run(
+        [sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == '[]'
+
+
 def test_the_simulator_node_runs_the_mujoco_plant(ros_context):
     """plant:=mujoco: the node steps MuJoCo (with its -p mujoco.* options) in the same loop."""
     from rclpy.executors import SingleThreadedExecutor

@@ -87,6 +87,16 @@ class InputWatchdog:
         self._accepted = wall
         return resumed_after
 
+    def answered_again(self, wall: float) -> None:
+        """Record the last tick answered again at ``wall``, s: its inputs came again.
+
+        A lockstep simulator that waited for its command in vain publishes its state again
+        and is answered again: its inputs did not stop. Once the watchdog has taken over,
+        only a new tick ends it (and says so).
+        """
+        if self._accepted is not None and self._since is None:
+            self._accepted = wall
+
     def silence(self, now_wall: float, hold_timeout: float) -> Silence | None:
         """Return the silence if no tick came for more than ``hold_timeout`` s, else None.
 

@@ -298,7 +298,11 @@ class SafetyFilterEndpoint:
         if tick is None:
             return []
         if tick == REPLAY:
-            # The same tick again (e.g. a simulator that re-sent its state): same answer.
+            # The same tick again (e.g. a simulator that re-sent its state): same answer,
+            # and the inputs did not stop (else the watchdog could answer the resent state
+            # with the fallback right after its answer).
+            if wall is not None:
+                self.input_watchdog.answered_again(wall)
             return list(self._last_outputs)
         return self._tick(stamp, tick, now_s, wall)
 
