@@ -292,40 +292,36 @@ def velocity_terms(
         for c in range(6):
             total += M_o_inverse[r, c] * (w_e[c] - C_o_twist[c])
         x_ddot_free[r] = total
-    # Products row by row, each entry's sum in the order of j: the inner loops run over
-    # contiguous columns with independent sums, which the compiler vectorises.
-    J_hT = np.empty((m, k))
-    for c in range(k):
-        for j in range(m):
-            J_hT[j, c] = J_h[c, j]
-    M_h_inv_J_hT = np.zeros((m, k))
+    M_h_inv_J_hT = np.empty((m, k))
     for r in range(m):
-        for j in range(m):
-            a = M_h_inverse[r, j]
-            for c in range(k):
-                M_h_inv_J_hT[r, c] += a * J_hT[j, c]
-    M_o_inv_G = np.zeros((6, k))
+        for c in range(k):
+            total = 0.0
+            for j in range(m):
+                total += M_h_inverse[r, j] * J_h[c, j]
+            M_h_inv_J_hT[r, c] = total
+    M_o_inv_G = np.empty((6, k))
     for r in range(6):
-        for j in range(6):
-            a = M_o_inverse[r, j]
-            for c in range(k):
-                M_o_inv_G[r, c] += a * G[j, c]
-    B_ho = np.zeros((k, k))
+        for c in range(k):
+            total = 0.0
+            for j in range(6):
+                total += M_o_inverse[r, j] * G[j, c]
+            M_o_inv_G[r, c] = total
+    B_ho = np.empty((k, k))
     for r in range(k):
-        for j in range(m):
-            a = J_h[r, j]
-            for c in range(k):
-                B_ho[r, c] += a * M_h_inv_J_hT[j, c]
-        for j in range(6):
-            a = G[j, r]
-            for c in range(k):
-                B_ho[r, c] += a * M_o_inv_G[j, c]
-    force_rhs = np.zeros((k, m + 1))
+        for c in range(k):
+            total = 0.0
+            for j in range(m):
+                total += J_h[r, j] * M_h_inv_J_hT[j, c]
+            for j in range(6):
+                total += G[j, r] * M_o_inv_G[j, c]
+            B_ho[r, c] = total
+    force_rhs = np.empty((k, m + 1))
     for r in range(k):
-        for j in range(m):
-            a = J_h[r, j]
-            for c in range(m + 1):
-                force_rhs[r, c] += a * ddq[j, c]
+        for c in range(m + 1):
+            total = 0.0
+            for j in range(m):
+                total += J_h[r, j] * ddq[j, c]
+            force_rhs[r, c] = total
         total = 0.0
         for j in range(6):
             total += G[j, r] * x_ddot_free[j]
@@ -357,21 +353,19 @@ def acceleration_terms(
     k = force.shape[0]
     tmp = np.empty(3)
     # ddq = M_h^-1 (u - h) - M_h^-1 J_h^T f_c;  x_o_ddot = M_o^-1 G f_c + x_ddot_free.
-    sums = np.empty(m + 1)
     for r in range(m):
-        sums[:] = 0.0
-        for j in range(k):
-            a = M_h_inv_J_hT[r, j]
-            for c in range(m + 1):
-                sums[c] += a * force[j, c]
         for c in range(m + 1):
-            ddq[r, c] -= sums[c]
-    x_ddot = np.zeros((6, m + 1))
+            total = 0.0
+            for j in range(k):
+                total += M_h_inv_J_hT[r, j] * force[j, c]
+            ddq[r, c] -= total
+    x_ddot = np.empty((6, m + 1))
     for r in range(6):
-        for j in range(k):
-            a = M_o_inv_G[r, j]
-            for c in range(m + 1):
-                x_ddot[r, c] += a * force[j, c]
+        for c in range(m + 1):
+            total = 0.0
+            for j in range(k):
+                total += M_o_inv_G[r, j] * force[j, c]
+            x_ddot[r, c] = total
         x_ddot[r, m] += x_ddot_free[r]
     # xi_cf_ddot,i = (H_cf R_cp) (J_w ddq - alpha_o + [alpha_f0 - w_c × w_rel]) + H_cf_dot w.
     xi_ddot = np.empty((2 * n, m + 1))
@@ -380,13 +374,11 @@ def acceleration_terms(
     for i in range(n):
         R = R_contact_to_palm[i]
         for r in range(3):
-            sums[:] = 0.0
-            for j in range(m):
-                a = J_fingertip[i, 3 + r, j]
-                for c in range(m + 1):
-                    sums[c] += a * ddq[j, c]
             for c in range(m + 1):
-                alpha[r, c] = sums[c] - x_ddot[3 + r, c]
+                total = 0.0
+                for j in range(m):
+                    total += J_fingertip[i, 3 + r, j] * ddq[j, c]
+                alpha[r, c] = total - x_ddot[3 + r, c]
         _cross(w_c[i], w_relative[i], tmp)
         for r in range(3):
             alpha[r, m] += J_fingertip_dot_dq[i, 3 + r] - tmp[r]
