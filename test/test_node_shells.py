@@ -179,7 +179,7 @@ def test_paper_demo_records_every_topic_of_the_table_as_mcap():
 
 @pytest.fixture
 def ros_context():
-    rclpy = pytest.importorskip('rclpy')
+    import rclpy  # a test dependency: a missing rclpy fails here, it is not skipped
     context = rclpy.Context()
     rclpy.init(context=context)
     yield context
@@ -234,7 +234,6 @@ def test_nodes_run_the_lockstep_loop_to_the_end(ros_context):
 
 def test_the_simulator_node_loads_its_kernels_before_the_first_step():
     """Under load, numba loading kernels at the first step would stall the lockstep loop."""
-    pytest.importorskip('rclpy')
     code = textwrap.dedent(
         f"""
         import numpy as np
