@@ -17,7 +17,8 @@ the hold policy gives the last safe command or, after ``input.hold_timeout``, th
 (:mod:`~grasp_safety_filter.nodes.held_commands`), stamped with the rejected message's stamp
 when it is readable and current (a lockstep simulator waiting for that stamp goes on), else
 with ``now``; the tick of that stamp is then closed. A complete, valid set arriving again for
-the last tick's stamp (a simulator that re-sent its state) gets the same messages again.
+the last tick's stamp (a simulator that re-sent its state) gets the same messages again, and
+the input watchdog then waits from it: those inputs did not stop.
 
 Input watchdog (:mod:`~grasp_safety_filter.nodes.input_watchdog`): :meth:`watchdog`, called
 every :data:`WATCHDOG_PERIOD` s on a steady clock, sends the fallback and an ERROR once no
