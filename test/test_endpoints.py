@@ -851,6 +851,44 @@ def test_a_tick_answered_again_keeps_the_watchdog_away(params):
     assert safety_filter.filter.calls == 1
 
 
+def test_the_watchdog_waits_from_the_answer_of_a_slow_tick(params):
+    """A tick longer than the hold timeout (a node's first loads its kernels): no fallback."""
+    sim, joints, odometry, effort_nominal = tick_inputs(params)
+    values = params['safety_filter_node']
+    clock = [WALL]
+    safety_filter = SafetyFilterEndpoint(
+        GraspModel.from_parameters(values),
+        SafetyFilterConfig.from_parameters(values),
+        InputPolicyConfig.from_parameters(values),
+        MSGS,
+        wall_clock=lambda: clock[0],
+    )
+    hold_timeout = safety_filter.hold.hold_timeout
+    slow = 3.0 * hold_timeout
+    core = safety_filter.filter
+
+    class SlowFilter(CountingFilter):
+        def solve(self, state, u_nom):
+            clock[0] += slow  # the wall clock runs on while the tick computes
+            return super().solve(state, u_nom)
+
+    safety_filter.filter = SlowFilter(core)
+    assert safety_filter.on_joint_states(joints, wall=WALL - 0.0004) == []
+    assert safety_filter.on_odom(odometry, wall=WALL - 0.0002) == []
+    answer = safety_filter.on_effort_nominal(effort_nominal, wall=WALL)
+    assert len(commands(answer, sim.model.joint_names)) == 1
+    answered = WALL + slow
+    # Timed from the last input, the watchdog would send the fallback right after the answer.
+    for wall in (answered + WATCHDOG_PERIOD, answered + 0.999 * hold_timeout):
+        assert safety_filter.watchdog(wall, now=0.0) == []
+    outgoing = safety_filter.watchdog(answered + hold_timeout + WATCHDOG_PERIOD, now=0.0)
+    assert [o.topic for o in outgoing] == [topics.EFFORT_COMMAND, topics.DIAGNOSTICS]
+    (report,) = statuses(outgoing, 'safety_filter')
+    elapsed = float(report.values[Key.INPUT_WALL_TIME_SINCE_ACCEPTED])
+    assert elapsed == pytest.approx(hold_timeout + WATCHDOG_PERIOD)
+    assert safety_filter.filter.calls == 1
+
+
 def test_watchdog_waits_for_a_first_tick_with_wall_times(params):
     fresh = make_filter(params)
     assert fresh.watchdog(WALL + 100.0, now=0.0) == []

@@ -41,6 +41,7 @@ turns the filter on or off at run time and records when. The status's values:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import time
 from typing import Any
 
@@ -119,6 +120,11 @@ class SafetyFilterEndpoint:
         grasp_check_config: ``grasp_check.gap_tolerance`` (default: the start-up check's).
         parse: The joint state and odometry parses, shared with the nominal controller in
             process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
+        wall_clock: The clock of the handlers' ``wall`` (the node's ``time.monotonic``),
+            read when a tick is answered: the input watchdog waits from the answer, so a
+            tick that took longer than ``input.hold_timeout`` (its first, which loads the
+            compiled kernels) is not followed by the fallback. None: a tick is dated by its
+            ``wall``, when its last input came.
 
     Attributes:
         filter: The safety filter core.
@@ -143,6 +149,7 @@ class SafetyFilterEndpoint:
         publication_rate_config: PublicationRateConfig | None = None,
         grasp_check_config: GraspCheckConfig | None = None,
         parse: SharedParse | None = None,
+        wall_clock: Callable[[], float] | None = None,
     ) -> None:
         self.model = model
         self.msgs = msgs
@@ -161,6 +168,7 @@ class SafetyFilterEndpoint:
         self._last_outputs: list[Outgoing] = []
         self.held = HeldCommands(model, self.hold, msgs, self.rate, self._status_message)
         self.input_watchdog = InputWatchdog(INPUTS)
+        self._wall_clock = wall_clock
         self._switched_at: float | None = None
 
     # -------------------------------------------------------------------------- inputs
@@ -303,7 +311,7 @@ class SafetyFilterEndpoint:
             # and the inputs did not stop (else the watchdog could answer the resent state
             # with the fallback right after its answer).
             if wall is not None:
-                self.input_watchdog.answered_again(wall)
+                self.input_watchdog.answered_again(self._answered(wall))
             return list(self._last_outputs)
         return self._tick(stamp, tick, now_s, wall)
 
@@ -350,7 +358,9 @@ class SafetyFilterEndpoint:
         # The gravity fallback's q: only a tick's accepted joint state, never one merely parsed.
         self.held.last_positions = np.array(inputs.joint_states.position)
         self.inputs.close(stamp)
-        resumed_after = None if wall is None else self.input_watchdog.accepted(wall)
+        resumed_after = (
+            None if wall is None else self.input_watchdog.accepted(self._answered(wall))
+        )
         # Both messages are stamped t, whose ns is the tick's stamp.
         command = effort_to_msg(self.msgs, t, self._joint_names, u)
         outgoing = [Outgoing(EFFORT_COMMAND, stamp, command)]
@@ -388,9 +398,13 @@ class SafetyFilterEndpoint:
         outgoing = self.held.grasp_lost(self.grasp, stamp, inputs.joint_states.t, now)
         self.inputs.close(stamp)
         if wall is not None:
-            self.input_watchdog.accepted(wall)
+            self.input_watchdog.accepted(self._answered(wall))
         self._last_outputs = outgoing
         return list(outgoing)
+
+    def _answered(self, wall: float) -> float:
+        """Return when a tick whose last input came at ``wall`` is answered, s."""
+        return wall if self._wall_clock is None else max(wall, self._wall_clock())
 
     def take_log(self) -> list[LogLine]:
         """Return and forget the grasp check's log lines (each change of its answer, once)."""

@@ -86,6 +86,7 @@ class SafetyFilterNode(EndpointNode):
             enabled=self.parameters[ENABLED_PARAMETER],
             publication_rate_config=PublicationRateConfig.from_parameters(self.parameters),
             grasp_check_config=GraspCheckConfig.from_parameters(self.parameters),
+            wall_clock=time.monotonic,
         )
         endpoint = self.endpoint
         monotonic = time.monotonic
