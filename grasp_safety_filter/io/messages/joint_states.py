@@ -128,20 +128,8 @@ def joint_state_from_msg(
 def effort_to_msg(
     msgs: MessageNamespace, t: float, names: Sequence[str], effort: np.ndarray
 ) -> Any:
-    """Build a JointState with names and efforts (N·m) only: position and velocity empty.
-
-    :func:`joint_state_to_msg` with ``position`` and ``velocity`` None, written out for the
-    one field (a command every tick).
-    """
-    name = unique_names('message', names, 'entry')
-    array = _sized_field(msgs, 'effort', effort, len(name))
-    return msgs.JointState(
-        header=header_msg(msgs, t, ''),
-        name=list(name),
-        position=msgs.empty_float_array(),
-        velocity=msgs.empty_float_array(),
-        effort=array,
-    )
+    """Build a JointState with names and efforts (N·m) only: position and velocity empty."""
+    return joint_state_to_msg(msgs, t, names, None, None, effort)
 
 
 def effort_from_msg(
