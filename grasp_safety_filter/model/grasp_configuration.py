@@ -1,7 +1,7 @@
 """Solves on a grasp's configuration: fingertips onto the object, joint rates that roll with it.
 
 Both act on a :class:`~grasp_safety_filter.model.grasp_model.GraspModel` through its public
-terms; the model's methods of the same names call them.
+terms; the model's methods of the same names are these functions.
 """
 
 from __future__ import annotations

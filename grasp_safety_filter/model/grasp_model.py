@@ -291,21 +291,9 @@ class GraspModel:
             for i, contact in enumerate(self.contacts)
         ]
 
-    def project_to_contact(
-        self,
-        q: np.ndarray,
-        p_object_in_palm: np.ndarray,
-        R_object_to_palm: np.ndarray,
-        tolerance: float = 1e-13,
-        max_iterations: int = 50,
-    ) -> np.ndarray:
-        """Smallest joint correction that makes every fingertip touch its surface exactly.
-
-        Gauss–Newton on the penetrations (:mod:`~grasp_safety_filter.model.grasp_configuration`).
-        """
-        return grasp_configuration.project_to_contact(
-            self, q, p_object_in_palm, R_object_to_palm, tolerance, max_iterations
-        )
+    #: Smallest joint correction that makes every fingertip touch its surface exactly
+    #: (:func:`~grasp_safety_filter.model.grasp_configuration.project_to_contact`).
+    project_to_contact = grasp_configuration.project_to_contact
 
     def check_grasp(
         self,
@@ -325,21 +313,9 @@ class GraspModel:
         gap = GAP_TOLERANCE if tolerance is None else tolerance
         check_grasp(self, q, p_object_in_palm, R_object_to_palm, gap)
 
-    def rolling_joint_velocity(
-        self,
-        q: np.ndarray,
-        p_object_in_palm: np.ndarray,
-        R_object_to_palm: np.ndarray,
-        twist_object: np.ndarray,
-    ) -> np.ndarray:
-        """Joint velocity that rolls the fingertips with the object.
-
-        Solves ``J_h dq = G^T x_o_dot`` (least-norm when m > 3n; soft fingers: see
-        :func:`~grasp_safety_filter.model.grasp_configuration.rolling_joint_velocity`).
-        """
-        return grasp_configuration.rolling_joint_velocity(
-            self, q, p_object_in_palm, R_object_to_palm, twist_object
-        )
+    #: Joint velocity that rolls the fingertips with the object, ``J_h dq = G^T x_o_dot``
+    #: (:func:`~grasp_safety_filter.model.grasp_configuration.rolling_joint_velocity`).
+    rolling_joint_velocity = grasp_configuration.rolling_joint_velocity
 
     def total_energy(self, state: GraspState) -> float:
         """Kinetic plus gravitational potential energy of hand and object, J."""
