@@ -210,6 +210,8 @@ def _sphere_on_plane_stage_system(
     offset_in_parent: np.ndarray,
     support: np.ndarray,
     joint_index: np.ndarray,
+    joint_span: np.ndarray,
+    fingertip_span: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
     R_object_to_palm: np.ndarray,
@@ -271,6 +273,8 @@ def _sphere_on_plane_stage_system(
         H_cf_dot_w,
         sliding,
         Omega,
+        joint_span,
+        fingertip_span,
         torsion,
     )
     stabilisation = baumgarte_correction(
@@ -304,12 +308,15 @@ def _sphere_on_plane_stage_rate(
     dq: np.ndarray,
     twist_object: np.ndarray,
     quaternion_xyzw: np.ndarray,
+    joint_span: np.ndarray,
+    fingertip_span: np.ndarray,
 ) -> np.ndarray:
     """From ``[F | f_0]`` and ``c``: the model's second pass, then the module's formulas."""
     m = ddq.shape[0]
     joints, body, _ = acceleration_terms(
         force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
-        J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w,
+        J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w, joint_span,
+        fingertip_span,
     )
     x_dot, _ = _stabilised_rates(
         force[:, :m], force[:, m], joints[:, :m], joints[:, m], body[:, :m], body[:, m],
@@ -340,7 +347,7 @@ def sphere_on_plane_stage_rate(
     """``x_dot`` of spherical fingertips on flat faces, from the hand's terms at a stage.
 
     The kernels :meth:`GraspModel.state` runs (the contacts' closed forms, both passes of
-    :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`) and
+    :func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`) and
     :func:`stabilised_rate`'s formulas, in two compiled calls around one LAPACK solve of
     ``B_ho`` (for ``[F | f_0]``, as the model's, and for ``c``): the same arithmetic, bit
     for bit, without a Python round trip per kernel. The hand's terms are formed in the
@@ -377,6 +384,7 @@ def sphere_on_plane_stage_rate(
         *hand.raw_terms(q, dq),
         *hand.fingertip_frames,
         hand.pinocchio_index,
+        *hand.branches,
         dq,
         p_object_in_palm,
         R_object_to_palm,
@@ -397,6 +405,6 @@ def sphere_on_plane_stage_rate(
     x_dot = _sphere_on_plane_stage_rate(
         force, stabilisation, correction, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
         w_relative, J_fingertip, J_fingertip_dot_dq, R_pc, H_cf, H_cf_dot_w, M_o_inverse,
-        effort, dq, twist_object, quaternion_xyzw,
+        effort, dq, twist_object, quaternion_xyzw, *hand.branches,
     )
     return x_dot

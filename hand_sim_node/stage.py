@@ -20,7 +20,7 @@ compiled in :func:`~hand_sim_node.stabilisation.stabilised_rate`:
   (the state the controller read) and holds the model's terms.
 - :meth:`PlantRate.at` at the intermediate Runge–Kutta stages, from the configuration: the
   same compiled kernels :meth:`GraspModel.state` runs (the hand's terms, the contacts'
-  kinematics, :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`), without
+  kinematics, :func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`), without
   building a read-only GraspState around them. For spherical fingertips on flat faces
   (the paper's grasp) they run inside two compiled calls around the solves of ``B_ho``
   (:func:`~hand_sim_node.stabilisation.sphere_on_plane_stage_rate`): the same bits
@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.contact_dynamics import contact_dynamics
 from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
-from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.stabilisation import sphere_on_plane_stage_rate, stabilised_rate
 
@@ -76,7 +76,7 @@ def _rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
 class StageTerms:
     """The model's terms at a Runge–Kutta stage that :func:`stabilised_rate` reads.
 
-    The outputs of :func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`,
+    The outputs of :func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`,
     not copied (made read-only, as in a GraspState): the fields of a :class:`GraspState`
     that the plant's rate needs, without the terms only the safety filter reads.
     """
@@ -198,6 +198,7 @@ class PlantRate:
             rates.H_cf_dot_w,
             rates.sliding_velocity,
             rates.frame_angular_velocity,
+            *self._hand.branches,
             self._model.soft_finger,
             self._model.torsional_compliance,
         )

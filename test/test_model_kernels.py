@@ -19,8 +19,8 @@ import pinocchio as pin
 import pytest
 from random_hands import random_hand
 
+from grasp_safety_filter.model.contact_dynamics import contact_dynamics
 from grasp_safety_filter.model.contact_stack import contact_stack, ContactStack, SphereOnPlaneStack
-from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_model import GraspModel
 
 PAPER_CASES = {
@@ -107,7 +107,7 @@ def test_a_singular_B_ho_raises_as_numpy_solve_does():
         zeros((n, 6, m)), zeros((n, 6)), zeros((n, 6)), zeros((n, 3)), zeros((m, m)), zeros(m),
         zeros(3), zeros(6), zeros((6, 6)), zeros(6), zeros(6), zeros((n, 3)),
         np.tile(np.eye(3), (n, 1, 1)), zeros((n, 2, 3)), zeros((n, 2)), zeros((n, 2)),
-        zeros((n, 3)),
+        zeros((n, 3)), np.tile([0, m], (m, 1)), np.tile([0, m], (n, 1)),
     )
     with pytest.raises(np.linalg.LinAlgError, match='B_ho is singular'):
         contact_dynamics(*arguments)

@@ -1,7 +1,9 @@
-"""The grasp's contact dynamics at one instant, as one compiled kernel.
+"""The grasp's contact dynamics at one instant, as two compiled passes.
 
 From the hand's terms (Pinocchio), the object's and the contacts' geometry and rolling
-rates, :func:`contact_dynamics` computes (DESIGN.md §3; the derivation is in
+rates, :func:`velocity_terms` and :func:`acceleration_terms` compute, on either side of the
+solve of ``B_ho`` (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`;
+DESIGN.md §3; the derivation is in
 :mod:`grasp_safety_filter.model.grasp_model`), per contact i, with ``R_cp,i = R_pc,i^T``,
 ``p_fc,i = p_c,i - p_f,i`` and ``p_oc,i = p_c,i - p_o``:
 
@@ -31,6 +33,12 @@ and the torque-affine terms, as augmented matrices ``[matrix | offset]`` acting 
 (soft fingers solve for ``f_c`` with compliant spin rows, or the least-squares solution of
 minimum norm where rigid ones make ``B_ho`` singular:
 :func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
+
+The sums over joints follow the hand's branches (:class:`~grasp_safety_filter.model.hand.
+Branches`): row r of ``M_h^-1`` is zero outside joint r's span and contact i's rows of
+``J_h`` outside its fingertip's span, so a product sums over the overlap of its factors'
+spans only (none for two fingers of a hand whose fingers hang from the palm). The terms
+left out are exact zeros: the answers are those of the full sums, bit for bit.
 Plain loops compiled by numba (:mod:`grasp_safety_filter.model.compiled`): at these sizes
 (k ≤ 16 rows, m ≤ 16 joints) two compiled passes, around LAPACK's solve of ``B_ho``, cost
 less than the calls of the numpy expressions they replace. Units: SI; frames and conventions as in
@@ -42,7 +50,22 @@ from __future__ import annotations
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.wrench_solve import contact_wrench
+
+
+@kernel
+def _row_span(fingertip_span: np.ndarray, row: int) -> tuple[int, int]:
+    """Return wrench row ``row``'s joint span: its contact's (``3i..3i+2``, torsion ``3n+i``)."""
+    n = fingertip_span.shape[0]
+    i = row // 3 if row < 3 * n else row - 3 * n
+    return fingertip_span[i, 0], fingertip_span[i, 1]
+
+
+@kernel
+def _spans_meet(fingertip_span: np.ndarray, i: int, joint_span: np.ndarray, r: int) -> bool:
+    """Return whether fingertip i's span and joint r's overlap."""
+    return max(fingertip_span[i, 0], joint_span[r, 0]) < min(
+        fingertip_span[i, 1], joint_span[r, 1]
+    )
 
 
 @kernel
@@ -51,96 +74,6 @@ def _cross(a: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
     out[0] = a[1] * b[2] - a[2] * b[1]
     out[1] = a[2] * b[0] - a[0] * b[2]
     out[2] = a[0] * b[1] - a[1] * b[0]
-
-
-def contact_dynamics(
-    J_fingertip: np.ndarray,
-    twist_fingertip: np.ndarray,
-    J_fingertip_dot_dq: np.ndarray,
-    p_fingertip_in_palm: np.ndarray,
-    M_h_inverse: np.ndarray,
-    h_bias: np.ndarray,
-    p_object_in_palm: np.ndarray,
-    twist_object: np.ndarray,
-    M_o_inverse: np.ndarray,
-    C_o_twist: np.ndarray,
-    w_e: np.ndarray,
-    p_contact_in_palm: np.ndarray,
-    R_contact_to_palm: np.ndarray,
-    H_cf: np.ndarray,
-    H_cf_dot_w: np.ndarray,
-    sliding_velocity: np.ndarray,
-    frame_angular_velocity: np.ndarray,
-    torsion: bool = False,
-    compliance: float = 0.0,
-) -> tuple[
-    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-    np.ndarray, np.ndarray,
-]:
-    """Contact Jacobians, grasp map, their rates and the torque-affine terms of one instant.
-
-    Args:
-        J_fingertip: ``J_s`` per fingertip (LOCAL_WORLD_ALIGNED), (n, 6, m).
-        twist_fingertip: ``(v_f, w_f)``, (n, 6).
-        J_fingertip_dot_dq: ``(a_f0, alpha_f0) = J_s_dot dq``, (n, 6).
-        p_fingertip_in_palm: Fingertip sphere centres, (n, 3), m.
-        M_h_inverse: ``M_h^-1``, (m, m).
-        h_bias: ``C_h dq + g``, (m,), N·m.
-        p_object_in_palm: Object centre of mass, (3,), m.
-        twist_object: ``(v_o, w_o)``, (6,).
-        M_o_inverse: ``M_o^-1``, (6, 6).
-        C_o_twist: ``C_o x_o_dot``, (6,).
-        w_e: External wrench on the object, (6,).
-        p_contact_in_palm: Contact points, (n, 3), m.
-        R_contact_to_palm: Contact frames ``R_pc``, (n, 3, 3).
-        H_cf: Relative rotation (contact frame) ↦ xi_cf_dot, (n, 2, 3).
-        H_cf_dot_w: ``H_cf_dot w``, (n, 2).
-        sliding_velocity: ``M_cf xi_cf_dot`` along (rho1, rho2), (n, 2), m/s.
-        frame_angular_velocity: ``Omega`` (contact-frame components), (n, 3), rad/s.
-        torsion: Soft-finger contacts: each contact also transmits a torque about its
-            normal and the fingertip cannot spin on the object (k = 4n rows, the n torsion
-            rows after the 3n force rows); False: point contacts with friction (k = 3n).
-        compliance: Soft fingers' relative torsional compliance
-            (:func:`~grasp_safety_filter.model.wrench_solve.wrench_solve`).
-
-    Returns:
-        ``J_h`` (k, m), ``G`` (6, k), ``J_h_dot dq`` (k,), ``G_dot^T x_o_dot`` (k,),
-        ``B_ho`` (k, k), and ``[matrix | offset]`` of ``f_c`` (k, m + 1), ``ddq``
-        (m, m + 1), ``x_o_ddot`` (6, m + 1) and ``xi_cf_ddot`` (2n, m + 1, contact-major).
-
-    Raises:
-        numpy.linalg.LinAlgError: B_ho is singular (the contact forces are not determined).
-    """
-    (
-        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
-        x_ddot_free, w_c, w_relative,
-    ) = velocity_terms(
-        J_fingertip,
-        twist_fingertip,
-        J_fingertip_dot_dq,
-        p_fingertip_in_palm,
-        M_h_inverse,
-        h_bias,
-        p_object_in_palm,
-        twist_object,
-        M_o_inverse,
-        C_o_twist,
-        w_e,
-        p_contact_in_palm,
-        R_contact_to_palm,
-        H_cf,
-        H_cf_dot_w,
-        sliding_velocity,
-        frame_angular_velocity,
-        torsion,
-    )
-    # B_ho is at most 16 × 16: LAPACK (scipy) in between the two compiled passes.
-    force = contact_wrench(B_ho, force_rhs, torsion, compliance)
-    ddq, x_ddot, xi_ddot = acceleration_terms(
-        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
-        J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w,
-    )
-    return J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force, ddq, x_ddot, xi_ddot
 
 
 @kernel
@@ -162,18 +95,21 @@ def velocity_terms(
     H_cf_dot_w: np.ndarray,
     sliding_velocity: np.ndarray,
     frame_angular_velocity: np.ndarray,
+    joint_span: np.ndarray,
+    fingertip_span: np.ndarray,
     torsion: bool,
 ) -> tuple[np.ndarray, ...]:
     """Everything up to ``B_ho f_c = rhs``: the Jacobians, rates, ``B_ho`` and ``rhs``.
 
-    The first of :func:`contact_dynamics`' two compiled passes; a compiled caller that
-    solves ``B_ho`` itself (the simulator's Runge–Kutta stages) calls both. With
-    ``torsion``, rows ``3n + i`` are contact i's torsion rows (module docstring).
+    The first of :func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`' two
+    compiled passes; a compiled caller that solves ``B_ho`` itself (the simulator's
+    Runge–Kutta stages) calls both. With ``torsion``, rows ``3n + i`` are contact i's torsion
+    rows (module docstring).
     """
     n = J_fingertip.shape[0]
     m = J_fingertip.shape[2]
     k = 4 * n if torsion else 3 * n
-    J_h = np.empty((k, m))
+    J_h = np.zeros((k, m))
     G = np.zeros((6, k))
     Jh_dot_dq = np.empty(k)
     G_dot_T_twist = np.empty(k)
@@ -197,8 +133,8 @@ def velocity_terms(
             p_fc[r] = p_contact_in_palm[i, r] - p_fingertip_in_palm[i, r]
             p_oc[r] = p_contact_in_palm[i, r] - p_object_in_palm[r]
             w_relative[i, r] = w_f[r] - w_o[r]
-        # J_h,i = R_cp (J_v - p_fc × J_w), column by column.
-        for j in range(m):
+        # J_h,i = R_cp (J_v - p_fc × J_w), column by column (zero off the fingertip's span).
+        for j in range(fingertip_span[i, 0], fingertip_span[i, 1]):
             for r in range(3):
                 tmp[r] = J_fingertip[i, 3 + r, j]
             _cross(p_fc, tmp, tmp2)
@@ -258,7 +194,7 @@ def velocity_terms(
             # No spin about the normal n = z_c: n^T (w_f - w_o) = 0, whose rate is
             # n^T (alpha_f - alpha_o) + (w_c × n)^T (w_f - w_o) = 0 (n turns with w_c).
             t = 3 * n + i
-            for j in range(m):
+            for j in range(fingertip_span[i, 0], fingertip_span[i, 1]):
                 J_h[t, j] = (
                     R[0, 2] * J_fingertip[i, 3, j]
                     + R[1, 2] * J_fingertip[i, 4, j]
@@ -283,6 +219,7 @@ def velocity_terms(
         offset = 0.0
         for j in range(m):
             ddq[r, j] = M_h_inverse[r, j]
+        for j in range(joint_span[r, 0], joint_span[r, 1]):
             offset -= M_h_inverse[r, j] * h_bias[j]
         ddq[r, m] = offset
     # Object acceleration from gravity and the bias wrench: M_o^-1 (w_e - C_o x_o_dot).
@@ -292,11 +229,13 @@ def velocity_terms(
         for c in range(6):
             total += M_o_inverse[r, c] * (w_e[c] - C_o_twist[c])
         x_ddot_free[r] = total
+    # Sums over the overlap of the factors' spans (module docstring).
     M_h_inv_J_hT = np.empty((m, k))
     for r in range(m):
         for c in range(k):
+            start, stop = _row_span(fingertip_span, c)
             total = 0.0
-            for j in range(m):
+            for j in range(max(start, joint_span[r, 0]), min(stop, joint_span[r, 1])):
                 total += M_h_inverse[r, j] * J_h[c, j]
             M_h_inv_J_hT[r, c] = total
     M_o_inv_G = np.empty((6, k))
@@ -308,18 +247,26 @@ def velocity_terms(
             M_o_inv_G[r, c] = total
     B_ho = np.empty((k, k))
     for r in range(k):
+        start, stop = _row_span(fingertip_span, r)
         for c in range(k):
+            other_start, other_stop = _row_span(fingertip_span, c)
             total = 0.0
-            for j in range(m):
+            for j in range(max(start, other_start), min(stop, other_stop)):
                 total += J_h[r, j] * M_h_inv_J_hT[j, c]
             for j in range(6):
                 total += G[j, r] * M_o_inv_G[j, c]
             B_ho[r, c] = total
     force_rhs = np.empty((k, m + 1))
     for r in range(k):
+        start, stop = _row_span(fingertip_span, r)
         for c in range(m + 1):
+            # ddq's column c < m is M_h^-1's: zero outside joint c's span.
+            if c < m:
+                low, high = max(start, joint_span[c, 0]), min(stop, joint_span[c, 1])
+            else:
+                low, high = start, stop
             total = 0.0
-            for j in range(m):
+            for j in range(low, high):
                 total += J_h[r, j] * ddq[j, c]
             force_rhs[r, c] = total
         total = 0.0
@@ -346,6 +293,8 @@ def acceleration_terms(
     R_contact_to_palm: np.ndarray,
     H_cf: np.ndarray,
     H_cf_dot_w: np.ndarray,
+    joint_span: np.ndarray,
+    fingertip_span: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """From ``f_c``: ``ddq``, ``x_o_ddot`` and ``xi_cf_ddot`` (augmented, as returned)."""
     n = J_fingertip.shape[0]
@@ -353,12 +302,22 @@ def acceleration_terms(
     k = force.shape[0]
     tmp = np.empty(3)
     # ddq = M_h^-1 (u - h) - M_h^-1 J_h^T f_c;  x_o_ddot = M_o^-1 G f_c + x_ddot_free.
+    # Row r of M_h^-1 J_h^T is zero on the rows of contacts whose spans miss joint r's: the
+    # sum runs over the others' rows, in order (force rows, then torsion rows).
+    total = np.empty(m + 1)
     for r in range(m):
+        total[:] = 0.0
+        for i in range(n):
+            if _spans_meet(fingertip_span, i, joint_span, r):
+                for j in range(3 * i, 3 * i + 3):
+                    for c in range(m + 1):
+                        total[c] += M_h_inv_J_hT[r, j] * force[j, c]
+        for i in range(n if k > 3 * n else 0):
+            if _spans_meet(fingertip_span, i, joint_span, r):
+                for c in range(m + 1):
+                    total[c] += M_h_inv_J_hT[r, 3 * n + i] * force[3 * n + i, c]
         for c in range(m + 1):
-            total = 0.0
-            for j in range(k):
-                total += M_h_inv_J_hT[r, j] * force[j, c]
-            ddq[r, c] -= total
+            ddq[r, c] -= total[c]
     x_ddot = np.empty((6, m + 1))
     for r in range(6):
         for c in range(m + 1):
@@ -376,7 +335,7 @@ def acceleration_terms(
         for r in range(3):
             for c in range(m + 1):
                 total = 0.0
-                for j in range(m):
+                for j in range(fingertip_span[i, 0], fingertip_span[i, 1]):
                     total += J_fingertip[i, 3 + r, j] * ddq[j, c]
                 alpha[r, c] = total - x_ddot[3 + r, c]
         _cross(w_c[i], w_relative[i], tmp)

@@ -337,7 +337,8 @@ class GraspModel:
 
         All contacts are evaluated together (arrays with a leading contact axis), and the
         torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
-        in one compiled pass (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`).
+        in one compiled pass
+        (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`).
         Spherical fingertips on flat faces (the paper's cube) take one compiled pass for
         everything after Pinocchio, into one buffer whose views are the fields
         (:func:`~grasp_safety_filter.model.packed_state.packed_state`); other contacts take

@@ -18,7 +18,9 @@ from grasp_safety_filter.model.fingertips import fingertip_spheres
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.urdf import check_urdf_file, HandModelError
 
-__all__ = ['FingertipFrames', 'HandModel', 'HandModelError', 'HandTerms', 'RawHandTerms']
+__all__ = [
+    'Branches', 'FingertipFrames', 'HandModel', 'HandModelError', 'HandTerms', 'RawHandTerms',
+]
 
 
 @dataclass(frozen=True)
@@ -93,6 +95,27 @@ class FingertipFrames(NamedTuple):
     parent_joint: np.ndarray
     offset_in_parent: np.ndarray
     support: np.ndarray
+
+
+class Branches(NamedTuple):
+    """Which joints can couple to which: spans of the hand's branches, in the caller's order.
+
+    A branch is a subtree of the kinematic tree hanging from the palm: each finger of a hand
+    whose fingers all hang from the palm, the whole hand if a wrist joint carries them.
+    Joints on different branches are decoupled (``M_h[a, b] = 0`` unless one of a, b
+    supports the other), so ``M_h`` and ``M_h^-1`` are block-diagonal by branch, and a
+    fingertip's Jacobian is zero outside its branch's joints. A span ``[start, stop)`` is
+    the smallest range of joint indices that holds a branch (the whole of it when a branch's
+    joints are not listed one after the other): row a of ``M_h^-1`` is zero outside joint
+    a's span, and fingertip i's Jacobian outside fingertip i's span.
+
+    Attributes:
+        joint_span: Each joint's branch's span, (m, 2).
+        fingertip_span: Each fingertip's branch's span (empty for a frame on the palm), (n, 2).
+    """
+
+    joint_span: np.ndarray
+    fingertip_span: np.ndarray
 
 
 def _rows_view(elements: Any, attribute: str, width: int) -> np.ndarray:
@@ -216,6 +239,8 @@ class HandModel:
         self.data = self.model.createData()
         #: The fingertip frames' places in Pinocchio's model (for :func:`hand_in_model_order`).
         self.fingertip_frames = self._fingertip_frames()
+        #: Where each joint's and fingertip's branch lies (the contact dynamics' sums).
+        self.branches = self._branches()
         # Views of Pinocchio's buffers, which its calls overwrite in place (raw_terms).
         self._buffers = tuple(
             _read_only(array)
@@ -254,6 +279,25 @@ class HandModel:
             support=support,
         )
         return FingertipFrames(*(_read_only(table) for table in tables))
+
+    def _branches(self) -> Branches:
+        """Return each joint's and fingertip's span: where the joints of its branch lie."""
+        parents = self.model.parents
+
+        def root(joint: int) -> int:
+            while joint != 0 and parents[joint] != 0:
+                joint = parents[joint]
+            return joint
+
+        branch = [root(self.model.getJointId(name)) for name in self.joint_names]
+        spans = {
+            b: (branch.index(b), len(branch) - branch[::-1].index(b)) for b in set(branch)
+        }
+        joint = [spans[b] for b in branch]
+        tip = [spans.get(root(self.model.frames[f].parentJoint), (0, 0)) for f in self.frame_ids]
+        return Branches(
+            *(_read_only(np.array(table, dtype=np.intp).reshape(-1, 2)) for table in (joint, tip))
+        )
 
     def _check_inertia(self, urdf_name: str) -> None:
         """Refuse a hand whose M_h is singular at the middle of the joint ranges.

@@ -228,6 +228,7 @@ def packed_state(
             *raw,
             *hand.fingertip_frames,
             hand.pinocchio_index,
+            *hand.branches,
             q,
             dq,
             p_o,

@@ -7,7 +7,7 @@ takes Pinocchio's raw hand terms (:meth:`~grasp_safety_filter.model.hand.HandMod
 and the object's, and runs in one call what :meth:`HandModel.terms
 <grasp_safety_filter.model.hand.HandModel.terms>`, the contact kinematics
 (:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`) and the contact
-dynamics (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`) compute one
+dynamics (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`) compute one
 after the other: the same formulas (those functions' docstrings), the same LAPACK solve of
 ``B_ho``. Each term goes to its place in one float64 buffer (:class:`PackedLayout`), from
 which :class:`~grasp_safety_filter.model.packed_state.PackedGraspState` hands out read-only
@@ -171,6 +171,8 @@ def sphere_on_plane_terms(
     offset_in_parent: np.ndarray,
     support: np.ndarray,
     joint_index: np.ndarray,
+    joint_span: np.ndarray,
+    fingertip_span: np.ndarray,
     q: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -204,6 +206,9 @@ def sphere_on_plane_terms(
         offset_in_parent: Each fingertip frame's origin in its parent's frame, (n, 3), m.
         support: Whether Pinocchio's velocity column k moves fingertip i, (n, nv).
         joint_index: Pinocchio's index of each of the model's joints, (m,).
+        joint_span: Each joint's span (:class:`~grasp_safety_filter.model.hand.Branches`),
+            (m, 2).
+        fingertip_span: Each fingertip's span, (n, 2).
         q: Joint angles, (m,), rad.
         dq: Joint velocities, (m,), rad/s.
         p_object_in_palm: Object centre of mass, (3,), m.
@@ -256,7 +261,7 @@ def sphere_on_plane_terms(
     ) = velocity_terms(
         J_s, twist_f, J_frames_dot_dq, p_f, M_h_inverse, h_bias, p_object_in_palm,
         twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
-        contacts[11], contacts[12], contacts[13], torsion,
+        contacts[11], contacts[12], contacts[13], joint_span, fingertip_span, torsion,
     )
     if torsion:
         force = wrench_solve(B_ho, force_rhs, torsional_compliance)
@@ -264,7 +269,8 @@ def sphere_on_plane_terms(
         force = np.linalg.solve(B_ho, force_rhs)
     ddq, x_ddot, xi_ddot = acceleration_terms(
         force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
-        J_s, J_frames_dot_dq, contacts[5], contacts[10], contacts[11],
+        J_s, J_frames_dot_dq, contacts[5], contacts[10], contacts[11], joint_span,
+        fingertip_span,
     )
     # ---- Into the buffer, in packed_fields' order.
     at = _put(out, 0, q)

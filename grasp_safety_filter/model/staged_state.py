@@ -2,7 +2,7 @@
 
 Hand terms (Pinocchio), then the contacts' geometry and rolling rates (one stacked call),
 the object's terms, and the hand–object coupling and the torque-affine terms in one compiled
-pass (:func:`~grasp_safety_filter.model.dynamics_kernel.contact_dynamics`); the equations are
+pass (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`); the equations are
 :mod:`~grasp_safety_filter.model.grasp_model`'s. Spherical fingertips on flat faces take
 :func:`~grasp_safety_filter.model.packed_state.packed_state` instead where it gives an answer.
 """
@@ -14,8 +14,8 @@ from functools import partial
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.contact_dynamics import contact_dynamics
 from grasp_safety_filter.model.contact_stack import ContactStack
-from grasp_safety_filter.model.dynamics_kernel import contact_dynamics
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.rigid_object import RigidObject
@@ -90,6 +90,7 @@ def staged_state(
         rates.H_cf_dot_w,
         rates.sliding_velocity,
         rates.frame_angular_velocity,
+        *hand_model.branches,
         torsion,
         torsional_compliance,
     )
