@@ -53,19 +53,12 @@ from grasp_safety_filter.model.compiled import kernel
 
 
 @kernel
-def _row_span(fingertip_span: np.ndarray, row: int) -> tuple[int, int]:
-    """Return wrench row ``row``'s joint span: its contact's (``3i..3i+2``, torsion ``3n+i``)."""
-    n = fingertip_span.shape[0]
-    i = row // 3 if row < 3 * n else row - 3 * n
-    return fingertip_span[i, 0], fingertip_span[i, 1]
-
-
-@kernel
-def _spans_meet(fingertip_span: np.ndarray, i: int, joint_span: np.ndarray, r: int) -> bool:
-    """Return whether fingertip i's span and joint r's overlap."""
-    return max(fingertip_span[i, 0], joint_span[r, 0]) < min(
-        fingertip_span[i, 1], joint_span[r, 1]
-    )
+def row_contacts(n: int, k: int) -> np.ndarray:
+    """Return each wrench row's contact: rows ``3i..3i+2`` and torsion row ``3n+i`` are i's."""
+    contact = np.empty(k, dtype=np.intp)
+    for row in range(k):
+        contact[row] = row // 3 if row < 3 * n else row - 3 * n
+    return contact
 
 
 @kernel
@@ -230,10 +223,11 @@ def velocity_terms(
             total += M_o_inverse[r, c] * (w_e[c] - C_o_twist[c])
         x_ddot_free[r] = total
     # Sums over the overlap of the factors' spans (module docstring).
+    row_contact = row_contacts(n, k)
     M_h_inv_J_hT = np.empty((m, k))
     for r in range(m):
         for c in range(k):
-            start, stop = _row_span(fingertip_span, c)
+            start, stop = fingertip_span[row_contact[c], 0], fingertip_span[row_contact[c], 1]
             total = 0.0
             for j in range(max(start, joint_span[r, 0]), min(stop, joint_span[r, 1])):
                 total += M_h_inverse[r, j] * J_h[c, j]
@@ -247,18 +241,18 @@ def velocity_terms(
             M_o_inv_G[r, c] = total
     B_ho = np.empty((k, k))
     for r in range(k):
-        start, stop = _row_span(fingertip_span, r)
+        start, stop = fingertip_span[row_contact[r], 0], fingertip_span[row_contact[r], 1]
         for c in range(k):
-            other_start, other_stop = _row_span(fingertip_span, c)
             total = 0.0
-            for j in range(max(start, other_start), min(stop, other_stop)):
+            low = max(start, fingertip_span[row_contact[c], 0])
+            for j in range(low, min(stop, fingertip_span[row_contact[c], 1])):
                 total += J_h[r, j] * M_h_inv_J_hT[j, c]
             for j in range(6):
                 total += G[j, r] * M_o_inv_G[j, c]
             B_ho[r, c] = total
     force_rhs = np.empty((k, m + 1))
     for r in range(k):
-        start, stop = _row_span(fingertip_span, r)
+        start, stop = fingertip_span[row_contact[r], 0], fingertip_span[row_contact[r], 1]
         for c in range(m + 1):
             # ddq's column c < m is M_h^-1's: zero outside joint c's span.
             if c < m:
@@ -303,21 +297,20 @@ def acceleration_terms(
     tmp = np.empty(3)
     # ddq = M_h^-1 (u - h) - M_h^-1 J_h^T f_c;  x_o_ddot = M_o^-1 G f_c + x_ddot_free.
     # Row r of M_h^-1 J_h^T is zero on the rows of contacts whose spans miss joint r's: the
-    # sum runs over the others' rows, in order (force rows, then torsion rows).
-    total = np.empty(m + 1)
+    # sum runs over the others' rows, in order.
+    row_contact = row_contacts(n, k)
+    coupling = np.empty(m + 1)
     for r in range(m):
-        total[:] = 0.0
-        for i in range(n):
-            if _spans_meet(fingertip_span, i, joint_span, r):
-                for j in range(3 * i, 3 * i + 3):
-                    for c in range(m + 1):
-                        total[c] += M_h_inv_J_hT[r, j] * force[j, c]
-        for i in range(n if k > 3 * n else 0):
-            if _spans_meet(fingertip_span, i, joint_span, r):
+        coupling[:] = 0.0
+        for j in range(k):
+            i = row_contact[j]
+            if max(fingertip_span[i, 0], joint_span[r, 0]) < min(
+                fingertip_span[i, 1], joint_span[r, 1]
+            ):
                 for c in range(m + 1):
-                    total[c] += M_h_inv_J_hT[r, 3 * n + i] * force[3 * n + i, c]
+                    coupling[c] += M_h_inv_J_hT[r, j] * force[j, c]
         for c in range(m + 1):
-            ddq[r, c] -= total[c]
+            ddq[r, c] -= coupling[c]
     x_ddot = np.empty((6, m + 1))
     for r in range(6):
         for c in range(m + 1):
