@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from random_hands import random_hand
 
 from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
@@ -115,3 +116,28 @@ def random_configuration(
         else:
             dq = model.rolling_joint_velocity(q, p_object, R_object, twist)
         return Configuration(q, dq, p_object, R_object, twist)
+
+
+def random_hand_grasps(
+    seed: int, directory: Path, count: int = 3
+) -> tuple[GraspModel, list[Configuration]]:
+    """Return random hand ``seed`` (its URDF written to ``directory``) and grasps of it.
+
+    Each grasp is the hand's own, perturbed, projected onto the faces and rolling with a
+    random object twist.
+    """
+    hand = random_hand(seed)
+    path = hand.write(directory)
+    model = GraspModel.from_parameters(
+        {**hand.model_parameters(path), **hand.initial_parameters()}
+    )
+    rng = np.random.default_rng(seed)
+    configurations = []
+    for _ in range(count):
+        q = model.project_to_contact(
+            hand.q0 + rng.uniform(-0.02, 0.02, hand.q0.size), hand.p_object, hand.R_object
+        )
+        twist = rng.normal(0.0, 0.3, 6)
+        dq = model.rolling_joint_velocity(q, hand.p_object, hand.R_object, twist)
+        configurations.append(Configuration(q, dq, hand.p_object, hand.R_object, twist))
+    return model, configurations

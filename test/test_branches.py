@@ -20,10 +20,10 @@ from grasp_states import (
     paper_model,
     PAPER_MODEL_PARAMETERS,
     random_configuration,
+    random_hand_grasps,
 )
 import numpy as np
 import pytest
-from random_hands import random_hand
 
 from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario
 from grasp_safety_filter.model.grasp_model import GraspModel
@@ -42,25 +42,6 @@ def _four_finger_model() -> tuple[GraspModel, list[Configuration]]:
         Configuration(t.q, t.dq, t.p_object_in_palm, t.R_object_to_palm, t.twist_object)
         for t in ticks[::10]
     ]
-
-
-def _random_model(seed: int, directory: Path) -> tuple[GraspModel, list[Configuration]]:
-    """Return a random hand and three grasps of it, rolling."""
-    hand = random_hand(seed)
-    path = hand.write(directory)
-    model = GraspModel.from_parameters(
-        {**hand.model_parameters(path), **hand.initial_parameters()}
-    )
-    rng = np.random.default_rng(seed)
-    configurations = []
-    for _ in range(3):
-        q = model.project_to_contact(
-            hand.q0 + rng.uniform(-0.02, 0.02, hand.q0.size), hand.p_object, hand.R_object
-        )
-        twist = rng.normal(0.0, 0.3, 6)
-        dq = model.rolling_joint_velocity(q, hand.p_object, hand.R_object, twist)
-        configurations.append(Configuration(q, dq, hand.p_object, hand.R_object, twist))
-    return model, configurations
 
 
 def _wrist_hand(directory: Path) -> HandModel:
@@ -88,7 +69,7 @@ def _hands(directory: Path) -> dict[str, HandModel]:
     hands = {'paper': paper_model().hand, 'four_finger': _four_finger_model()[0].hand}
     for seed in range(6):
         (directory / str(seed)).mkdir()
-        hands[f'random {seed}'] = _random_model(seed, directory / str(seed))[0].hand
+        hands[f'random {seed}'] = random_hand_grasps(seed, directory / str(seed))[0].hand
     hands['wrist'] = _wrist_hand(directory)
     return hands
 
@@ -154,7 +135,7 @@ def _terms(state) -> dict[str, np.ndarray]:
 )
 def test_the_sums_over_spans_are_the_full_sums_to_the_bit(case, tmp_path, monkeypatch):
     if case.startswith('random'):
-        model, configurations = _random_model(int(case.split()[1]), tmp_path)
+        model, configurations = random_hand_grasps(int(case.split()[1]), tmp_path)
     elif case == 'four_finger':
         model, configurations = _four_finger_model()
     else:

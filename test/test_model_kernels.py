@@ -12,16 +12,14 @@ from __future__ import annotations
 
 import dataclasses
 
-from grasp_states import Configuration, paper_model, random_configuration
+from grasp_states import Configuration, paper_model, random_configuration, random_hand_grasps
 import numpy as np
 from numpy_model_terms import numpy_model_terms
 import pinocchio as pin
 import pytest
-from random_hands import random_hand
 
 from grasp_safety_filter.model.contact_dynamics import contact_dynamics
 from grasp_safety_filter.model.contact_stack import contact_stack, ContactStack, SphereOnPlaneStack
-from grasp_safety_filter.model.grasp_model import GraspModel
 
 PAPER_CASES = {
     'cube': {},
@@ -34,20 +32,7 @@ AFFINE_TERMS = ('contact_force', 'joint_acceleration', 'object_acceleration', 'x
 
 
 def _random_hand_cases(tmp_path_factory, seed):
-    hand = random_hand(seed)
-    path = hand.write(tmp_path_factory.mktemp(f'kernel_hand{seed}'))
-    params = {**hand.model_parameters(path), **hand.initial_parameters()}
-    model = GraspModel.from_parameters(params)
-    rng = np.random.default_rng(seed)
-    configurations = []
-    for _ in range(3):
-        q = model.project_to_contact(
-            hand.q0 + rng.uniform(-0.02, 0.02, hand.q0.size), hand.p_object, hand.R_object
-        )
-        twist = rng.normal(0.0, 0.3, 6)
-        dq = model.rolling_joint_velocity(q, hand.p_object, hand.R_object, twist)
-        configurations.append(Configuration(q, dq, hand.p_object, hand.R_object, twist))
-    return model, configurations
+    return random_hand_grasps(seed, tmp_path_factory.mktemp(f'kernel_hand{seed}'))
 
 
 def _assert_close(actual, expected, what):
