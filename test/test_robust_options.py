@@ -16,6 +16,7 @@ from scipy.optimize import nnls
 from synthetic_state import synthetic_state, SyntheticHand
 from test_safety_filter import independent_rows
 
+from grasp_safety_filter.bench.command_line import bench_main, bench_parser
 from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.control.constraints import FrictionPyramid, TorqueRateBound
 from grasp_safety_filter.control.constraints.friction_cone import DIAMOND, INSCRIBED
@@ -319,18 +320,21 @@ def test_measurement_command_takes_filter_overrides(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ('main', 'option', 'dest'),
+    ('main', 'parse', 'option', 'dest'),
     [
-        (mujoco_run.main, '--set', 'set'),
-        (mujoco_run.main, '--plant-set', 'plant_set'),
-        (mujoco_compare.main, '--plant-set', None),
+        (mujoco_run.main, mujoco_run.parse_args, '--set', 'set'),
+        (mujoco_run.main, mujoco_run.parse_args, '--plant-set', 'plant_set'),
+        (mujoco_compare.main, None, '--plant-set', None),
+        (bench_main, lambda argv: bench_parser().parse_args(argv), '--set', 'overrides'),
     ],
 )
-def test_measurement_commands_read_overrides_as_a_parameter_file_does(main, option, dest, capsys):
-    """The MuJoCo tools type ``NAME=VALUE`` as grasp-demo does: ``1e-5`` is a double."""
+def test_measurement_commands_read_overrides_as_a_parameter_file_does(
+    main, parse, option, dest, capsys
+):
+    """The tools type ``NAME=VALUE`` as grasp-demo does: ``1e-5`` a double, ``[..]`` a list."""
     if dest is not None:
-        parsed = mujoco_run.parse_args([option, 'osqp.eps_abs=1e-5'])
-        assert getattr(parsed, dest) == [('osqp.eps_abs', 1e-5)]
+        parsed = parse([option, 'osqp.eps_abs=1e-5', option, 'x=[0.1, 2]'])
+        assert getattr(parsed, dest) == [('osqp.eps_abs', 1e-5), ('x', [0.1, 2])]
     with pytest.raises(SystemExit) as exit_info:
         main([option, 'model.torsional_friction'])
     assert exit_info.value.code == 2

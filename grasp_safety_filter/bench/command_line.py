@@ -10,28 +10,14 @@ import sys
 from typing import Any
 
 from grasp_safety_filter.bench.report import benchmark, format_report
+from grasp_safety_filter.cli import parse_override
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import MODEL_PARAMETERS
 
 
-def _parse_override(text: str) -> tuple[str, Any]:
-    name, separator, value = text.partition('=')
-    if not separator or not name:
-        raise argparse.ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
-    lowered = value.strip().lower()
-    if lowered in ('true', 'false'):
-        return name.strip(), lowered == 'true'
-    for kind in (int, float):
-        try:
-            return name.strip(), kind(value)
-        except ValueError:
-            pass
-    return name.strip(), value
-
-
-def bench_main(argv: list[str] | None = None) -> int:
-    """``grasp-bench``: time the model, the QP and the filter over the paper's filtered run."""
+def bench_parser() -> argparse.ArgumentParser:
+    """Return ``grasp-bench``'s argument parser."""
     parser = argparse.ArgumentParser(prog='grasp-bench', description=bench_main.__doc__)
     parser.add_argument(
         '--config', type=Path, default=config_path(), help='scenario parameter file'
@@ -67,7 +53,7 @@ def bench_main(argv: list[str] | None = None) -> int:
         '--set',
         dest='overrides',
         metavar='NAME=VALUE',
-        type=_parse_override,
+        type=parse_override,
         action='append',
         default=[],
         help='override a safety-filter parameter, e.g. --set osqp.eps_abs=1e-3, or a model '
@@ -99,6 +85,12 @@ def bench_main(argv: list[str] | None = None) -> int:
         metavar='PATH',
         help='print the figures as JSON (the table then goes to stderr), or write them to PATH',
     )
+    return parser
+
+
+def bench_main(argv: list[str] | None = None) -> int:
+    """``grasp-bench``: time the model, the QP and the filter over the paper's filtered run."""
+    parser = bench_parser()
     args = parser.parse_args(argv)
     if args.duration <= 0:
         parser.error(f'--duration: expected > 0 s, got {args.duration}')
