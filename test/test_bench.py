@@ -30,9 +30,11 @@ from grasp_safety_filter.bench import (
     format_report,
     general_form,
     replay_backends,
+    replay_hands,
     run_external,
     Scenario,
 )
+from grasp_safety_filter.control.filter_result import FilterStatus
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.paths import config_path
@@ -81,6 +83,8 @@ def bench(tmp_path_factory):
                 str(EXTERNAL_TICKS),
                 '--runner-duration',
                 str(RUNNER_DURATION),
+                '--compare-config',
+                str(config_path('four_finger_box.yaml')),
                 '--json',
                 str(path),
             ]
@@ -174,6 +178,58 @@ def test_every_qp_backend_replays_the_same_ticks_and_agrees(bench):
         assert entry['node_tick_over_qp_solve'] > 1.0, backend
         assert backend in table
     assert backends[next(iter(BACKENDS))]['max_abs_du_vs_first'] == 0.0
+
+
+def test_other_hands_are_timed_on_as_many_ticks_in_the_same_run(bench):
+    _, document, table = bench
+    section = document['hands']
+    first, other = section['hands']
+    assert first['config'] == str(config_path())
+    assert other['config'].endswith('four_finger_box.yaml')
+    assert [(hand['joints'], hand['contacts']) for hand in (first, other)] == [(9, 3), (16, 4)]
+    for hand in (first, other):
+        assert sum(hand['statuses'].values()) == TICKS
+        for key in ('node_tick_cpu_us', 'node_tick_wall_us'):
+            assert hand[key]['n'] == TICKS and positive_spread(hand[key]), key
+        assert hand['cpu_median_over_first'] == pytest.approx(
+            hand['node_tick_cpu_us']['median'] / first['node_tick_cpu_us']['median']
+        )
+        assert f'{hand["cpu_median_over_first"]:.2f}x' in table
+    assert 'four_finger_box.yaml' in table
+
+
+def test_hands_take_turns_block_by_block(monkeypatch):
+    """Blocks of each hand's ticks alternate, the first hand of a block rotating."""
+    import grasp_safety_filter.bench.hands as hands_module
+
+    calls = []
+
+    class Filter:
+        def __init__(self, name):
+            self.name = name
+
+        def solve(self, state, u_nom):
+            calls.append((self.name, state))
+            return SimpleNamespace(status=FilterStatus.SOLVED)
+
+    def hand(name, count):
+        scenario = SimpleNamespace(
+            model=SimpleNamespace(n_joints=1, n_contacts=1), safety_filter=lambda: Filter(name)
+        )
+        return name, scenario, [SimpleNamespace(index=i, u_nom=None) for i in range(count)]
+
+    monkeypatch.setattr(hands_module, 'state_of', lambda model, tick: tick.index)
+    replays = replay_hands([hand('a', 5), hand('b', 4)], block=2, warmup=1)
+    assert calls == [
+        ('a', 0), ('b', 0),  # warm-up
+        ('a', 0), ('a', 1), ('b', 0), ('b', 1),
+        ('b', 2), ('b', 3), ('a', 2), ('a', 3),
+    ]
+    assert [r.cpu.size for r in replays] == [4, 4] and replays[1].statuses == {'solved': 4}
+    with pytest.raises(ValueError, match='block: expected >= 1'):
+        replay_hands([hand('a', 1)], block=0)
+    with pytest.raises(ValueError, match='at least one tick'):
+        replay_hands([hand('a', 1), hand('b', 0)])
 
 
 def test_replay_backends_refuses_an_unknown_backend():

@@ -34,8 +34,9 @@ recording runner, bag size per simulated second, memory of the analysis):
 :mod:`grasp_safety_filter.soak`.
 
 Modules: :mod:`.recorded_run` (1, 4), :mod:`.replay` (2), :mod:`.external_solvers` (3),
-:mod:`.backends` (the QP backends on the same ticks), :mod:`.machine` (machine facts and
-noise floor), :mod:`.node_callbacks` (4),
+:mod:`.backends` (the QP backends on the same ticks), :mod:`.hands` (other hands in the
+same run, ``--compare-config``), :mod:`.machine` (machine facts and noise floor),
+:mod:`.node_callbacks` (4),
 :mod:`.report` (the document and its table), :mod:`.command_line`.
 """
 
@@ -58,6 +59,12 @@ from grasp_safety_filter.bench.external_solvers import (  # noqa: F401
     general_form,
     run_external,
     SolverInput,
+)
+from grasp_safety_filter.bench.hands import (  # noqa: F401
+    format_hands,
+    hand_table,
+    HandTicks,
+    replay_hands,
 )
 from grasp_safety_filter.bench.machine import (  # noqa: F401
     fixed_work,

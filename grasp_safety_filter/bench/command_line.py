@@ -50,6 +50,16 @@ def bench_parser() -> argparse.ArgumentParser:
         f'(default: {",".join(BACKENDS)}; empty: none)',
     )
     parser.add_argument(
+        '--compare-config',
+        type=Path,
+        action='append',
+        default=[],
+        metavar='PATH',
+        help="another scenario whose hand's node tick is compared with --config's in the "
+        'same run, tick after tick in alternating blocks (repeatable; e.g. '
+        'config/four_finger_box.yaml)',
+    )
+    parser.add_argument(
         '--set',
         dest='overrides',
         metavar='NAME=VALUE',
@@ -111,7 +121,8 @@ def bench_main(argv: list[str] | None = None) -> int:
     model_names = {spec.name for spec in MODEL_PARAMETERS}
     model_overrides = {name: overrides.pop(name) for name in model_names & set(overrides)}
     try:
-        load_initial_grasp(args.config, model_overrides)  # the simulator's start-up checks
+        for config in (args.config, *args.compare_config):
+            load_initial_grasp(config, model_overrides)  # the simulator's start-up checks
     except ConfigError as error:
         print(config_error_line('grasp-bench', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
@@ -128,6 +139,7 @@ def bench_main(argv: list[str] | None = None) -> int:
         backends=args.backends,
         model_overrides=model_overrides,
         log=log,
+        compare_configs=args.compare_config,
     )
     _print(format_report(document), document, args.json)
     return 0

@@ -11,6 +11,7 @@ import numpy as np
 
 from grasp_safety_filter.bench.backends import backend_table, replay_backends
 from grasp_safety_filter.bench.external_solvers import external_solvers, run_external
+from grasp_safety_filter.bench.hands import compare_hands, format_hands
 from grasp_safety_filter.bench.machine import machine_info, noise_floor
 from grasp_safety_filter.bench.node_callbacks import FilterCallbackTimes
 from grasp_safety_filter.bench.recorded_run import (
@@ -27,9 +28,7 @@ from grasp_safety_filter.bench.replay import (
     statistics,
 )
 from grasp_safety_filter.control.qp_solvers import BACKENDS
-from grasp_safety_filter.control.safety_filter import (
-    FilterStatus,
-)
+from grasp_safety_filter.control.safety_filter import FilterStatus
 
 #: The per-tick table's row of the runner's filter-node callbacks.
 CALLBACKS_LABEL = 'filter node callbacks (parse, model, filter step, messages)'
@@ -72,6 +71,7 @@ def benchmark(
     backends: Sequence[str] = tuple(BACKENDS),
     model_overrides: dict[str, Any] | None = None,
     log: Callable[[str], None] = lambda message: None,
+    compare_configs: Sequence[Path] = (),
 ) -> dict[str, Any]:
     """Run every measurement and return the figures as a JSON-ready document.
 
@@ -91,6 +91,9 @@ def benchmark(
         model_overrides: ``model.*`` parameters replaced by dotted name, for every part
             (e.g. ``{"model.torsional_friction": 0.005}``: soft fingers).
         log: Called with a line saying what is being measured.
+        compare_configs: Other scenarios whose hands' node ticks are compared with this
+            one's in the same run (:mod:`grasp_safety_filter.bench.hands`; the same
+            overrides apply); none: not compared.
     """
     machine = machine_info()
     scenario = Scenario.load(config, filter_overrides, model_overrides)
@@ -116,6 +119,10 @@ def benchmark(
     if backends:
         log(f'replaying {len(replayed)} ticks through {", ".join(backends)}, interleaved')
         backend_figures = backend_table(replay_backends(scenario, replayed, backends))
+    hand_figures = compare_hands(
+        (str(config), scenario, replayed), compare_configs, duration, warmup, log,
+        (filter_overrides, model_overrides),
+    ) if compare_configs else None
     ours = measured.u[measured.qp_ticks]
     certified = np.array([measured.status[i] in CERTIFIED for i in measured.qp_ticks], dtype=bool)
     our_step_on_qps = statistics(measured.times['filter_step'][measured.qp_ticks])
@@ -210,6 +217,7 @@ def benchmark(
         ),
         'noise_floor': floor,
         'backends': backend_figures,
+        'hands': hand_figures,
         'external': {
             'qps': len(measured.qps),
             'ticks': measured.qp_ticks.tolist(),
@@ -324,6 +332,9 @@ def format_report(document: dict[str, Any]) -> str:
             '   median wall time over it; max |Δu*|: against the first backend, on ticks both'
             ' certified optimal)',
         ]
+
+    if document.get('hands'):
+        lines += format_hands(document['hands'])
 
     external = document['external']
     step, solve = external['filter_step_us'], external['filter_qp_solve_us']
