@@ -20,10 +20,10 @@ def problem(rng, m=9, k=40):
     return rng.normal(scale=5.0, size=m), C, b
 
 
-def on_working_set(y0, C, b, rows, work=None):
+def on_working_set(y0, C, b, rows, scratch=None):
     """Return optimum_on_working_set at TOLERANCE, on new scratch unless given."""
-    work = working_set_scratch(y0.size, b.size) if work is None else work
-    return optimum_on_working_set(y0, C, b, rows, TOLERANCE, work)
+    scratch = working_set_scratch(y0.size, b.size) if scratch is None else scratch
+    return optimum_on_working_set(y0, C, b, rows, TOLERANCE, scratch)
 
 
 @numba.njit
@@ -84,7 +84,7 @@ def test_the_solve_is_dgesv_on_the_dense_kkt_system_to_the_bit(seed):
     rng = np.random.default_rng(200 + seed)
     y0, C, b = problem(rng)
     m, k = C.shape[1], C.shape[0]
-    work = working_set_scratch(m, k)
+    scratch = working_set_scratch(m, k)
     for q in rng.integers(1, m + 1, size=30):
         rows = rng.choice(k, q, replace=False).astype(np.intp)
         kkt = np.zeros((m + q, m + q))
@@ -96,7 +96,7 @@ def test_the_solve_is_dgesv_on_the_dense_kkt_system_to_the_bit(seed):
             for c in range(m):  # the kernel's order of the sum
                 rhs[m + a] -= C[r, c] * y0[c]
         solution = kkt_solve(kkt, rhs)
-        _, y, lam = on_working_set(y0, C, b, rows, work)
+        _, y, lam = on_working_set(y0, C, b, rows, scratch)
         np.testing.assert_array_equal(y, y0 + solution[:m])
         np.testing.assert_array_equal(lam, solution[m:])
 

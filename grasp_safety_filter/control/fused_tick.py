@@ -171,7 +171,7 @@ def _packed_tick(
         outside, the guess absent or not optimal) or :data:`NOT_FINITE`.
     """
     A, lower, C_data = rows
-    working_set, C, b, work = guess
+    working_set, C, b, scratch = guess
     g, nominal_out = nominal
     u_min, u_max = box
     force_start, margin, start = pyramid
@@ -218,12 +218,12 @@ def _packed_tick(
     if with_metric:
         outcome, u, multipliers = metric_optimum_on_working_set(
             C, b, working_set, (R, factor, rows_y, y_nom), y0, box, (C_data, lower),
-            (ACTIVE_SET_TOLERANCE, FEASIBILITY_TOLERANCE), work,
+            (ACTIVE_SET_TOLERANCE, FEASIBILITY_TOLERANCE), scratch,
         )
     else:
         outcome, u, multipliers = clipped_optimum_on_working_set(
             y0, C, b, working_set, ACTIVE_SET_TOLERANCE, u_min, u_max, A, lower,
-            FEASIBILITY_TOLERANCE, work,
+            FEASIBILITY_TOLERANCE, scratch,
         )
     if outcome != 1:
         return NOT_SETTLED, u_nom, np.empty(0), 0.0

@@ -35,28 +35,23 @@ from grasp_safety_filter.model.fortran_linalg import _routine
 dgesv = _routine('lapack', 'dgesv', 'iiainain')
 
 #: :func:`working_set_scratch`'s arrays.
-WorkingSetScratch = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+WorkingSetScratch = tuple[np.ndarray, np.ndarray]
 
 #: Norm floor of a row in the check (a null row: all zero coefficients).
 NULL_ROW_NORM = 1e-12
 
 
 def working_set_scratch(m: int, rows: int) -> WorkingSetScratch:
-    """Return the work arrays of :func:`optimum_on_working_set` for m variables and k rows.
+    """Return the work arrays of :func:`optimum_on_working_set` for rows C of shape (k, m).
 
-    ``(KKT matrix, right-hand side, pivots, LAPACK's info, row norms, row distances)``,
-    sized for any working set of the k rows; one per caller, reused every call (the
-    answers are new arrays).
+    Sized for any working set of the k rows, with ``s = m + k``: floats, the KKT matrix
+    (``s^2``, column-major from 0), its right-hand side (s), the rows' norms (k) and
+    distances (k); LAPACK's integers, the pivots (s) and ``info`` (last). Two arrays, not
+    six: each array a compiled call takes from Python is unboxed on every call. One per
+    caller, reused every call (the answers are new arrays).
     """
-    n = m + rows
-    return (
-        np.empty(n * n),
-        np.empty(n),
-        np.empty(n, dtype=np.int32),
-        np.empty(1, dtype=np.int32),
-        np.empty(rows),
-        np.empty(rows),
-    )
+    size = m + rows
+    return np.empty(size * size + size + 2 * rows), np.empty(size + 1, dtype=np.int32)
 
 
 @kernel
@@ -66,11 +61,11 @@ def optimum_on_working_set(
     b: np.ndarray,
     working_set: np.ndarray,
     tolerance: float,
-    work: WorkingSetScratch,
+    scratch: WorkingSetScratch,
 ) -> tuple[int, np.ndarray, np.ndarray]:
     """Solve on the working set and check optimality (module docstring).
 
-    The KKT system is written column-major into ``work`` and solved there by ``dgesv``, as
+    The KKT system is written column-major into ``scratch`` and solved there by ``dgesv``, as
     ``np.linalg.solve`` does on its own copies (a system with an entry not finite is refused
     as ``np.linalg.solve`` refuses it).
 
@@ -80,46 +75,50 @@ def optimum_on_working_set(
         b: Shape (k,), finite.
         working_set: Row indices W, distinct, shape (q,), q >= 1.
         tolerance: The distance tolerance tol (y's unit).
-        work: :func:`working_set_scratch` of at least (m, k).
+        scratch: :func:`working_set_scratch` of (m, k).
 
     Returns:
         ``(outcome, y, lambda)``: outcome 1 when y is the optimum of the whole problem,
         0 when a row or a multiplier fails the check, -1 when the KKT system is singular
         (dependent rows) or its solution is not finite; lambda in W's order.
     """
-    kkt, rhs, pivots, info, norms, distances = work
+    work, pivots = scratch
     k, m = C.shape
     q = working_set.shape[0]
     n = m + q
+    # Offsets in work (working_set_scratch): the KKT matrix at 0, then the others.
+    size = m + k
+    rhs = size * size
+    norms = rhs + size
+    distances = norms + k
     for i in range(n * n):
-        kkt[i] = 0.0
+        work[i] = 0.0
     finite = True
     for i in range(m):
-        kkt[i * n + i] = 1.0
-        rhs[i] = 0.0
+        work[i * n + i] = 1.0
+        work[rhs + i] = 0.0
     for a in range(q):
         r = working_set[a]
         residual = b[r]
         for c in range(m):
-            kkt[(m + a) * n + c] = -C[r, c]
-            kkt[c * n + m + a] = C[r, c]
+            work[(m + a) * n + c] = -C[r, c]
+            work[c * n + m + a] = C[r, c]
             residual -= C[r, c] * y0[c]
             finite = finite and math.isfinite(C[r, c])
-        rhs[m + a] = residual
+        work[rhs + m + a] = residual
         finite = finite and math.isfinite(residual)
     if finite:
-        dgesv(n, 1, kkt, 0, n, pivots, 0, rhs, 0, n, info, 0)
+        dgesv(n, 1, work, 0, n, pivots, 0, work, rhs, n, pivots, size)
     multipliers = np.empty(q)
-    if not finite or info[0] != 0:  # a singular system (dependent rows)
-        multipliers[:] = rhs[m:n]
+    for a in range(q):
+        multipliers[a] = work[rhs + m + a]
+    if not finite or pivots[size] != 0:  # a singular system (dependent rows)
         return -1, y0, multipliers
     y = np.empty(m)
     for c in range(m):
-        y[c] = y0[c] + rhs[c]
-    for a in range(q):
-        multipliers[a] = rhs[m + a]
+        y[c] = y0[c] + work[rhs + c]
     for i in range(n):
-        if not math.isfinite(rhs[i]):
+        if not math.isfinite(work[rhs + i]):
             return -1, y, multipliers
     for i in range(k):
         squares = 0.0
@@ -127,13 +126,14 @@ def optimum_on_working_set(
         for c in range(m):
             squares += C[i, c] * C[i, c]
             dot += C[i, c] * y[c]
-        norms[i] = max(math.sqrt(squares), NULL_ROW_NORM)
-        distances[i] = (dot - b[i]) / norms[i]
-        if not distances[i] >= -tolerance:
+        work[norms + i] = max(math.sqrt(squares), NULL_ROW_NORM)
+        work[distances + i] = (dot - b[i]) / work[norms + i]
+        if not work[distances + i] >= -tolerance:
             return 0, y, multipliers
     for a in range(q):
         r = working_set[a]
-        if abs(distances[r]) > tolerance or multipliers[a] * norms[r] < -tolerance:
+        norm, distance = work[norms + r], work[distances + r]
+        if abs(distance) > tolerance or multipliers[a] * norm < -tolerance:
             return 0, y, multipliers
     return 1, y, multipliers
 
@@ -150,7 +150,7 @@ def clipped_optimum_on_working_set(
     A: np.ndarray,
     lower: np.ndarray,
     feasibility_tolerance: float,
-    work: WorkingSetScratch,
+    scratch: WorkingSetScratch,
 ) -> tuple[int, np.ndarray, np.ndarray]:
     """:func:`optimum_on_working_set` for the identity metric (y = u), then the answer's checks.
 
@@ -164,7 +164,7 @@ def clipped_optimum_on_working_set(
         row check, 0 when a check fails, -1 as :func:`optimum_on_working_set`, -2 when u
         is not finite.
     """
-    outcome, y, multipliers = optimum_on_working_set(y0, C, b, working_set, tolerance, work)
+    outcome, y, multipliers = optimum_on_working_set(y0, C, b, working_set, tolerance, scratch)
     if outcome != 1:
         return outcome, y, multipliers
     m = y.shape[0]

@@ -59,7 +59,7 @@ class ActiveSetSteps:
     _last_active: tuple[int, ...] | None
     _pending: tuple[np.ndarray, tuple[int, ...], np.ndarray] | None
     _working_set: tuple[tuple[int, ...] | None, np.ndarray]
-    _solve_work: WorkingSetScratch
+    _solve_scratch: WorkingSetScratch
 
     def _on_guess(
         self, problem: Problem, guess: tuple[int, ...], iterations: int
@@ -90,7 +90,7 @@ class ActiveSetSteps:
                 problem.A,
                 problem.lower,
                 FEASIBILITY_TOLERANCE,
-                self._solve_work,
+                self._solve_scratch,
             )
             if outcome != 1:
                 return None
@@ -104,7 +104,7 @@ class ActiveSetSteps:
             self._hard_lower,
             working_set,
             ACTIVE_SET_TOLERANCE,
-            self._solve_work,
+            self._solve_scratch,
         )
         if outcome != 1:
             return None

@@ -136,7 +136,7 @@ class OSQPBackend(ActiveSetSteps):
         self._R: np.ndarray | None = None
         self._rows_y = self._hard_rows
         self._y_nom = np.zeros(m)
-        self._solve_work = working_set_scratch(m, k + 2 * m)
+        self._solve_scratch = working_set_scratch(m, k + 2 * m)
         self.reset()
 
     def reset(self) -> None:
@@ -184,7 +184,7 @@ class OSQPBackend(ActiveSetSteps):
         """
         guess = self._last_active
         working_set = self._working_set_array(guess) if guess else _NO_ROWS
-        return working_set, self._hard_rows, self._hard_lower, self._solve_work
+        return working_set, self._hard_rows, self._hard_lower, self._solve_scratch
 
     def accept_guess(
         self,
