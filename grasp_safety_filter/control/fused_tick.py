@@ -37,6 +37,7 @@ from collections.abc import Sequence
 import time
 from typing import Any, NamedTuple, TYPE_CHECKING
 
+import numba
 import numpy as np
 
 from grasp_safety_filter.control.constraints import ConstraintFamily, FrictionPyramid
@@ -68,6 +69,11 @@ if TYPE_CHECKING:
 
 #: :func:`packed_tick`'s outcomes.
 NOT_FINITE, NOT_SETTLED, SETTLED_ON_GUESS, NOMINAL = -1, 0, 1, 2
+
+#: The kernels' options (:data:`~grasp_safety_filter.model.compiled.kernel`), the body
+#: inlined into each entry by numba: no call with two dozen arrays to count references of,
+#: and the identity entry's metric branch folded away.
+_inlined_kernel = numba.njit(cache=True, error_model='numpy', nogil=True, inline='always')
 
 
 @kernel
@@ -122,7 +128,7 @@ def packed_tick_metric(
     )
 
 
-@kernel
+@_inlined_kernel
 def _packed_tick(
     terms: np.ndarray,
     negative_faces: np.ndarray,
