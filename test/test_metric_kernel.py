@@ -12,7 +12,7 @@ from grasp_safety_filter.control.metric_kernel import (
 )
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_metric import to_metric_coordinates, write_inertia_factor
-from grasp_safety_filter.control.working_set import optimum_on_working_set
+from grasp_safety_filter.control.working_set import optimum_on_working_set, working_set_scratch
 from grasp_safety_filter.model.fortran_linalg import matrix_matrix, matrix_vector
 
 SIZES = (2, 3, 7, 8, 9, 12, 16, 17, 40)
@@ -80,11 +80,13 @@ def test_the_guess_in_metric_coordinates_is_the_backends(m):
         rows_y, y_nom = np.empty_like(C), np.empty(m)
         outcome, u, multipliers = metric_optimum_on_working_set(
             C, b, working_set, (R, factor, rows_y, y_nom), u_nom, (-np.ones(m), np.ones(m)),
-            (qp.C_data, qp.lower_rows), (1e-10, 1e-6),
+            (qp.C_data, qp.lower_rows), (1e-10, 1e-6), working_set_scratch(m, C.shape[0]),
         )
         np.testing.assert_array_equal(rows_y, C @ R)
         np.testing.assert_array_equal(y_nom, to_metric_coordinates(R, u_nom))
-        expected, y, lam = optimum_on_working_set(y_nom, C @ R, b, working_set, 1e-10)
+        expected, y, lam = optimum_on_working_set(
+            y_nom, C @ R, b, working_set, 1e-10, working_set_scratch(m, C.shape[0])
+        )
         if expected != 1:
             assert outcome == expected
             rejected += 1

@@ -37,6 +37,7 @@ from collections.abc import Sequence
 import time
 from typing import Any, NamedTuple, TYPE_CHECKING
 
+import numba
 import numpy as np
 
 from grasp_safety_filter.control.constraints import ConstraintFamily, FrictionPyramid
@@ -63,11 +64,16 @@ from grasp_safety_filter.model.fortran_linalg import matrix_vector
 from grasp_safety_filter.model.grasp_state import GraspState
 
 if TYPE_CHECKING:
-    from grasp_safety_filter.control.qp_solvers.osqp_backend import OSQPBackend
+    from grasp_safety_filter.control.qp_solvers.osqp_backend import ActiveGuess, OSQPBackend
     from grasp_safety_filter.control.safety_filter import SafetyFilter
 
 #: :func:`packed_tick`'s outcomes.
 NOT_FINITE, NOT_SETTLED, SETTLED_ON_GUESS, NOMINAL = -1, 0, 1, 2
+
+#: The kernels' options (:data:`~grasp_safety_filter.model.compiled.kernel`), the body
+#: inlined into each entry by numba: no call with two dozen arrays to count references of,
+#: and the identity entry's metric branch folded away.
+_inlined_kernel = numba.njit(cache=True, error_model='numpy', nogil=True, inline='always')
 
 
 @kernel
@@ -83,9 +89,7 @@ def packed_tick(
     box: tuple[np.ndarray, np.ndarray],
     rows: tuple[np.ndarray, np.ndarray, np.ndarray],
     nominal: tuple[np.ndarray, np.ndarray],
-    working_set: np.ndarray,
-    C: np.ndarray,
-    b: np.ndarray,
+    guess: ActiveGuess,
     slack: np.ndarray,
 ) -> tuple[int, np.ndarray, np.ndarray, float]:
     """:func:`packed_tick_metric` for the identity metric (no metric arrays to pass in)."""
@@ -93,7 +97,7 @@ def packed_tick(
     identity = (0, empty, none, empty, none, none, none)
     return _packed_tick(
         terms, negative_faces, pyramid, box_places, box_rows, box_alpha, h, u_nom, box, rows,
-        nominal, identity, working_set, C, b, slack,
+        nominal, identity, guess, slack,
     )
 
 
@@ -111,9 +115,7 @@ def packed_tick_metric(
     rows: tuple[np.ndarray, np.ndarray, np.ndarray],
     nominal: tuple[np.ndarray, np.ndarray],
     metric: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    working_set: np.ndarray,
-    C: np.ndarray,
-    b: np.ndarray,
+    guess: ActiveGuess,
     slack: np.ndarray,
 ) -> tuple[int, np.ndarray, np.ndarray, float]:
     """Write the tick's rows, check them and u_nom, try the last active set (module doc).
@@ -122,11 +124,11 @@ def packed_tick_metric(
     """
     return _packed_tick(
         terms, negative_faces, pyramid, box_places, box_rows, box_alpha, h, u_nom, box, rows,
-        nominal, metric, working_set, C, b, slack,
+        nominal, metric, guess, slack,
     )
 
 
-@kernel
+@_inlined_kernel
 def _packed_tick(
     terms: np.ndarray,
     negative_faces: np.ndarray,
@@ -140,9 +142,7 @@ def _packed_tick(
     rows: tuple[np.ndarray, np.ndarray, np.ndarray],
     nominal: tuple[np.ndarray, np.ndarray],
     metric: tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-    working_set: np.ndarray,
-    C: np.ndarray,
-    b: np.ndarray,
+    guess: ActiveGuess,
     slack: np.ndarray,
 ) -> tuple[int, np.ndarray, np.ndarray, float]:
     """Write the tick's rows, check them and u_nom, try the last active set (module doc).
@@ -166,9 +166,9 @@ def _packed_tick(
         metric: ``(M_h's start in terms, R, R column-major, C R, y_nom, W, q)``: out, the
             metric factor R (m, m), the hard QP's ``q[:m] = W (-u_nom)`` (its W, (m, m),
             in) and the least-distance form in y (work); R of shape (0, 0): the identity.
-        working_set: The last active set, (q,); empty: no guess.
-        C: The hard least-distance rows ``[A; B]`` (k + 2m, m); rows ``:k`` are written.
-        b: Their lower bounds; ``:k`` written.
+        guess: :meth:`OSQPBackend.last_active_guess`: the last active set (q,) (empty: no
+            guess), the hard least-distance rows ``[A; B]`` (k + 2m, m) and their lower
+            bounds (rows ``:k`` written), and the working-set solve's scratch.
         slack: Out: ``A u - lower`` at the answer in ``[:k]``.
 
     Returns:
@@ -177,6 +177,7 @@ def _packed_tick(
         outside, the guess absent or not optimal) or :data:`NOT_FINITE`.
     """
     A, lower, C_data = rows
+    working_set, C, b, scratch = guess
     g, nominal_out = nominal
     u_min, u_max = box
     force_start, margin, start = pyramid
@@ -223,12 +224,12 @@ def _packed_tick(
     if with_metric:
         outcome, u, multipliers = metric_optimum_on_working_set(
             C, b, working_set, (R, factor, rows_y, y_nom), y0, box, (C_data, lower),
-            (ACTIVE_SET_TOLERANCE, FEASIBILITY_TOLERANCE),
+            (ACTIVE_SET_TOLERANCE, FEASIBILITY_TOLERANCE), scratch,
         )
     else:
         outcome, u, multipliers = clipped_optimum_on_working_set(
             y0, C, b, working_set, ACTIVE_SET_TOLERANCE, u_min, u_max, A, lower,
-            FEASIBILITY_TOLERANCE,
+            FEASIBILITY_TOLERANCE, scratch,
         )
     if outcome != 1:
         return NOT_SETTLED, u_nom, np.empty(0), 0.0
@@ -348,15 +349,14 @@ class FusedTick:
         start = time.perf_counter()
         if self._problem.metric_factor is None:
             outcome, u_star, multipliers, smallest = packed_tick(
-                terms, *self._arguments, h, u, self._box, self._rows, self._nominal, *guess,
-                slack,
+                terms, *self._arguments, h, u, self._box, self._rows, self._nominal, guess, slack,
             )
         else:
             hard_qp = self._hard_qp
             metric = (self._M_start, *self._metric, hard_qp.W.reshape(-1), hard_qp.q)
             outcome, u_star, multipliers, smallest = packed_tick_metric(
                 terms, *self._arguments, h, u, self._box, self._rows, self._nominal, metric,
-                *guess, slack,
+                guess, slack,
             )
         elapsed = time.perf_counter() - start
         if outcome == NOT_FINITE:

@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from grasp_safety_filter.control.row_checks import clip_if_finite
-from grasp_safety_filter.control.working_set import optimum_on_working_set
+from grasp_safety_filter.control.working_set import optimum_on_working_set, WorkingSetScratch
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.fortran_linalg import (
     dpotrf,
@@ -109,6 +109,7 @@ def metric_optimum_on_working_set(
     box: tuple[np.ndarray, np.ndarray],
     rows: tuple[np.ndarray, np.ndarray],
     tolerances: tuple[float, float],
+    scratch: WorkingSetScratch,
 ) -> tuple[int, np.ndarray, np.ndarray]:
     """Try the working set in ``y = R^-1 u`` as the OSQP backend's step 1 does with a metric.
 
@@ -123,6 +124,8 @@ def metric_optimum_on_working_set(
         rows: ``C_data``, the hard QP's CSC values holding the barrier rows ``A`` (k, m)
             (column j's k entries from ``j (k + 1)``), and ``lower`` (k,).
         tolerances: The active-set and the feasibility tolerance.
+        scratch: :func:`~grasp_safety_filter.control.working_set.working_set_scratch` of
+            (m, k + 2m).
 
     Returns:
         ``(outcome, u, lambda)``: outcome 1 when u (``R y`` clipped) is the optimum and its
@@ -142,7 +145,7 @@ def metric_optimum_on_working_set(
     if info[0] != 0:
         return -2, u_nom, np.empty(0)
     outcome, y, multipliers = optimum_on_working_set(
-        y_nom, rows_y, b, working_set, active_set_tolerance
+        y_nom, rows_y, b, working_set, active_set_tolerance, scratch
     )
     if outcome != 1:
         return outcome, y, multipliers

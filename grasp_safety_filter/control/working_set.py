@@ -29,16 +29,45 @@ import numpy as np
 
 from grasp_safety_filter.control.row_checks import row_dot
 from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.fortran_linalg import _routine
+
+#: ``dgesv(n, nrhs, a, lda, ipiv, b, ldb, info)``, scipy's (as numba's ``np.linalg.solve``).
+dgesv = _routine('lapack', 'dgesv', 'iiainain')
+
+#: :func:`working_set_scratch`'s arrays.
+WorkingSetScratch = tuple[np.ndarray, np.ndarray]
 
 #: Norm floor of a row in the check (a null row: all zero coefficients).
 NULL_ROW_NORM = 1e-12
 
 
+def working_set_scratch(m: int, rows: int) -> WorkingSetScratch:
+    """Return the work arrays of :func:`optimum_on_working_set` for rows C of shape (k, m).
+
+    Sized for any working set of the k rows, with ``s = m + k``: floats, the KKT matrix
+    (``s^2``, column-major from 0), its right-hand side (s), the rows' norms (k) and
+    distances (k); LAPACK's integers, the pivots (s) and ``info`` (last). Two arrays, not
+    six: each array a compiled call takes from Python is unboxed on every call. One per
+    caller, reused every call (the answers are new arrays).
+    """
+    size = m + rows
+    return np.empty(size * size + size + 2 * rows), np.empty(size + 1, dtype=np.int32)
+
+
 @kernel
 def optimum_on_working_set(
-    y0: np.ndarray, C: np.ndarray, b: np.ndarray, working_set: np.ndarray, tolerance: float
+    y0: np.ndarray,
+    C: np.ndarray,
+    b: np.ndarray,
+    working_set: np.ndarray,
+    tolerance: float,
+    scratch: WorkingSetScratch,
 ) -> tuple[int, np.ndarray, np.ndarray]:
     """Solve on the working set and check optimality (module docstring).
+
+    The KKT system is written column-major into ``scratch`` and solved there by ``dgesv``, as
+    ``np.linalg.solve`` does on its own copies (a system with an entry not finite is refused
+    as ``np.linalg.solve`` refuses it).
 
     Args:
         y0: Shape (m,).
@@ -46,50 +75,65 @@ def optimum_on_working_set(
         b: Shape (k,), finite.
         working_set: Row indices W, distinct, shape (q,), q >= 1.
         tolerance: The distance tolerance tol (y's unit).
+        scratch: :func:`working_set_scratch` of (m, k).
 
     Returns:
         ``(outcome, y, lambda)``: outcome 1 when y is the optimum of the whole problem,
         0 when a row or a multiplier fails the check, -1 when the KKT system is singular
         (dependent rows) or its solution is not finite; lambda in W's order.
     """
+    work, pivots = scratch
     k, m = C.shape
     q = working_set.shape[0]
-    kkt = np.zeros((m + q, m + q))
-    rhs = np.zeros(m + q)
+    n = m + q
+    # Offsets in work (working_set_scratch): the KKT matrix at 0, then the others.
+    size = m + k
+    rhs = size * size
+    norms = rhs + size
+    distances = norms + k
+    for i in range(n * n):
+        work[i] = 0.0
+    finite = True
     for i in range(m):
-        kkt[i, i] = 1.0
+        work[i * n + i] = 1.0
+        work[rhs + i] = 0.0
     for a in range(q):
         r = working_set[a]
         residual = b[r]
         for c in range(m):
-            kkt[c, m + a] = -C[r, c]
-            kkt[m + a, c] = C[r, c]
+            work[(m + a) * n + c] = -C[r, c]
+            work[c * n + m + a] = C[r, c]
             residual -= C[r, c] * y0[c]
-        rhs[m + a] = residual
-    try:
-        solution = np.linalg.solve(kkt, rhs)
-    except Exception:  # numba's LinAlgError: a singular system (dependent rows)
-        return -1, y0, rhs[m:]
-    y = y0 + solution[:m]
-    multipliers = solution[m:]
-    for value in solution:
-        if not math.isfinite(value):
+            finite = finite and math.isfinite(C[r, c])
+        work[rhs + m + a] = residual
+        finite = finite and math.isfinite(residual)
+    if finite:
+        dgesv(n, 1, work, 0, n, pivots, 0, work, rhs, n, pivots, size)
+    multipliers = np.empty(q)
+    for a in range(q):
+        multipliers[a] = work[rhs + m + a]
+    if not finite or pivots[size] != 0:  # a singular system (dependent rows)
+        return -1, y0, multipliers
+    y = np.empty(m)
+    for c in range(m):
+        y[c] = y0[c] + work[rhs + c]
+    for i in range(n):
+        if not math.isfinite(work[rhs + i]):
             return -1, y, multipliers
-    norms = np.empty(k)
-    distances = np.empty(k)
     for i in range(k):
         squares = 0.0
         dot = 0.0
         for c in range(m):
             squares += C[i, c] * C[i, c]
             dot += C[i, c] * y[c]
-        norms[i] = max(math.sqrt(squares), NULL_ROW_NORM)
-        distances[i] = (dot - b[i]) / norms[i]
-        if not distances[i] >= -tolerance:
+        work[norms + i] = max(math.sqrt(squares), NULL_ROW_NORM)
+        work[distances + i] = (dot - b[i]) / work[norms + i]
+        if not work[distances + i] >= -tolerance:
             return 0, y, multipliers
     for a in range(q):
         r = working_set[a]
-        if abs(distances[r]) > tolerance or multipliers[a] * norms[r] < -tolerance:
+        norm, distance = work[norms + r], work[distances + r]
+        if abs(distance) > tolerance or multipliers[a] * norm < -tolerance:
             return 0, y, multipliers
     return 1, y, multipliers
 
@@ -106,6 +150,7 @@ def clipped_optimum_on_working_set(
     A: np.ndarray,
     lower: np.ndarray,
     feasibility_tolerance: float,
+    scratch: WorkingSetScratch,
 ) -> tuple[int, np.ndarray, np.ndarray]:
     """:func:`optimum_on_working_set` for the identity metric (y = u), then the answer's checks.
 
@@ -119,7 +164,7 @@ def clipped_optimum_on_working_set(
         row check, 0 when a check fails, -1 as :func:`optimum_on_working_set`, -2 when u
         is not finite.
     """
-    outcome, y, multipliers = optimum_on_working_set(y0, C, b, working_set, tolerance)
+    outcome, y, multipliers = optimum_on_working_set(y0, C, b, working_set, tolerance, scratch)
     if outcome != 1:
         return outcome, y, multipliers
     m = y.shape[0]

@@ -28,6 +28,7 @@ from grasp_safety_filter.control.row_checks import clip_if_finite
 from grasp_safety_filter.control.working_set import (
     clipped_optimum_on_working_set,
     optimum_on_working_set,
+    WorkingSetScratch,
 )
 
 #: Distance tolerance (N·m, in torque space) of the exact active-set method.
@@ -58,6 +59,7 @@ class ActiveSetSteps:
     _last_active: tuple[int, ...] | None
     _pending: tuple[np.ndarray, tuple[int, ...], np.ndarray] | None
     _working_set: tuple[tuple[int, ...] | None, np.ndarray]
+    _solve_scratch: WorkingSetScratch
 
     def _on_guess(
         self, problem: Problem, guess: tuple[int, ...], iterations: int
@@ -88,6 +90,7 @@ class ActiveSetSteps:
                 problem.A,
                 problem.lower,
                 FEASIBILITY_TOLERANCE,
+                self._solve_scratch,
             )
             if outcome != 1:
                 return None
@@ -96,7 +99,12 @@ class ActiveSetSteps:
             )
         # y = R^-1 u with a metric
         outcome, y, multipliers = optimum_on_working_set(
-            self._y_nom, self._rows_y, self._hard_lower, working_set, ACTIVE_SET_TOLERANCE
+            self._y_nom,
+            self._rows_y,
+            self._hard_lower,
+            working_set,
+            ACTIVE_SET_TOLERANCE,
+            self._solve_scratch,
         )
         if outcome != 1:
             return None

@@ -73,10 +73,14 @@ from grasp_safety_filter.control.qp_solvers.problem import (
     Solution,
     SolutionStatus,
 )
+from grasp_safety_filter.control.working_set import working_set_scratch, WorkingSetScratch
 
 _NO_MULTIPLIERS = np.zeros(0)
 _NO_MULTIPLIERS.setflags(write=False)
 _NO_ROWS = np.zeros(0, dtype=np.intp)
+
+#: :meth:`OSQPBackend.last_active_guess`'s answer.
+ActiveGuess = tuple[np.ndarray, np.ndarray, np.ndarray, WorkingSetScratch]
 
 _CONVERGED = (osqp.SolverStatus.OSQP_SOLVED, osqp.SolverStatus.OSQP_SOLVED_INACCURATE)
 _INFEASIBLE = (
@@ -132,6 +136,7 @@ class OSQPBackend(ActiveSetSteps):
         self._R: np.ndarray | None = None
         self._rows_y = self._hard_rows
         self._y_nom = np.zeros(m)
+        self._solve_scratch = working_set_scratch(m, k + 2 * m)
         self.reset()
 
     def reset(self) -> None:
@@ -169,17 +174,17 @@ class OSQPBackend(ActiveSetSteps):
         self._last_active = solution.active
         self._pending = (solution.u, solution.active, solution.multipliers)
 
-    def last_active_guess(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def last_active_guess(self) -> ActiveGuess:
         """Return what a compiled pass needs to try step 1 itself.
 
         Returns:
-            The previous tick's active set as an index array (empty when there is no guess)
-            and the hard least-distance form's rows ``C`` and ``b`` in u, whose first k rows
-            the pass overwrites with the tick's ``A`` and ``lower``.
+            The previous tick's active set as an index array (empty when there is no guess),
+            the hard least-distance form's rows ``C`` and ``b`` in u, whose first k rows
+            the pass overwrites with the tick's ``A`` and ``lower``, and the solve's scratch.
         """
         guess = self._last_active
         working_set = self._working_set_array(guess) if guess else _NO_ROWS
-        return working_set, self._hard_rows, self._hard_lower
+        return working_set, self._hard_rows, self._hard_lower, self._solve_scratch
 
     def accept_guess(
         self,
