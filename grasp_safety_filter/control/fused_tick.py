@@ -37,7 +37,6 @@ from collections.abc import Sequence
 import time
 from typing import Any, NamedTuple, TYPE_CHECKING
 
-import numba
 import numpy as np
 
 from grasp_safety_filter.control.constraints import ConstraintFamily, FrictionPyramid
@@ -59,7 +58,7 @@ from grasp_safety_filter.control.qp_solvers import (
 from grasp_safety_filter.control.qp_solvers.osqp_active_set import ACTIVE_SET_TOLERANCE
 from grasp_safety_filter.control.row_checks import all_finite, inside, residuals
 from grasp_safety_filter.control.working_set import clipped_optimum_on_working_set
-from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.compiled import inline_kernel, kernel
 from grasp_safety_filter.model.fortran_linalg import matrix_vector
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -69,11 +68,6 @@ if TYPE_CHECKING:
 
 #: :func:`packed_tick`'s outcomes.
 NOT_FINITE, NOT_SETTLED, SETTLED_ON_GUESS, NOMINAL = -1, 0, 1, 2
-
-#: The kernels' options (:data:`~grasp_safety_filter.model.compiled.kernel`), the body
-#: inlined into each entry by numba: no call with two dozen arrays to count references of,
-#: and the identity entry's metric branch folded away.
-_inlined_kernel = numba.njit(cache=True, error_model='numpy', nogil=True, inline='always')
 
 
 @kernel
@@ -128,7 +122,9 @@ def packed_tick_metric(
     )
 
 
-@_inlined_kernel
+# Inlined into each entry: no call that counts the references of two dozen arrays, and the
+# identity entry's metric branch folds away.
+@inline_kernel
 def _packed_tick(
     terms: np.ndarray,
     negative_faces: np.ndarray,

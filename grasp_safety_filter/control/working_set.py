@@ -29,10 +29,7 @@ import numpy as np
 
 from grasp_safety_filter.control.row_checks import row_dot
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.fortran_linalg import _routine
-
-#: ``dgesv(n, nrhs, a, lda, ipiv, b, ldb, info)``, scipy's (as numba's ``np.linalg.solve``).
-dgesv = _routine('lapack', 'dgesv', 'iiainain')
+from grasp_safety_filter.model.fortran_linalg import dgesv
 
 #: :func:`working_set_scratch`'s arrays.
 WorkingSetScratch = tuple[np.ndarray, np.ndarray]

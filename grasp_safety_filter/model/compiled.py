@@ -53,3 +53,6 @@ numba.config.CACHE_DIR = fallback_cache_directory() or numba.config.CACHE_DIR
 #: The kernels' decorator: no Python objects, cached machine code, numpy's float semantics
 #: (division by zero gives inf or NaN, as in the numpy code, instead of raising).
 kernel = numba.njit(cache=True, error_model='numpy', nogil=True)
+#: The same, its body inlined into each compiled caller by numba (a helper whose call would
+#: pass many arrays: inlined, their reference counts go too).
+inline_kernel = numba.njit(cache=True, error_model='numpy', nogil=True, inline='always')

@@ -102,6 +102,8 @@ ddot = _routine('blas', 'ddot', 'iaiai', returns_double=True)
 dgemm = _routine('blas', 'dgemm', 'cciiidaiaidai')
 #: ``dgemv(trans, m, n, alpha, a, lda, x, incx, beta, y, incy)``.
 dgemv = _routine('blas', 'dgemv', 'ciidaiaidai')
+#: ``dgesv(n, nrhs, a, lda, ipiv, b, ldb, info)``: scipy's, as numba's ``np.linalg.solve``.
+dgesv = _routine('lapack', 'dgesv', 'iiainain')
 #: ``dgeqrf(m, n, a, lda, tau, work, lwork, info)``.
 dgeqrf = _routine('lapack', 'dgeqrf', 'iiaiaain')
 #: ``dgeqp3(m, n, a, lda, jpvt, tau, work, lwork, info)``.
