@@ -19,8 +19,9 @@ import pinocchio as pin
 import pytest
 from random_hands import random_hand
 
+from grasp_safety_filter.model.closed_form_stacks import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.contact_dynamics import contact_dynamics
-from grasp_safety_filter.model.contact_stack import contact_stack, ContactStack, SphereOnPlaneStack
+from grasp_safety_filter.model.contact_stack import ContactStack
 from grasp_safety_filter.model.grasp_model import GraspModel
 
 PAPER_CASES = {
