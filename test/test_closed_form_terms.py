@@ -119,6 +119,7 @@ def _check_state(model, configuration, stack_type, label):
         for a, b in zip(ours, theirs, strict=True):
             _assert_close(a, b, f'{label}: {field.name}', floor)
     for part in ('matrix', 'offset'):
+        assert not getattr(packed.xi_co_ddot, part).flags.writeable
         _assert_close(
             getattr(packed.xi_co_ddot, part),
             getattr(staged.xi_co_ddot, part),

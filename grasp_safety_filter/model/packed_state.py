@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 import dataclasses
-from functools import partial
+from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
@@ -125,6 +125,20 @@ class PackedGraspState(GraspState):
         fields['_layout'] = layout
         fields['_stack'] = stack
         return state
+
+    @cached_property
+    def xi_co_ddot(self) -> AffineMap:
+        """:attr:`GraspState.xi_co_ddot`, in one compiled call where the contacts give one.
+
+        On a sphere object straight from the buffer
+        (:meth:`~grasp_safety_filter.model.closed_form_stacks.SphereOnSphereStack.
+        packed_xi_co_ddot`); else as :class:`GraspState` forms it.
+        """
+        fields = self.__dict__
+        from_terms = getattr(fields.get('_stack'), 'packed_xi_co_ddot', None)
+        if from_terms is None or '_layout' not in fields:
+            return GraspState.xi_co_ddot.func(self)
+        return from_terms(fields['_buffer'], fields['_layout'])
 
     def _make(self, name: str) -> Any:
         places = self._layout.places

@@ -218,3 +218,64 @@ def sphere_on_sphere_contacts(
         xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc,
         xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega,
     )
+
+
+@kernel
+def sphere_object_coordinate_acceleration(
+    terms: np.ndarray,
+    starts: np.ndarray,
+    m: int,
+    object_radius: np.ndarray,
+    radius: np.ndarray,
+) -> np.ndarray:
+    """``u ↦ xi_co_ddot`` on a sphere object, ``[matrix | offset]`` (2n, m + 1), from the terms.
+
+    :meth:`~grasp_safety_filter.model.contact_stack.ContactStack.object_rate_terms` and
+    :attr:`~grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot` in closed form:
+    per contact, with ``M_cf = diag(R, R cos a_f)``, ``M_co = diag(R_o, R_o cos a_o)``,
+
+        xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot
+                     + M_co^-1 (R_psi_dot sliding + R_psi M_cf_dot xi_cf_dot - M_co_dot xi_co_dot)
+        M_cf_dot = diag(0, -R sin(a_f) a_f_dot),   M_co_dot = diag(0, -R_o sin(a_o) a_o_dot)
+        R_psi_dot = psi_dot [[-sin psi, -cos psi], [-cos psi, sin psi]]
+
+    (rad/s² in the object's charts), with ``xi_cf_ddot``'s rows ``[matrix | offset]``.
+
+    Args:
+        terms: The packed terms (:func:`~grasp_safety_filter.model.packed_terms.
+            packed_fields`).
+        starts: Where ``xi_cf``, ``xi_co``, ``psi``, ``xi_cf_dot``, ``xi_co_dot``,
+            ``psi_dot``, ``sliding_velocity`` and ``xi_cf_ddot_augmented`` start in it, (8,).
+        m: Joints.
+        object_radius: The object's radius per contact, (n,), m.
+        radius: Each fingertip's radius, (n,), m.
+    """
+    n = radius.shape[0]
+    s_xi_cf, s_xi_co, s_psi, s_xi_cf_dot, s_xi_co_dot, s_psi_dot, s_sliding, s_ddot = starts
+    columns = m + 1
+    out = np.empty((2 * n, columns))
+    for i in range(n):
+        R_f, R_o = radius[i], object_radius[i]
+        a_f, a_o = terms[s_xi_cf + 2 * i], terms[s_xi_co + 2 * i]
+        a_f_dot, b_f_dot = terms[s_xi_cf_dot + 2 * i], terms[s_xi_cf_dot + 2 * i + 1]
+        a_o_dot, b_o_dot = terms[s_xi_co_dot + 2 * i], terms[s_xi_co_dot + 2 * i + 1]
+        sliding_x, sliding_y = terms[s_sliding + 2 * i], terms[s_sliding + 2 * i + 1]
+        psi, psi_dot = terms[s_psi + i], terms[s_psi_dot + i]
+        s, c = math.sin(psi), math.cos(psi)
+        M_cf_x, M_cf_y = R_f, R_f * math.cos(a_f)
+        M_co_x, M_co_y = R_o, R_o * math.cos(a_o)
+        # M_cf_dot xi_cf_dot and M_co_dot xi_co_dot: only their second entries are nonzero.
+        fingertip_y = -R_f * math.sin(a_f) * a_f_dot * b_f_dot
+        object_y = -R_o * math.sin(a_o) * a_o_dot * b_o_dot
+        bias_x = (psi_dot * (-s * sliding_x - c * sliding_y) - s * fingertip_y) / M_co_x
+        bias_y = (psi_dot * (-c * sliding_x + s * sliding_y) - c * fingertip_y - object_y) / M_co_y
+        # M_co^-1 R_psi M_cf, R_psi = [[c, -s], [-s, -c]].
+        A_xx, A_xy = c * M_cf_x / M_co_x, -s * M_cf_y / M_co_x
+        A_yx, A_yy = -s * M_cf_x / M_co_y, -c * M_cf_y / M_co_y
+        top, bottom = s_ddot + 2 * i * columns, s_ddot + (2 * i + 1) * columns
+        for k in range(columns):
+            out[2 * i, k] = A_xx * terms[top + k] + A_xy * terms[bottom + k]
+            out[2 * i + 1, k] = A_yx * terms[top + k] + A_yy * terms[bottom + k]
+        out[2 * i, m] += bias_x
+        out[2 * i + 1, m] += bias_y
+    return out
