@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.closed_form_stacks import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.contact_dynamics import contact_dynamics
-from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.stabilisation import sphere_on_plane_stage_rate, stabilised_rate
 
@@ -169,7 +169,8 @@ class PlantRate:
         C_o_twist = rigid_object.bias_wrench(R_o, twist_o)
         if isinstance(stack, SphereOnPlaneStack):
             # The same kernels, the hand's terms included, in one compiled call before and
-            # one after the solve.
+            # one after the solve. Flat faces only: other contacts (a sphere object's
+            # compiled SphereOnSphereStack included) take the stages below.
             return sphere_on_plane_stage_rate(
                 self._hand, x[:m], stack.surface_arrays, dq, p_o, R_o, twist_o, quaternion,
                 M_o_inv, C_o_twist, rigid_object.external_wrench(), effort, position_gain,

@@ -8,7 +8,12 @@ import pinocchio as pin
 import pytest
 
 from grasp_safety_filter.model.arrays import matvec
-from grasp_safety_filter.model.contact_stack import contact_stack, ContactStack, SphereOnPlaneStack
+from grasp_safety_filter.model.closed_form_stacks import (
+    contact_stack,
+    SphereOnPlaneStack,
+    SphereOnSphereStack,
+)
+from grasp_safety_filter.model.contact_stack import ContactStack
 from grasp_safety_filter.model.rolling import ContactPair
 from grasp_safety_filter.model.surface_stacks import SurfaceList
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
@@ -106,10 +111,15 @@ def test_stacks_match_the_per_contact_formulas(shape):
                 )
 
 
-def test_the_selected_stack_uses_the_closed_forms_only_for_planes():
-    assert isinstance(contact_stack(paper_model().contacts), SphereOnPlaneStack)
+def test_the_selected_stack_uses_the_closed_forms_only_for_planes_and_spheres():
+    cube = paper_model()
+    assert type(contact_stack(cube.contacts)) is SphereOnPlaneStack
     sphere = paper_model(**MODELS['sphere'])
     sphere.bind_contacts(Q_PAPER, P_OBJECT_PAPER, np.eye(3))
-    assert type(contact_stack(sphere.contacts)) is ContactStack
-    opaque = ContactStack([_opaque(pair) for pair in sphere.contacts])
-    assert isinstance(opaque.object_surfaces, SurfaceList)
+    assert type(contact_stack(sphere.contacts)) is SphereOnSphereStack
+    for model in (cube, sphere):
+        opaque = [_opaque(pair) for pair in model.contacts]
+        assert type(contact_stack(opaque)) is ContactStack
+        assert isinstance(ContactStack(opaque).object_surfaces, SurfaceList)
+    mixed = [*cube.contacts[:-1], sphere.contacts[-1]]
+    assert type(contact_stack(mixed)) is ContactStack

@@ -18,8 +18,9 @@ from numpy_model_terms import numpy_model_terms
 import pinocchio as pin
 import pytest
 
+from grasp_safety_filter.model.closed_form_stacks import contact_stack, SphereOnPlaneStack
 from grasp_safety_filter.model.contact_dynamics import contact_dynamics
-from grasp_safety_filter.model.contact_stack import contact_stack, ContactStack, SphereOnPlaneStack
+from grasp_safety_filter.model.contact_stack import ContactStack
 
 PAPER_CASES = {
     'cube': {},

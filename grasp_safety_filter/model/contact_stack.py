@@ -1,10 +1,10 @@
 """All rolling contacts of a grasp at once: Montana's kinematics on stacked arrays.
 
 The formulas of :mod:`grasp_safety_filter.model.rolling`, evaluated for the n contacts of a
-grasp together along a leading contact axis (one call per tick instead of one per contact),
-and for the paper's spheres on flat faces in compiled kernels
-(:mod:`grasp_safety_filter.model.rolling_kernels`). :func:`contact_stack` picks the
-evaluation for a grasp's contacts.
+grasp together along a leading contact axis (one call per tick instead of one per contact).
+:mod:`grasp_safety_filter.model.closed_form_stacks` evaluates them in compiled closed forms
+for spherical fingertips on flat faces or on a sphere, and picks the evaluation for a grasp's
+contacts (:func:`~grasp_safety_filter.model.closed_form_stacks.contact_stack`).
 """
 
 from __future__ import annotations
@@ -16,14 +16,8 @@ import numpy as np
 
 from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.rolling import ContactPair, ROLL_SELECT
-from grasp_safety_filter.model.rolling_kernels import (
-    fingertip_contact_frames,
-    sphere_on_plane_contacts,
-    sphere_on_plane_geometry,
-    sphere_on_plane_rates,
-)
-from grasp_safety_filter.model.surface_stacks import FlatStack, SphereStack, stack_surfaces
-from grasp_safety_filter.model.surfaces import FlatSurface
+from grasp_safety_filter.model.rolling_kernels import fingertip_contact_frames
+from grasp_safety_filter.model.surface_stacks import SphereStack, stack_surfaces
 
 
 def _reflections(psi: np.ndarray) -> np.ndarray:
@@ -267,105 +261,3 @@ class ContactStack:
             - self.object_surfaces.metric_rate(xi_co, rates.xi_co_dot) * rates.xi_co_dot
         ) / M_co
         return R_psi * M_cf[:, None, :] / M_co[:, :, None], bias
-
-
-class SphereOnPlaneStack(ContactStack):
-    """Spherical fingertips on flat object faces (the paper's cube).
-
-    The geometry and rolling rates of :class:`ContactStack` in closed form, compiled
-    (:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_geometry` and
-    :func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_rates`, whose
-    docstrings give the formulas).
-
-    Args:
-        contacts: The contact pairs; every object surface must be a
-            :class:`~grasp_safety_filter.model.surfaces.FlatSurface`.
-    """
-
-    def __init__(self, contacts: Sequence[ContactPair]) -> None:
-        super().__init__(contacts)
-        if not isinstance(self.object_surfaces, FlatStack):
-            raise TypeError('SphereOnPlaneStack: every object surface must be a FlatSurface')
-        self._radius = np.ascontiguousarray(self.fingertips.radius, dtype=float)
-        self._plane_origin = np.ascontiguousarray(self.object_surfaces.origin, dtype=float)
-        self._plane_frame = np.array(self.object_surfaces.frame(None), dtype=float)
-
-    @property
-    def surface_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Return the kernels' constants: faces' origins, frames and fingertip radii.
-
-        Each face's origin (n, 3), m, and ``[e1, e2, n]`` (n, 3, 3) in the object frame, and
-        each fingertip's radius (n,), m.
-        """
-        return self._plane_origin, self._plane_frame, self._radius
-
-    def geometry(
-        self,
-        p_fingertip_in_palm: np.ndarray,
-        R_fingertip_to_palm: np.ndarray,
-        p_object_in_palm: np.ndarray,
-        R_object_to_palm: np.ndarray,
-    ) -> StackedContactGeometry:
-        """:meth:`ContactStack.geometry`, by the compiled closed forms."""
-        return StackedContactGeometry(
-            *sphere_on_plane_geometry(
-                p_fingertip_in_palm,
-                R_fingertip_to_palm,
-                p_object_in_palm,
-                R_object_to_palm,
-                self._plane_origin,
-                self._plane_frame,
-                self._radius,
-            )
-        )
-
-    def kinematics(
-        self,
-        p_fingertip_in_palm: np.ndarray,
-        R_fingertip_to_palm: np.ndarray,
-        twist_fingertip: np.ndarray,
-        p_object_in_palm: np.ndarray,
-        R_object_to_palm: np.ndarray,
-        twist_object: np.ndarray,
-    ) -> tuple[StackedContactGeometry, StackedRollingRates]:
-        """:meth:`ContactStack.kinematics` in one compiled pass."""
-        arrays = sphere_on_plane_contacts(
-            p_fingertip_in_palm,
-            R_fingertip_to_palm,
-            twist_fingertip,
-            p_object_in_palm,
-            R_object_to_palm,
-            twist_object,
-            self._plane_origin,
-            self._plane_frame,
-            self._radius,
-        )
-        return StackedContactGeometry(*arrays[:7]), StackedRollingRates(*arrays[7:])
-
-    def rolling_rates(
-        self, geometry: StackedContactGeometry, w_relative_in_contact: np.ndarray
-    ) -> StackedRollingRates:
-        """:meth:`ContactStack.rolling_rates`, by the compiled closed forms."""
-        xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega = sphere_on_plane_rates(
-            geometry.xi_cf, geometry.psi, w_relative_in_contact, self._radius
-        )
-        return StackedRollingRates(
-            xi_cf_dot=xi_cf_dot,
-            xi_co_dot=xi_co_dot,
-            psi_dot=psi_dot,
-            H_cf=H_cf,
-            H_cf_dot_w=H_cf_dot_w,
-            sliding_velocity=sliding,
-            frame_angular_velocity=Omega,
-        )
-
-
-def contact_stack(contacts: Sequence[ContactPair]) -> ContactStack:
-    """Stack ``contacts`` for batched evaluation.
-
-    The closed forms of :class:`SphereOnPlaneStack` when every object surface is flat, else
-    the general :class:`ContactStack`.
-    """
-    if all(type(contact.object_surface) is FlatSurface for contact in contacts):
-        return SphereOnPlaneStack(contacts)
-    return ContactStack(contacts)

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model import grasp_configuration
-from grasp_safety_filter.model.contact_stack import contact_stack, SphereOnPlaneStack
+from grasp_safety_filter.model.closed_form_stacks import ClosedFormStack, contact_stack
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
@@ -142,7 +142,8 @@ class GraspModel:
     def _set_contacts(self, contacts: Sequence[ContactPair]) -> None:
         self._contacts = list(contacts)
         self._contact_stack = contact_stack(self._contacts)
-        # Spherical fingertips on flat faces: every term in one compiled pass (packed_terms).
+        # Spherical fingertips on flat faces or a sphere: every term in one compiled pass
+        # (packed_terms).
         self._packed_layout = (
             PackedLayout.of(
                 len(self._contacts),
@@ -150,7 +151,7 @@ class GraspModel:
                 self.soft_finger,
                 self.torsional_compliance,
             )
-            if isinstance(self._contact_stack, SphereOnPlaneStack)
+            if isinstance(self._contact_stack, ClosedFormStack)
             else None
         )
 
@@ -339,9 +340,9 @@ class GraspModel:
         torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
         in one compiled pass
         (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`).
-        Spherical fingertips on flat faces (the paper's cube) take one compiled pass for
-        everything after Pinocchio, into one buffer whose views are the fields
-        (:func:`~grasp_safety_filter.model.packed_state.packed_state`); other contacts take
+        Spherical fingertips on flat faces (the paper's cube) or on a sphere take one
+        compiled pass for everything after Pinocchio, into one buffer whose views are the
+        fields (:func:`~grasp_safety_filter.model.packed_state.packed_state`); other contacts take
         the stages of :func:`~grasp_safety_filter.model.staged_state.staged_state`.
         """
         if self._contacts is None:

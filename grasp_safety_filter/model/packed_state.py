@@ -4,15 +4,19 @@ from __future__ import annotations
 
 from collections.abc import Callable
 import dataclasses
-from functools import partial
+from functools import cached_property, partial
 from typing import Any
 
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.closed_form_stacks import (
+    ClosedFormStack,
+    SphereOnPlaneStack,
+    SphereOnSphereStack,
+)
 from grasp_safety_filter.model.contact_stack import (
     ContactStack,
-    SphereOnPlaneStack,
     StackedContactGeometry,
     StackedRollingRates,
 )
@@ -22,8 +26,15 @@ from grasp_safety_filter.model.packed_terms import (
     packed_fields,
     PackedLayout,
     sphere_on_plane_terms,
+    sphere_on_sphere_terms,
 )
 from grasp_safety_filter.model.rigid_object import RigidObject
+
+#: The one-pass kernel of each kind of contacts (its surface arrays: the stack's).
+_TERMS_KERNELS = {
+    SphereOnPlaneStack: sphere_on_plane_terms,
+    SphereOnSphereStack: sphere_on_sphere_terms,
+}
 
 #: GraspState's affine terms and the packed ``[matrix | offset]`` each is a view of.
 _AFFINE = {
@@ -61,11 +72,12 @@ class _View:
 class PackedGraspState(GraspState):
     """A :class:`GraspState` whose fields are views of one read-only buffer.
 
-    The buffer is :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`'s:
-    the same fields and values as the staged computation, read-only arrays. Each field is
-    a view of the buffer, made when it is first read and kept; a tick's state is thus built
-    with no array per term, and a consumer pays only for the fields it reads. Build with
-    :meth:`of`; ``dataclasses.replace`` gives a copy with every field set.
+    The buffer is :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`'s
+    (or ``sphere_on_sphere_terms``'): the same fields and values as the staged computation,
+    read-only arrays. Each field is a view of the buffer, made when it is first read and
+    kept; a tick's state is thus built with no array per term, and a consumer pays only for
+    the fields it reads. Build with :meth:`of`; ``dataclasses.replace`` gives a copy with
+    every field set.
     """
 
     @property
@@ -113,6 +125,20 @@ class PackedGraspState(GraspState):
         fields['_layout'] = layout
         fields['_stack'] = stack
         return state
+
+    @cached_property
+    def xi_co_ddot(self) -> AffineMap:
+        """:attr:`GraspState.xi_co_ddot`, in one compiled call where the contacts give one.
+
+        On a sphere object straight from the buffer
+        (:meth:`~grasp_safety_filter.model.closed_form_stacks.SphereOnSphereStack.
+        packed_xi_co_ddot`); else as :class:`GraspState` forms it.
+        """
+        fields = self.__dict__
+        from_terms = getattr(fields.get('_stack'), 'packed_xi_co_ddot', None)
+        if from_terms is None or '_layout' not in fields:
+            return GraspState.xi_co_ddot.func(self)
+        return from_terms(fields['_buffer'], fields['_layout'])
 
     def _make(self, name: str) -> Any:
         places = self._layout.places
@@ -173,14 +199,15 @@ _install_views(PackedGraspState)
 def packed_state(
     hand: HandModel,
     rigid_object: RigidObject,
-    stack: SphereOnPlaneStack,
+    stack: ClosedFormStack,
     layout: PackedLayout,
     sample: tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
 ) -> PackedGraspState | None:
     """Return every model term of one instant, computed in one compiled pass.
 
-    :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms` gives the same
-    terms as the staged computation of
+    :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms` (spherical
+    fingertips on flat faces) or :func:`~grasp_safety_filter.model.packed_terms.
+    sphere_on_sphere_terms` (on a sphere object) gives the same terms as the staged computation of
     :meth:`~grasp_safety_filter.model.grasp_model.GraspModel.state` (the same formulas and
     LAPACK solve), computed in one compiled pass from Pinocchio's terms and the object's
     mass matrices into one buffer.
@@ -188,7 +215,8 @@ def packed_state(
     Args:
         hand: The hand.
         rigid_object: The object.
-        stack: The contacts (spherical fingertips on flat faces).
+        stack: The contacts (:class:`~grasp_safety_filter.model.closed_form_stacks.
+            SphereOnPlaneStack` or ``SphereOnSphereStack``).
         layout: The buffer's layout for these contacts and joints.
         sample: ``(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)``.
 
@@ -198,8 +226,9 @@ def packed_state(
         computation, which reports them as it always has).
 
     Raises:
-        ValueError: An input's shape is not the model's: q and dq (m,),
-            ``p_object_in_palm`` (3,), ``R_object_to_palm`` (3, 3), ``twist_object`` (6,).
+        ValueError: A fingertip centre is a sphere object's centre, or an input's shape is
+            not the model's: q and dq (m,), ``p_object_in_palm`` (3,), ``R_object_to_palm``
+            (3, 3), ``twist_object`` (6,).
     """
     t, q, dq, p_object_in_palm, R_object_to_palm, twist_object = sample
     q = np.ascontiguousarray(q, dtype=np.float64)
@@ -223,7 +252,7 @@ def packed_state(
     w_e = rigid_object.external_wrench()
     buffer = np.empty(layout.size)
     try:
-        sphere_on_plane_terms(
+        _TERMS_KERNELS[type(stack)](
             buffer,
             *raw,
             *hand.fingertip_frames,

@@ -1,19 +1,22 @@
 """Every model term of a tick in one compiled pass, written into one flat buffer.
 
 For spherical fingertips on flat faces (the paper's cube), :func:`sphere_on_plane_terms`
-takes Pinocchio's raw hand terms (:meth:`~grasp_safety_filter.model.hand.HandModel.raw_terms`: the
+(on a sphere object, :func:`sphere_on_sphere_terms`) takes Pinocchio's raw hand terms
+(:meth:`~grasp_safety_filter.model.hand.HandModel.raw_terms`: the
 :class:`~grasp_safety_filter.model.hand.RawHandTerms` and
 :class:`~grasp_safety_filter.model.hand.FingertipFrames` arguments)
 and the object's, and runs in one call what :meth:`HandModel.terms
 <grasp_safety_filter.model.hand.HandModel.terms>`, the contact kinematics
-(:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`) and the contact
+(:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`,
+:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`) and the contact
 dynamics (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`) compute one
 after the other: the same formulas (those functions' docstrings), the same LAPACK solve of
 ``B_ho``. Each term goes to its place in one float64 buffer (:class:`PackedLayout`), from
 which :class:`~grasp_safety_filter.model.packed_state.PackedGraspState` hands out read-only
 views when they are read. A tick's terms are a few hundred float operations: one call with
 one output, instead of a call per stage and an array per term, is most of what saving
-Python's per-call cost can give.
+Python's per-call cost can give. The stages both kernels share are
+:mod:`grasp_safety_filter.model.packed_pass`'s.
 """
 
 from __future__ import annotations
@@ -23,11 +26,9 @@ from typing import NamedTuple
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
-from grasp_safety_filter.model.hand_kernel import hand_in_model_order
-from grasp_safety_filter.model.object_kernel import object_dynamics
+from grasp_safety_filter.model.packed_pass import hand_and_object_terms, write_grasp_terms
 from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
-from grasp_safety_filter.model.wrench_solve import wrench_solve
+from grasp_safety_filter.model.sphere_object_kernels import sphere_on_sphere_contacts
 
 
 def packed_fields(
@@ -35,8 +36,8 @@ def packed_fields(
 ) -> tuple[tuple[str, tuple[int, ...]], ...]:
     """Return the buffer's terms in order, with their shapes, for n contacts and m joints.
 
-    The order is the one :func:`sphere_on_plane_terms` writes. Names are
-    :class:`~grasp_safety_filter.model.grasp_state.GraspState` fields, the contact
+    The order is the one :func:`sphere_on_plane_terms` and :func:`sphere_on_sphere_terms`
+    write. Names are :class:`~grasp_safety_filter.model.grasp_state.GraspState` fields, the contact
     geometry's and rolling rates' fields, and ``*_augmented``: ``[matrix | offset]`` of an
     affine term, (k, m + 1). The contact wrench has k = 3n entries, or 4n with soft-finger
     contacts (``torsion``; :mod:`~grasp_safety_filter.model.dynamics_kernel`).
@@ -122,39 +123,6 @@ class PackedLayout(NamedTuple):
 
 
 @kernel
-def _put(out: np.ndarray, start: int, values: np.ndarray) -> int:
-    """Copy a vector to ``out[start:]``; return the index after it."""
-    for i in range(values.shape[0]):
-        out[start + i] = values[i]
-    return start + values.shape[0]
-
-
-@kernel
-def _put2(out: np.ndarray, start: int, values: np.ndarray) -> int:
-    """Copy a matrix to ``out[start:]`` in C order; return the index after it.
-
-    Indexed entry by entry: a reshaped view (``ravel``) costs a call into numba's runtime
-    per array, more than copying the few entries.
-    """
-    rows, columns = values.shape
-    for r in range(rows):
-        for c in range(columns):
-            out[start + r * columns + c] = values[r, c]
-    return start + rows * columns
-
-
-@kernel
-def _put3(out: np.ndarray, start: int, values: np.ndarray) -> int:
-    """Copy a 3-D array to ``out[start:]`` in C order; return the index after it."""
-    blocks, rows, columns = values.shape
-    for b in range(blocks):
-        for r in range(rows):
-            for c in range(columns):
-                out[start + (b * rows + r) * columns + c] = values[b, r, c]
-    return start + blocks * rows * columns
-
-
-@kernel
 def sphere_on_plane_terms(
     out: np.ndarray,
     frame_placements: np.ndarray,
@@ -228,85 +196,114 @@ def sphere_on_plane_terms(
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
     """
-    # ---- The object (RigidObject's inertia_matrix, bias_wrench, inverse_inertia_matrix).
-    if isotropic:
-        M_o = M_o_in_body[0].copy()
-        M_o_inverse = M_o_in_body[1].copy()
-        C_o_twist = np.zeros(6)
-    else:
-        inertia = (
-            np.ascontiguousarray(M_o_in_body[0, 3:, 3:]),
-            np.ascontiguousarray(M_o_in_body[1, 3:, 3:]),
-        )
-        M_o, M_o_inverse, C_o_twist = object_dynamics(
-            M_o_in_body[0, 0, 0], inertia, R_object_to_palm, twist_object
-        )
-    # ---- The hand, in the model's joint order (HandModel.terms).
-    p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = (
-        hand_in_model_order(
-            frame_placements, joint_placements, joint_velocities, joint_accelerations,
-            J_joints, M_upper, nle, g, M_inverse_pin, frame_index, parent_joint,
-            offset_in_parent, support, joint_index, dq,
-        )
+    object_terms, hand_terms = hand_and_object_terms(
+        frame_placements, joint_placements, joint_velocities, joint_accelerations, J_joints,
+        M_upper, nle, g, M_inverse_pin, frame_index, parent_joint, offset_in_parent, support,
+        joint_index, dq, R_object_to_palm, twist_object, M_o_in_body, isotropic,
     )
-    # ---- Contact geometry and rolling rates.
+    p_f, R_f, _, twist_f = hand_terms[:4]
     contacts = sphere_on_plane_contacts(
         p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
         plane_origin, plane_frame, radius,
     )
-    # ---- Contact dynamics (contact_dynamics: two passes around the solve of B_ho).
-    (
-        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
-        x_ddot_free, w_c, w_relative,
-    ) = velocity_terms(
-        J_s, twist_f, J_frames_dot_dq, p_f, M_h_inverse, h_bias, p_object_in_palm,
-        twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
-        contacts[11], contacts[12], contacts[13], joint_span, fingertip_span, torsion,
+    write_grasp_terms(
+        out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
+        p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
     )
-    if torsion:
-        force = wrench_solve(B_ho, force_rhs, torsional_compliance)
-    else:
-        force = np.linalg.solve(B_ho, force_rhs)
-    ddq, x_ddot, xi_ddot = acceleration_terms(
-        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
-        J_s, J_frames_dot_dq, contacts[5], contacts[10], contacts[11], joint_span,
-        fingertip_span,
+
+
+@kernel
+def sphere_on_sphere_terms(
+    out: np.ndarray,
+    frame_placements: np.ndarray,
+    joint_placements: np.ndarray,
+    joint_velocities: np.ndarray,
+    joint_accelerations: np.ndarray,
+    J_joints: np.ndarray,
+    M_upper: np.ndarray,
+    nle: np.ndarray,
+    g: np.ndarray,
+    M_inverse_pin: np.ndarray,
+    frame_index: np.ndarray,
+    parent_joint: np.ndarray,
+    offset_in_parent: np.ndarray,
+    support: np.ndarray,
+    joint_index: np.ndarray,
+    joint_span: np.ndarray,
+    fingertip_span: np.ndarray,
+    q: np.ndarray,
+    dq: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    M_o_in_body: np.ndarray,
+    isotropic: bool,
+    w_e: np.ndarray,
+    R_chart_to_object: np.ndarray,
+    object_radius: np.ndarray,
+    radius: np.ndarray,
+    torsion: bool,
+    torsional_compliance: float,
+) -> None:
+    """Write every term of :func:`packed_fields` into ``out``, for a sphere object.
+
+    :func:`sphere_on_plane_terms` with the contacts of spherical fingertips on a sphere
+    (:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`).
+
+    Args:
+        out: The buffer, (:attr:`PackedLayout.size`,).
+        frame_placements: Every frame's placement (``oMf``), (nframes, 12).
+        joint_placements: Every joint's placement (``oMi``), (njoints, 12).
+        joint_velocities: Every joint's velocity, own frame (``v``), (njoints, 6).
+        joint_accelerations: Every joint's acceleration at ddq = 0, own frame (``a``),
+            (njoints, 6).
+        J_joints: The joint Jacobian, world frame (Pinocchio's order), (6, nv).
+        M_upper: M_h, upper triangle (Pinocchio's order), (nv, nv), kg·m².
+        nle: ``C_h dq + g`` (Pinocchio's order), (nv,), N·m.
+        g: ``g(q)`` (Pinocchio's order), (nv,), N·m.
+        M_inverse_pin: ``M_h^-1`` (Pinocchio's order), (nv, nv).
+        frame_index: Each fingertip's frame, (n,).
+        parent_joint: Each fingertip frame's parent joint, (n,).
+        offset_in_parent: Each fingertip frame's origin in its parent's frame, (n, 3), m.
+        support: Whether Pinocchio's velocity column k moves fingertip i, (n, nv).
+        joint_index: Pinocchio's index of each of the model's joints, (m,).
+        joint_span: Each joint's span (:class:`~grasp_safety_filter.model.hand.Branches`),
+            (m, 2).
+        fingertip_span: Each fingertip's span, (n, 2).
+        q: Joint angles, (m,), rad.
+        dq: Joint velocities, (m,), rad/s.
+        p_object_in_palm: Object centre of mass, (3,), m.
+        R_object_to_palm: Object orientation, (3, 3).
+        twist_object: ``(v_o, w_o)``, (6,).
+        M_o_in_body: ``M_o`` and ``M_o^-1`` in the object frame, ``blkdiag(mass I3,
+            I_body)`` and ``blkdiag(I3 / mass, I_body^-1)``, (2, 6, 6)
+            (:attr:`~grasp_safety_filter.model.rigid_object.RigidObject.mass_matrices_in_body`).
+        isotropic: Whether ``I_body`` is isotropic (then ``M_o`` is the same in every frame).
+        w_e: External wrench on the object, (6,).
+        R_chart_to_object: Each contact's chart of the object sphere, (n, 3, 3).
+        object_radius: The object's radius per contact, (n,), m.
+        radius: Each fingertip's radius, (n,), m.
+        torsion: Soft-finger contacts (:attr:`PackedLayout.torsion`).
+        torsional_compliance: Their relative torsional compliance rho.
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular.
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular.
+        ValueError: A fingertip centre is the object's centre.
+    """
+    object_terms, hand_terms = hand_and_object_terms(
+        frame_placements, joint_placements, joint_velocities, joint_accelerations, J_joints,
+        M_upper, nle, g, M_inverse_pin, frame_index, parent_joint, offset_in_parent, support,
+        joint_index, dq, R_object_to_palm, twist_object, M_o_in_body, isotropic,
     )
-    # ---- Into the buffer, in packed_fields' order.
-    at = _put(out, 0, q)
-    at = _put(out, at, dq)
-    at = _put(out, at, p_object_in_palm)
-    at = _put2(out, at, R_object_to_palm)
-    at = _put(out, at, twist_object)
-    at = _put2(out, at, p_f)
-    at = _put3(out, at, R_f)
-    at = _put2(out, at, twist_f)
-    at = _put3(out, at, J_s)
-    at = _put2(out, at, M_h)
-    at = _put(out, at, h_bias)
-    at = _put(out, at, gravity)
-    at = _put2(out, at, contacts[0])  # xi_cf
-    at = _put2(out, at, contacts[1])  # xi_co
-    at = _put(out, at, contacts[2])  # psi
-    at = _put(out, at, contacts[3])  # penetration
-    at = _put2(out, at, contacts[4])  # p_contact
-    at = _put3(out, at, contacts[5])  # R_pc
-    at = _put3(out, at, contacts[6])  # R_fc
-    at = _put2(out, at, contacts[7])  # xi_cf_dot
-    at = _put2(out, at, contacts[8])  # xi_co_dot
-    at = _put(out, at, contacts[9])  # psi_dot
-    at = _put3(out, at, contacts[10])  # H_cf
-    at = _put2(out, at, contacts[11])  # H_cf_dot_w
-    at = _put2(out, at, contacts[12])  # sliding
-    at = _put2(out, at, contacts[13])  # Omega
-    at = _put2(out, at, J_h)
-    at = _put2(out, at, G)
-    at = _put(out, at, Jh_dot_dq)
-    at = _put(out, at, G_dot_T_twist)
-    at = _put2(out, at, B_ho)
-    at = _put2(out, at, force)
-    at = _put2(out, at, ddq)
-    at = _put2(out, at, x_ddot)
-    at = _put2(out, at, xi_ddot)
-    at = _put2(out, at, M_o)
-    _put(out, at, C_o_twist)
+    p_f, R_f, _, twist_f = hand_terms[:4]
+    contacts = sphere_on_sphere_contacts(
+        p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
+        R_chart_to_object, object_radius, radius,
+    )
+    write_grasp_terms(
+        out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
+        p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
+    )

@@ -68,6 +68,93 @@ def fingertip_contact_frames(
 
 
 @kernel
+def contact_on_object_surface(
+    R_object_to_palm: np.ndarray,
+    R_object_contact_to_object: np.ndarray,
+    R_fingertip_to_palm: np.ndarray,
+    p_fingertip_in_palm: np.ndarray,
+    radius: float,
+    R_object_contact_to_palm: np.ndarray,
+    R_object_contact_to_fingertip: np.ndarray,
+    xi_cf: np.ndarray,
+    R_contact_to_fingertip: np.ndarray,
+    R_contact_to_palm: np.ndarray,
+    p_contact_in_palm: np.ndarray,
+) -> float:
+    """One fingertip's contact frame, from the object surface's Gauss frame at the contact.
+
+    ``R_po F`` is the surface's frame in the palm (``F = R_object_contact_to_object``), ``M =
+    R_pf^T R_po F`` in the fingertip; :func:`fingertip_contact_frames` of M gives ``xi_cf``,
+    ``R_fc`` and psi; then ``R_pc = R_pf R_fc`` and the contact point ``p_f + R n_c`` (on a
+    sphere the contact point is R along the contact normal).
+
+    Args:
+        R_object_to_palm: Object orientation, (3, 3).
+        R_object_contact_to_object: The surface's ``[rho1, rho2, n]`` at the contact, object
+            frame, (3, 3).
+        R_fingertip_to_palm: The fingertip's orientation, (3, 3).
+        p_fingertip_in_palm: Its sphere centre, (3,), m.
+        radius: Its radius, m.
+        R_object_contact_to_palm: Scratch, (3, 3): ``R_po F`` on return.
+        R_object_contact_to_fingertip: Scratch, (3, 3): M on return.
+        xi_cf: Written: the fingertip coordinates, (2,), rad.
+        R_contact_to_fingertip: Written: ``R_fc``, (3, 3).
+        R_contact_to_palm: Written: ``R_pc``, (3, 3).
+        p_contact_in_palm: Written: the contact point, (3,), m.
+
+    Returns:
+        psi, rad.
+    """
+    F = R_object_contact_to_object
+    R_plane = R_object_contact_to_palm
+    M = R_object_contact_to_fingertip
+    for r in range(3):
+        for c in range(3):
+            R_plane[r, c] = (
+                R_object_to_palm[r, 0] * F[0, c]
+                + R_object_to_palm[r, 1] * F[1, c]
+                + R_object_to_palm[r, 2] * F[2, c]
+            )
+    R_f = R_fingertip_to_palm
+    for r in range(3):
+        for c in range(3):
+            M[r, c] = (
+                R_f[0, r] * R_plane[0, c]
+                + R_f[1, r] * R_plane[1, c]
+                + R_f[2, r] * R_plane[2, c]
+            )
+    psi = _fingertip_frame(M, xi_cf, R_contact_to_fingertip)
+    R_fc = R_contact_to_fingertip
+    for r in range(3):
+        for c in range(3):
+            R_contact_to_palm[r, c] = (
+                R_f[r, 0] * R_fc[0, c] + R_f[r, 1] * R_fc[1, c] + R_f[r, 2] * R_fc[2, c]
+            )
+        p_contact_in_palm[r] = p_fingertip_in_palm[r] + radius * R_contact_to_palm[r, 2]
+    return psi
+
+
+@kernel
+def relative_rotation_in_contact(
+    twist_fingertip: np.ndarray, twist_object: np.ndarray, R_contact_to_palm: np.ndarray
+) -> np.ndarray:
+    """``w = R_pc^T (w_f - w_o)`` per contact, (n, 3), rad/s.
+
+    With ``w_f = twist_fingertip[:, 3:]`` (n, 3) and ``w_o = twist_object[3:]`` (palm frame).
+    """
+    R_pc = R_contact_to_palm
+    n = R_pc.shape[0]
+    w = np.empty((n, 3))
+    for i in range(n):
+        w_x = twist_fingertip[i, 3] - twist_object[3]
+        w_y = twist_fingertip[i, 4] - twist_object[4]
+        w_z = twist_fingertip[i, 5] - twist_object[5]
+        for c in range(3):
+            w[i, c] = R_pc[i, 0, c] * w_x + R_pc[i, 1, c] * w_y + R_pc[i, 2, c] * w_z
+    return w
+
+
+@kernel
 def sphere_on_plane_geometry(
     p_fingertip_in_palm: np.ndarray,
     R_fingertip_to_palm: np.ndarray,
@@ -122,32 +209,10 @@ def sphere_on_plane_geometry(
             xi_co[i, j] = F[0, j] * offset[0] + F[1, j] * offset[1] + F[2, j] * offset[2]
         distance = F[0, 2] * offset[0] + F[1, 2] * offset[1] + F[2, 2] * offset[2]
         penetration[i] = radius[i] - distance
-        # R_plane = R_po F (the plane's frame in the palm); M = R_pf^T R_plane.
-        for r in range(3):
-            for c in range(3):
-                R_plane[r, c] = (
-                    R_object_to_palm[r, 0] * F[0, c]
-                    + R_object_to_palm[r, 1] * F[1, c]
-                    + R_object_to_palm[r, 2] * F[2, c]
-                )
-        R_f = R_fingertip_to_palm[i]
-        for r in range(3):
-            for c in range(3):
-                M[r, c] = (
-                    R_f[0, r] * R_plane[0, c]
-                    + R_f[1, r] * R_plane[1, c]
-                    + R_f[2, r] * R_plane[2, c]
-                )
-        psi[i] = _fingertip_frame(M, xi_cf[i], R_fc[i])
-        for r in range(3):
-            for c in range(3):
-                R_pc[i, r, c] = (
-                    R_f[r, 0] * R_fc[i, 0, c]
-                    + R_f[r, 1] * R_fc[i, 1, c]
-                    + R_f[r, 2] * R_fc[i, 2, c]
-                )
-            # On a sphere the contact point is R along the contact normal.
-            p_contact[i, r] = p_fingertip_in_palm[i, r] + radius[i] * R_pc[i, r, 2]
+        psi[i] = contact_on_object_surface(
+            R_object_to_palm, plane_frame[i], R_fingertip_to_palm[i], p_fingertip_in_palm[i],
+            radius[i], R_plane, M, xi_cf[i], R_fc[i], R_pc[i], p_contact[i],
+        )
     return xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc
 
 
@@ -235,14 +300,7 @@ def sphere_on_plane_contacts(
         plane_frame,
         radius,
     )
-    n = xi_cf.shape[0]
-    w = np.empty((n, 3))
-    for i in range(n):
-        w_x = twist_fingertip[i, 3] - twist_object[3]
-        w_y = twist_fingertip[i, 4] - twist_object[4]
-        w_z = twist_fingertip[i, 5] - twist_object[5]
-        for c in range(3):
-            w[i, c] = R_pc[i, 0, c] * w_x + R_pc[i, 1, c] * w_y + R_pc[i, 2, c] * w_z
+    w = relative_rotation_in_contact(twist_fingertip, twist_object, R_pc)
     xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega = sphere_on_plane_rates(
         xi_cf, psi, w, radius
     )

@@ -3,8 +3,9 @@
 Hand terms (Pinocchio), then the contacts' geometry and rolling rates (one stacked call),
 the object's terms, and the hand–object coupling and the torque-affine terms in one compiled
 pass (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`); the equations are
-:mod:`~grasp_safety_filter.model.grasp_model`'s. Spherical fingertips on flat faces take
-:func:`~grasp_safety_filter.model.packed_state.packed_state` instead where it gives an answer.
+:mod:`~grasp_safety_filter.model.grasp_model`'s. Spherical fingertips on flat faces or on a
+sphere object take :func:`~grasp_safety_filter.model.packed_state.packed_state` instead where
+it gives an answer.
 """
 
 from __future__ import annotations

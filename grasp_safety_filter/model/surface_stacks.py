@@ -86,6 +86,13 @@ class SphereStack(SurfaceStack):
         self._curvature = read_only(np.eye(2) / self.radius[:, None, None])
         self._zeros = read_only(np.zeros((k, 2, 2)))
 
+    @property
+    def R_chart_to_body(self) -> np.ndarray:
+        """Each sphere's chart orientation in its body, (k, 3, 3): the identity if not turned."""
+        if self._rotation is None:
+            return np.tile(np.eye(3), (self.radius.size, 1, 1))
+        return self._rotation
+
     def frame(self, xi: np.ndarray) -> np.ndarray:
         """Compute :meth:`SphereSurface.frame` of each sphere."""
         sa, ca, sb, cb = _sin_cos(xi)

@@ -1,0 +1,220 @@
+"""The one-pass grasp terms' shared stages: hand and object before the contacts, the rest after.
+
+Each one-pass kernel of :mod:`grasp_safety_filter.model.packed_terms` (one per kind of
+object surface) runs :func:`hand_and_object_terms`, its surface's contact kernel, and
+:func:`write_grasp_terms`, which solves the contact dynamics and writes every term into the
+buffer in :func:`~grasp_safety_filter.model.packed_terms.packed_fields`' order. The stages
+are compiled functions called from the compiled kernels (numba inlines nothing across a
+Python call: the pass stays one call from Python).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
+from grasp_safety_filter.model.hand_kernel import hand_in_model_order
+from grasp_safety_filter.model.object_kernel import object_dynamics
+from grasp_safety_filter.model.wrench_solve import wrench_solve
+
+#: The object's terms: ``M_o``, ``M_o^-1`` (6, 6) and ``C_o x_o_dot`` (6,), palm frame.
+ObjectTerms = tuple[np.ndarray, np.ndarray, np.ndarray]
+#: The hand's terms in the model's order, as :func:`~grasp_safety_filter.model.hand_kernel.
+#: hand_in_model_order` returns them.
+HandTerms = tuple[np.ndarray, ...]
+
+
+@kernel
+def _put(out: np.ndarray, start: int, values: np.ndarray) -> int:
+    """Copy a vector to ``out[start:]``; return the index after it."""
+    for i in range(values.shape[0]):
+        out[start + i] = values[i]
+    return start + values.shape[0]
+
+
+@kernel
+def _put2(out: np.ndarray, start: int, values: np.ndarray) -> int:
+    """Copy a matrix to ``out[start:]`` in C order; return the index after it.
+
+    Indexed entry by entry: a reshaped view (``ravel``) costs a call into numba's runtime
+    per array, more than copying the few entries.
+    """
+    rows, columns = values.shape
+    for r in range(rows):
+        for c in range(columns):
+            out[start + r * columns + c] = values[r, c]
+    return start + rows * columns
+
+
+@kernel
+def _put3(out: np.ndarray, start: int, values: np.ndarray) -> int:
+    """Copy a 3-D array to ``out[start:]`` in C order; return the index after it."""
+    blocks, rows, columns = values.shape
+    for b in range(blocks):
+        for r in range(rows):
+            for c in range(columns):
+                out[start + (b * rows + r) * columns + c] = values[b, r, c]
+    return start + blocks * rows * columns
+
+
+@kernel
+def hand_and_object_terms(
+    frame_placements: np.ndarray,
+    joint_placements: np.ndarray,
+    joint_velocities: np.ndarray,
+    joint_accelerations: np.ndarray,
+    J_joints: np.ndarray,
+    M_upper: np.ndarray,
+    nle: np.ndarray,
+    g: np.ndarray,
+    M_inverse_pin: np.ndarray,
+    frame_index: np.ndarray,
+    parent_joint: np.ndarray,
+    offset_in_parent: np.ndarray,
+    support: np.ndarray,
+    joint_index: np.ndarray,
+    dq: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    M_o_in_body: np.ndarray,
+    isotropic: bool,
+) -> tuple[ObjectTerms, HandTerms]:
+    """Return the object's mass matrices and bias, and the hand's terms in the model's order.
+
+    The arguments are :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`'
+    of the same names.
+
+    Returns:
+        ``(M_o, M_o^-1, C_o x_o_dot)`` (RigidObject's ``inertia_matrix``,
+        ``inverse_inertia_matrix``, ``bias_wrench``) and :func:`~grasp_safety_filter.model.
+        hand_kernel.hand_in_model_order`'s ``(p_f, R_f, J_f, twist_f, J_f_dot dq, M_h,
+        M_h^-1, h_bias, g)`` (HandModel.terms).
+    """
+    # ---- The object (RigidObject's inertia_matrix, bias_wrench, inverse_inertia_matrix).
+    if isotropic:
+        M_o = M_o_in_body[0].copy()
+        M_o_inverse = M_o_in_body[1].copy()
+        C_o_twist = np.zeros(6)
+    else:
+        inertia = (
+            np.ascontiguousarray(M_o_in_body[0, 3:, 3:]),
+            np.ascontiguousarray(M_o_in_body[1, 3:, 3:]),
+        )
+        M_o, M_o_inverse, C_o_twist = object_dynamics(
+            M_o_in_body[0, 0, 0], inertia, R_object_to_palm, twist_object
+        )
+    # ---- The hand, in the model's joint order (HandModel.terms).
+    p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = (
+        hand_in_model_order(
+            frame_placements, joint_placements, joint_velocities, joint_accelerations,
+            J_joints, M_upper, nle, g, M_inverse_pin, frame_index, parent_joint,
+            offset_in_parent, support, joint_index, dq,
+        )
+    )
+    return (M_o, M_o_inverse, C_o_twist), (
+        p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity
+    )
+
+
+@kernel
+def write_grasp_terms(
+    out: np.ndarray,
+    object_terms: ObjectTerms,
+    hand_terms: HandTerms,
+    contacts: tuple[np.ndarray, ...],
+    joint_span: np.ndarray,
+    fingertip_span: np.ndarray,
+    q: np.ndarray,
+    dq: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    w_e: np.ndarray,
+    torsion: bool,
+    torsional_compliance: float,
+) -> None:
+    """Solve the contact dynamics and write every term into ``out``, in ``packed_fields``' order.
+
+    The contact dynamics are :func:`~grasp_safety_filter.model.contact_dynamics.
+    contact_dynamics`' two passes around the solve of ``B_ho``.
+
+    Args:
+        out: The buffer (:attr:`~grasp_safety_filter.model.packed_terms.PackedLayout.size`,).
+        object_terms: :func:`hand_and_object_terms`' object terms.
+        hand_terms: :func:`hand_and_object_terms`' hand terms.
+        contacts: The contacts' geometry and rolling rates, the 14 arrays of
+            :func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`.
+        joint_span: Each joint's span (:class:`~grasp_safety_filter.model.hand.Branches`),
+            (m, 2).
+        fingertip_span: Each fingertip's span, (n, 2).
+        q: Joint angles, (m,), rad.
+        dq: Joint velocities, (m,), rad/s.
+        p_object_in_palm: Object centre of mass, (3,), m.
+        R_object_to_palm: Object orientation, (3, 3).
+        twist_object: ``(v_o, w_o)``, (6,).
+        w_e: External wrench on the object, (6,).
+        torsion: Soft-finger contacts (4n wrench entries, not 3n).
+        torsional_compliance: Their relative torsional compliance rho.
+
+    Raises:
+        numpy.linalg.LinAlgError: B_ho is singular.
+    """
+    M_o, M_o_inverse, C_o_twist = object_terms
+    p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = hand_terms
+    # ---- Contact dynamics (contact_dynamics: two passes around the solve of B_ho).
+    (
+        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
+        x_ddot_free, w_c, w_relative,
+    ) = velocity_terms(
+        J_s, twist_f, J_frames_dot_dq, p_f, M_h_inverse, h_bias, p_object_in_palm,
+        twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
+        contacts[11], contacts[12], contacts[13], joint_span, fingertip_span, torsion,
+    )
+    if torsion:
+        force = wrench_solve(B_ho, force_rhs, torsional_compliance)
+    else:
+        force = np.linalg.solve(B_ho, force_rhs)
+    ddq, x_ddot, xi_ddot = acceleration_terms(
+        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
+        J_s, J_frames_dot_dq, contacts[5], contacts[10], contacts[11], joint_span,
+        fingertip_span,
+    )
+    # ---- Into the buffer, in packed_fields' order.
+    at = _put(out, 0, q)
+    at = _put(out, at, dq)
+    at = _put(out, at, p_object_in_palm)
+    at = _put2(out, at, R_object_to_palm)
+    at = _put(out, at, twist_object)
+    at = _put2(out, at, p_f)
+    at = _put3(out, at, R_f)
+    at = _put2(out, at, twist_f)
+    at = _put3(out, at, J_s)
+    at = _put2(out, at, M_h)
+    at = _put(out, at, h_bias)
+    at = _put(out, at, gravity)
+    at = _put2(out, at, contacts[0])  # xi_cf
+    at = _put2(out, at, contacts[1])  # xi_co
+    at = _put(out, at, contacts[2])  # psi
+    at = _put(out, at, contacts[3])  # penetration
+    at = _put2(out, at, contacts[4])  # p_contact
+    at = _put3(out, at, contacts[5])  # R_pc
+    at = _put3(out, at, contacts[6])  # R_fc
+    at = _put2(out, at, contacts[7])  # xi_cf_dot
+    at = _put2(out, at, contacts[8])  # xi_co_dot
+    at = _put(out, at, contacts[9])  # psi_dot
+    at = _put3(out, at, contacts[10])  # H_cf
+    at = _put2(out, at, contacts[11])  # H_cf_dot_w
+    at = _put2(out, at, contacts[12])  # sliding
+    at = _put2(out, at, contacts[13])  # Omega
+    at = _put2(out, at, J_h)
+    at = _put2(out, at, G)
+    at = _put(out, at, Jh_dot_dq)
+    at = _put(out, at, G_dot_T_twist)
+    at = _put2(out, at, B_ho)
+    at = _put2(out, at, force)
+    at = _put2(out, at, ddq)
+    at = _put2(out, at, x_ddot)
+    at = _put2(out, at, xi_ddot)
+    at = _put2(out, at, M_o)
+    _put(out, at, C_o_twist)

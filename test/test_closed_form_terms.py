@@ -1,0 +1,187 @@
+"""The closed-form contact stacks and one-pass terms against the general numpy evaluation.
+
+Spherical fingertips on flat faces (``SphereOnPlaneStack``) and on a sphere object
+(``SphereOnSphereStack``) are evaluated by compiled closed forms, and ``GraspModel.state``
+computes every term of them in one pass (``PackedGraspState``). The staged computation with
+the general ``ContactStack`` (Montana's formulas as stacked numpy calls, any surfaces) is the
+oracle: every field must agree to rounding. Cases per surface type: the paper's hand on its
+cube and on a sphere, point contacts and soft fingers, the four-finger example on its sphere
+and random hands holding spheres.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from grasp_states import CONFIG_DIR, paper_model, random_configuration, rolling_motion
+import numpy as np
+import pytest
+from random_hands import random_hand
+
+from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
+from grasp_safety_filter.model.closed_form_stacks import (
+    contact_stack,
+    SphereOnPlaneStack,
+    SphereOnSphereStack,
+)
+from grasp_safety_filter.model.contact_stack import ContactStack
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.model.packed_state import PackedGraspState
+from grasp_safety_filter.model.staged_state import staged_state
+
+#: Largest difference allowed, relative to the term's largest entry: rounding only.
+RTOL = 1e-11
+#: Penetrations are ~0 on the contact manifold: their scale is a length of the grasp, m.
+LENGTH_SCALE = 1e-3
+SOFT = {'model.torsional_friction': 0.005}
+SPHERE = {'model.object.shape': 'sphere', 'model.object.size': 0.3}
+#: Per case: the model's overrides of the paper's, and the stack it must get.
+PAPER_CASES = {
+    'cube': ({}, SphereOnPlaneStack),
+    'cube, soft fingers': (SOFT, SphereOnPlaneStack),
+    'sphere': (SPHERE, SphereOnSphereStack),
+    'sphere, soft fingers': ({**SPHERE, **SOFT}, SphereOnSphereStack),
+}
+FOUR_FINGER_CASES = {'point contacts': {}, 'soft fingers': SOFT}
+SPHERE_SEEDS = (1, 3, 5)
+
+
+def _near(model, rng, q0, p_object, R_object, count=3):
+    """Return grasps rolling near ``q0`` at the object pose (point contacts or soft fingers)."""
+    configurations = []
+    for _ in range(count):
+        q = model.project_to_contact(q0 + rng.uniform(-0.02, 0.02, q0.size), p_object, R_object)
+        twist = rng.normal(0.0, 0.3, 6)
+        if model.soft_finger:
+            dq, twist = rolling_motion(model, q, p_object, R_object, twist)
+        else:
+            dq = model.rolling_joint_velocity(q, p_object, R_object, twist)
+        configurations.append((q, dq, p_object, R_object, twist))
+    return configurations
+
+
+def _four_finger_sphere(overrides):
+    params = load_node_parameters(CONFIG_DIR / 'four_finger_sphere.yaml', HAND_SIM_NODE)
+    model_params = {k: v for k, v in params.items() if k.startswith('model.')}
+    model = GraspModel.from_parameters({**model_params, **overrides}, CONFIG_DIR)
+    q0 = np.array(params['initial.joint_positions'])
+    p_object = np.array(params['initial.object_position'])
+    return model, _near(model, np.random.default_rng(7), q0, p_object, np.eye(3))
+
+
+def _random_sphere_hand(seed, tmp_path):
+    hand = random_hand(seed)
+    assert hand.shape == 'sphere'
+    path = hand.write(tmp_path)
+    params = {**hand.model_parameters(path), **hand.initial_parameters()}
+    model = GraspModel.from_parameters(params)
+    rng = np.random.default_rng(seed)
+    return model, _near(model, rng, hand.q0, hand.p_object, hand.R_object)
+
+
+def _assert_close(actual, expected, what, floor=1e-300):
+    actual, expected = np.asarray(actual), np.asarray(expected)
+    assert actual.shape == expected.shape, what
+    scale = max(float(np.max(np.abs(expected), initial=0.0)), floor)
+    error = float(np.max(np.abs(actual - expected), initial=0.0)) / scale
+    assert error <= RTOL, f'{what}: relative difference {error:.2e} > {RTOL:g}'
+
+
+def _check_state(model, configuration, stack_type, label):
+    """Check that GraspModel.state is one packed pass, equal to the staged numpy evaluation."""
+    assert isinstance(model._contact_stack, stack_type)
+    args = (0.5, *configuration)
+    packed = model.state(*args)
+    assert isinstance(packed, PackedGraspState), label
+    general = ContactStack(model.contacts)
+    staged = staged_state(
+        model.hand,
+        model.object,
+        general,
+        *args,
+        torsion=model.soft_finger,
+        torsional_compliance=model.torsional_compliance,
+    )
+    for field in dataclasses.fields(GraspState):
+        ours, theirs = getattr(packed, field.name), getattr(staged, field.name)
+        if field.name in ('t', 'w_e'):
+            np.testing.assert_array_equal(ours, theirs)
+            continue
+        if field.name == 'xi_co_rate_terms':
+            ours, theirs = ours(), theirs()
+        elif hasattr(theirs, 'matrix'):
+            ours, theirs = (ours.matrix, ours.offset), (theirs.matrix, theirs.offset)
+        else:
+            assert not ours.flags.writeable, field.name
+            ours, theirs = (ours,), (theirs,)
+        floor = LENGTH_SCALE if field.name == 'penetration' else 1e-300
+        for a, b in zip(ours, theirs, strict=True):
+            _assert_close(a, b, f'{label}: {field.name}', floor)
+    for part in ('matrix', 'offset'):
+        assert not getattr(packed.xi_co_ddot, part).flags.writeable
+        _assert_close(
+            getattr(packed.xi_co_ddot, part),
+            getattr(staged.xi_co_ddot, part),
+            f'{label}: xi_co_ddot.{part}',
+        )
+
+
+def _check_stack(model, configuration, stack_type, label):
+    """Check the closed-form stack's kinematics, geometry and rates against the general's."""
+    closed, general = contact_stack(model.contacts), ContactStack(model.contacts)
+    assert type(closed) is stack_type
+    q, dq, p_object, R_object, twist_object = configuration
+    hand = model.hand.terms(q, dq)
+    pose = (hand.p_fingertip_in_palm, hand.R_fingertip_to_palm)
+    ours = closed.kinematics(*pose, hand.twist_fingertip, p_object, R_object, twist_object)
+    theirs = general.kinematics(*pose, hand.twist_fingertip, p_object, R_object, twist_object)
+    w = np.random.default_rng(0).normal(size=(len(model.contacts), 3))
+    ours += (closed.geometry(*pose, p_object, R_object), closed.rolling_rates(theirs[0], w))
+    theirs += (general.geometry(*pose, p_object, R_object), general.rolling_rates(theirs[0], w))
+    for a, b in zip(ours, theirs, strict=True):
+        for field in dataclasses.fields(b):
+            floor = LENGTH_SCALE if field.name == 'penetration' else 1e-300
+            _assert_close(
+                getattr(a, field.name), getattr(b, field.name), f'{label}: {field.name}', floor
+            )
+
+
+@pytest.mark.parametrize('check', [_check_state, _check_stack])
+@pytest.mark.parametrize('case', list(PAPER_CASES))
+def test_the_paper_hand_matches_the_general_evaluation(case, check):
+    overrides, stack_type = PAPER_CASES[case]
+    model = paper_model(**overrides)
+    rng = np.random.default_rng(11)
+    for k in range(4):
+        c = random_configuration(model, rng)
+        configuration = (c.q, c.dq, c.p_object, c.R_object, c.twist_object)
+        check(model, configuration, stack_type, f'{case} #{k}')
+
+
+@pytest.mark.parametrize('case', list(FOUR_FINGER_CASES))
+def test_the_four_finger_hand_on_its_sphere_matches_the_general_evaluation(case):
+    model, configurations = _four_finger_sphere(FOUR_FINGER_CASES[case])
+    for k, configuration in enumerate(configurations):
+        _check_stack(model, configuration, SphereOnSphereStack, f'{case} #{k}')
+        _check_state(model, configuration, SphereOnSphereStack, f'{case} #{k}')
+
+
+@pytest.mark.parametrize('seed', SPHERE_SEEDS)
+def test_random_hands_on_spheres_match_the_general_evaluation(seed, tmp_path):
+    model, configurations = _random_sphere_hand(seed, tmp_path)
+    for k, configuration in enumerate(configurations):
+        _check_stack(model, configuration, SphereOnSphereStack, f'seed {seed} #{k}')
+        _check_state(model, configuration, SphereOnSphereStack, f'seed {seed} #{k}')
+
+
+def test_a_fingertip_at_the_sphere_centre_is_refused():
+    """The radial projection has no direction there: the numpy evaluation raises too."""
+    model = paper_model(**SPHERE)
+    c = random_configuration(model, np.random.default_rng(3))
+    hand = model.hand.terms(c.q, c.dq)
+    pose = (hand.p_fingertip_in_palm, hand.R_fingertip_to_palm)
+    p_object = hand.p_fingertip_in_palm[0]
+    for stack in (contact_stack(model.contacts), ContactStack(model.contacts)):
+        with pytest.raises(ValueError, match='centre'):
+            stack.geometry(*pose, p_object, c.R_object)
