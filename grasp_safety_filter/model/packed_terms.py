@@ -248,46 +248,10 @@ def sphere_on_sphere_terms(
     """Write every term of :func:`packed_fields` into ``out``, for a sphere object.
 
     :func:`sphere_on_plane_terms` with the contacts of spherical fingertips on a sphere
-    (:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`).
-
-    Args:
-        out: The buffer, (:attr:`PackedLayout.size`,).
-        frame_placements: Every frame's placement (``oMf``), (nframes, 12).
-        joint_placements: Every joint's placement (``oMi``), (njoints, 12).
-        joint_velocities: Every joint's velocity, own frame (``v``), (njoints, 6).
-        joint_accelerations: Every joint's acceleration at ddq = 0, own frame (``a``),
-            (njoints, 6).
-        J_joints: The joint Jacobian, world frame (Pinocchio's order), (6, nv).
-        M_upper: M_h, upper triangle (Pinocchio's order), (nv, nv), kg·m².
-        nle: ``C_h dq + g`` (Pinocchio's order), (nv,), N·m.
-        g: ``g(q)`` (Pinocchio's order), (nv,), N·m.
-        M_inverse_pin: ``M_h^-1`` (Pinocchio's order), (nv, nv).
-        frame_index: Each fingertip's frame, (n,).
-        parent_joint: Each fingertip frame's parent joint, (n,).
-        offset_in_parent: Each fingertip frame's origin in its parent's frame, (n, 3), m.
-        support: Whether Pinocchio's velocity column k moves fingertip i, (n, nv).
-        joint_index: Pinocchio's index of each of the model's joints, (m,).
-        joint_span: Each joint's span (:class:`~grasp_safety_filter.model.hand.Branches`),
-            (m, 2).
-        fingertip_span: Each fingertip's span, (n, 2).
-        q: Joint angles, (m,), rad.
-        dq: Joint velocities, (m,), rad/s.
-        p_object_in_palm: Object centre of mass, (3,), m.
-        R_object_to_palm: Object orientation, (3, 3).
-        twist_object: ``(v_o, w_o)``, (6,).
-        M_o_in_body: ``M_o`` and ``M_o^-1`` in the object frame, ``blkdiag(mass I3,
-            I_body)`` and ``blkdiag(I3 / mass, I_body^-1)``, (2, 6, 6)
-            (:attr:`~grasp_safety_filter.model.rigid_object.RigidObject.mass_matrices_in_body`).
-        isotropic: Whether ``I_body`` is isotropic (then ``M_o`` is the same in every frame).
-        w_e: External wrench on the object, (6,).
-        R_chart_to_object: Each contact's chart of the object sphere, (n, 3, 3).
-        object_radius: The object's radius per contact, (n,), m.
-        radius: Each fingertip's radius, (n,), m.
-        torsion: Soft-finger contacts (:attr:`PackedLayout.torsion`).
-        torsional_compliance: Their relative torsional compliance rho.
-
-    Raises:
-        numpy.linalg.LinAlgError: B_ho is singular.
+    (:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`):
+    the same arguments, the object's surface given by ``R_chart_to_object``, each
+    contact's chart of the object sphere (n, 3, 3), and ``object_radius``, the object's
+    radius per contact (n,), m, in place of the planes' origins and frames.
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
