@@ -5,8 +5,8 @@ Spherical fingertips on flat faces (``SphereOnPlaneStack``) and on a sphere obje
 computes every term of them in one pass (``PackedGraspState``). The staged computation with
 the general ``ContactStack`` (Montana's formulas as stacked numpy calls, any surfaces) is the
 oracle: every field must agree to rounding. Cases per surface type: the paper's hand on its
-cube and on a sphere, point contacts and soft fingers, the four-finger example on its sphere
-and random hands holding spheres.
+cube and on a sphere, point contacts and soft fingers, the four-finger examples on their box
+and sphere and random hands holding spheres.
 """
 
 from __future__ import annotations
@@ -61,8 +61,8 @@ def _near(model, rng, q0, p_object, R_object, count=3):
     return configurations
 
 
-def _four_finger_sphere(overrides):
-    params = load_node_parameters(CONFIG_DIR / 'four_finger_sphere.yaml', HAND_SIM_NODE)
+def _four_finger(overrides, config='four_finger_sphere.yaml'):
+    params = load_node_parameters(CONFIG_DIR / config, HAND_SIM_NODE)
     model_params = {k: v for k, v in params.items() if k.startswith('model.')}
     model = GraspModel.from_parameters({**model_params, **overrides}, CONFIG_DIR)
     q0 = np.array(params['initial.joint_positions'])
@@ -118,8 +118,16 @@ def _check_state(model, configuration, stack_type, label):
         floor = LENGTH_SCALE if field.name == 'penetration' else 1e-300
         for a, b in zip(ours, theirs, strict=True):
             _assert_close(a, b, f'{label}: {field.name}', floor)
+    # xi_co_ddot is a view of the buffer's xi_co_ddot_augmented (the pass's closed form).
+    terms, layout = packed.packed_terms
+    start, stop, shape = layout.places['xi_co_ddot_augmented']
+    np.testing.assert_array_equal(
+        np.column_stack((packed.xi_co_ddot.matrix, packed.xi_co_ddot.offset)),
+        terms[start:stop].reshape(shape),
+    )
     for part in ('matrix', 'offset'):
         assert not getattr(packed.xi_co_ddot, part).flags.writeable
+        assert np.shares_memory(getattr(packed.xi_co_ddot, part), terms)
         _assert_close(
             getattr(packed.xi_co_ddot, part),
             getattr(staged.xi_co_ddot, part),
@@ -161,10 +169,18 @@ def test_the_paper_hand_matches_the_general_evaluation(case, check):
 
 @pytest.mark.parametrize('case', list(FOUR_FINGER_CASES))
 def test_the_four_finger_hand_on_its_sphere_matches_the_general_evaluation(case):
-    model, configurations = _four_finger_sphere(FOUR_FINGER_CASES[case])
+    model, configurations = _four_finger(FOUR_FINGER_CASES[case])
     for k, configuration in enumerate(configurations):
         _check_stack(model, configuration, SphereOnSphereStack, f'{case} #{k}')
         _check_state(model, configuration, SphereOnSphereStack, f'{case} #{k}')
+
+
+@pytest.mark.parametrize('case', list(FOUR_FINGER_CASES))
+def test_the_four_finger_hand_on_its_box_matches_the_general_evaluation(case):
+    model, configurations = _four_finger(FOUR_FINGER_CASES[case], 'four_finger_box.yaml')
+    for k, configuration in enumerate(configurations):
+        _check_stack(model, configuration, SphereOnPlaneStack, f'{case} #{k}')
+        _check_state(model, configuration, SphereOnPlaneStack, f'{case} #{k}')
 
 
 @pytest.mark.parametrize('seed', SPHERE_SEEDS)

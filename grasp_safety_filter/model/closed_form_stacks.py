@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.contact_stack import (
     ContactStack,
     StackedContactGeometry,
@@ -28,19 +27,12 @@ from grasp_safety_filter.model.rolling_kernels import (
     sphere_on_plane_rates,
 )
 from grasp_safety_filter.model.sphere_object_kernels import (
-    sphere_object_coordinate_acceleration,
     sphere_on_sphere_contacts,
     sphere_on_sphere_geometry,
     sphere_on_sphere_rates,
 )
 from grasp_safety_filter.model.surface_stacks import FlatStack, SphereStack
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
-
-#: The packed terms :meth:`SphereOnSphereStack.packed_xi_co_ddot` reads, in its kernel's order.
-_RATE_FIELDS = (
-    'xi_cf', 'xi_co', 'psi', 'xi_cf_dot', 'xi_co_dot', 'psi_dot', 'sliding_velocity',
-    'xi_cf_ddot_augmented',
-)
 
 
 class ClosedFormStack(ContactStack):
@@ -168,28 +160,6 @@ class SphereOnSphereStack(ClosedFormStack):
             self._object_radius,
             self._radius,
         )
-        # The layout packed_xi_co_ddot last read, and its terms' starts there.
-        self._starts: tuple[Any, np.ndarray] = (None, np.zeros(0, dtype=np.int64))
-
-    def packed_xi_co_ddot(self, terms: np.ndarray, layout: Any) -> AffineMap:
-        """``u ↦ xi_co_ddot`` (2n, m), read-only, straight from a tick's packed terms.
-
-        :attr:`~grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot` in closed form
-        (:func:`~grasp_safety_filter.model.sphere_object_kernels.
-        sphere_object_coordinate_acceleration`), without a view or array per term.
-
-        Args:
-            terms: The buffer of :func:`~grasp_safety_filter.model.packed_terms.packed_fields`.
-            layout: Its :class:`~grasp_safety_filter.model.packed_terms.PackedLayout`.
-        """
-        if self._starts[0] is not layout:
-            self._starts = (layout, np.array([layout.start(name) for name in _RATE_FIELDS]))
-        augmented = sphere_object_coordinate_acceleration(
-            terms, self._starts[1], layout.n_joints, self._object_radius, self._radius
-        )
-        augmented.setflags(write=False)
-        m = layout.n_joints
-        return AffineMap(augmented[:, :m], augmented[:, m])
 
     def rolling_rates(
         self, geometry: StackedContactGeometry, w_relative_in_contact: np.ndarray

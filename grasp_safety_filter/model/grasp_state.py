@@ -82,7 +82,8 @@ class GraspState:
             ``xi_cf_ddot``), shape (2n, m); m/s² on a face, rad/s² in a sphere chart.
             A property computed once, on first use, from ``xi_cf_ddot`` and
             ``xi_co_rate_terms``: a tick without an object-surface barrier does not pay
-            for it.
+            for it (a packed state's one compiled pass writes it in closed form, a few
+            dozen products).
     """
 
     t: float

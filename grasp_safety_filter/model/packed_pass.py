@@ -134,11 +134,13 @@ def write_grasp_terms(
     w_e: np.ndarray,
     torsion: bool,
     torsional_compliance: float,
-) -> None:
-    """Solve the contact dynamics and write every term into ``out``, in ``packed_fields``' order.
+) -> tuple[int, np.ndarray]:
+    """Solve the contact dynamics and write the terms into ``out``, in ``packed_fields``' order.
 
     The contact dynamics are :func:`~grasp_safety_filter.model.contact_dynamics.
-    contact_dynamics`' two passes around the solve of ``B_ho``.
+    contact_dynamics`' two passes around the solve of ``B_ho``. Every term but the last,
+    ``xi_co_ddot_augmented``, is written: its closed form is the object surface's, which the
+    caller writes from what this returns.
 
     Args:
         out: The buffer (:attr:`~grasp_safety_filter.model.packed_terms.PackedLayout.size`,).
@@ -157,6 +159,10 @@ def write_grasp_terms(
         w_e: External wrench on the object, (6,).
         torsion: Soft-finger contacts (4n wrench entries, not 3n).
         torsional_compliance: Their relative torsional compliance rho.
+
+    Returns:
+        Where ``xi_co_ddot_augmented`` starts in ``out``, and ``u ↦ xi_cf_ddot``,
+        ``[matrix | offset]`` (2n, m + 1).
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
@@ -218,4 +224,4 @@ def write_grasp_terms(
     at = _put2(out, at, x_ddot)
     at = _put2(out, at, xi_ddot)
     at = _put2(out, at, M_o)
-    _put(out, at, C_o_twist)
+    return _put(out, at, C_o_twist), xi_ddot

@@ -42,6 +42,7 @@ _AFFINE = {
     'joint_acceleration': 'joint_acceleration_augmented',
     'object_acceleration': 'object_acceleration_augmented',
     'xi_cf_ddot': 'xi_cf_ddot_augmented',
+    'xi_co_ddot': 'xi_co_ddot_augmented',
 }
 
 #: GraspState fields :meth:`PackedGraspState.of` sets (not in the buffer).
@@ -128,17 +129,13 @@ class PackedGraspState(GraspState):
 
     @cached_property
     def xi_co_ddot(self) -> AffineMap:
-        """:attr:`GraspState.xi_co_ddot`, in one compiled call where the contacts give one.
+        """:attr:`GraspState.xi_co_ddot`: a view of the buffer's ``xi_co_ddot_augmented``.
 
-        On a sphere object straight from the buffer
-        (:meth:`~grasp_safety_filter.model.closed_form_stacks.SphereOnSphereStack.
-        packed_xi_co_ddot`); else as :class:`GraspState` forms it.
+        On a copy whose fields were given, formed as :class:`GraspState` forms it.
         """
-        fields = self.__dict__
-        from_terms = getattr(fields.get('_stack'), 'packed_xi_co_ddot', None)
-        if from_terms is None or '_layout' not in fields:
+        if '_layout' not in self.__dict__:
             return GraspState.xi_co_ddot.func(self)
-        return from_terms(fields['_buffer'], fields['_layout'])
+        return self._make('xi_co_ddot')
 
     def _make(self, name: str) -> Any:
         places = self._layout.places
@@ -183,7 +180,9 @@ def _install_views(cls: type[PackedGraspState]) -> None:
     (which does not depend on n and m), so the buffer's terms are listed once; every
     GraspState field not in the buffer must be set by :meth:`PackedGraspState.of`.
     """
-    names = [name for name, _ in packed_fields(1, 1)] + [*_AFFINE, 'xi_co_rate_terms']
+    # xi_co_ddot, a GraspState property, keeps its own (the class's) for copies.
+    affine = [name for name in _AFFINE if name not in cls.__dict__]
+    names = [name for name, _ in packed_fields(1, 1)] + [*affine, 'xi_co_rate_terms']
     unset = {field.name for field in dataclasses.fields(GraspState)} - set(names) - set(_SET_BY_OF)
     if unset:
         raise TypeError(f'PackedGraspState: no view or value for {sorted(unset)}')

@@ -11,12 +11,16 @@ and the object's, and runs in one call what :meth:`HandModel.terms
 :func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`) and the contact
 dynamics (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`) compute one
 after the other: the same formulas (those functions' docstrings), the same LAPACK solve of
-``B_ho``. Each term goes to its place in one float64 buffer (:class:`PackedLayout`), from
-which :class:`~grasp_safety_filter.model.packed_state.PackedGraspState` hands out read-only
-views when they are read. A tick's terms are a few hundred float operations: one call with
-one output, instead of a call per stage and an array per term, is most of what saving
-Python's per-call cost can give. The stages both kernels share are
-:mod:`grasp_safety_filter.model.packed_pass`'s.
+``B_ho``; last, :attr:`GraspState.xi_co_ddot
+<grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot>` in the surface's closed form
+(:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_coordinate_acceleration`,
+:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_object_coordinate_acceleration`),
+which an object-workspace barrier reads. Each term goes to its place in one float64 buffer
+(:class:`PackedLayout`), from which :class:`~grasp_safety_filter.model.packed_state.
+PackedGraspState` hands out read-only views when they are read. A tick's terms are a few
+hundred float operations: one call with one output, instead of a call per stage and an
+array per term, is most of what saving Python's per-call cost can give. The stages both
+kernels share are :mod:`grasp_safety_filter.model.packed_pass`'s.
 """
 
 from __future__ import annotations
@@ -27,8 +31,14 @@ import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.packed_pass import hand_and_object_terms, write_grasp_terms
-from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
-from grasp_safety_filter.model.sphere_object_kernels import sphere_on_sphere_contacts
+from grasp_safety_filter.model.rolling_kernels import (
+    sphere_on_plane_contacts,
+    sphere_on_plane_coordinate_acceleration,
+)
+from grasp_safety_filter.model.sphere_object_kernels import (
+    sphere_object_coordinate_acceleration,
+    sphere_on_sphere_contacts,
+)
 
 
 def packed_fields(
@@ -39,8 +49,10 @@ def packed_fields(
     The order is the one :func:`sphere_on_plane_terms` and :func:`sphere_on_sphere_terms`
     write. Names are :class:`~grasp_safety_filter.model.grasp_state.GraspState` fields, the contact
     geometry's and rolling rates' fields, and ``*_augmented``: ``[matrix | offset]`` of an
-    affine term, (k, m + 1). The contact wrench has k = 3n entries, or 4n with soft-finger
-    contacts (``torsion``; :mod:`~grasp_safety_filter.model.dynamics_kernel`).
+    affine term, (k, m + 1) (``xi_co_ddot_augmented``: :attr:`GraspState.xi_co_ddot
+    <grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot>`). The contact wrench
+    has k = 3n entries, or 4n with soft-finger contacts (``torsion``;
+    :mod:`~grasp_safety_filter.model.dynamics_kernel`).
     """
     k = 4 * n if torsion else 3 * n
     return (
@@ -81,6 +93,7 @@ def packed_fields(
         ('xi_cf_ddot_augmented', (2 * n, m + 1)),
         ('M_o', (6, 6)),
         ('C_o_twist', (6,)),
+        ('xi_co_ddot_augmented', (2 * n, m + 1)),
     )
 
 
@@ -206,10 +219,11 @@ def sphere_on_plane_terms(
         p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
         plane_origin, plane_frame, radius,
     )
-    write_grasp_terms(
+    at, xi_cf_ddot = write_grasp_terms(
         out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
         p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
     )
+    sphere_on_plane_coordinate_acceleration(out, at, contacts, xi_cf_ddot, radius)
 
 
 @kernel
@@ -267,7 +281,8 @@ def sphere_on_sphere_terms(
         p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
         R_chart_to_object, object_radius, radius,
     )
-    write_grasp_terms(
+    at, xi_cf_ddot = write_grasp_terms(
         out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
         p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
     )
+    sphere_object_coordinate_acceleration(out, at, contacts, xi_cf_ddot, object_radius, radius)

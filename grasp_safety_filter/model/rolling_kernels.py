@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.compiled import inline_kernel, kernel
 
 
 @kernel
@@ -308,3 +308,56 @@ def sphere_on_plane_contacts(
         xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc,
         xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega,
     )
+
+
+@inline_kernel
+def sphere_on_plane_coordinate_acceleration(
+    out: np.ndarray,
+    at: int,
+    contacts: tuple[np.ndarray, ...],
+    xi_cf_ddot: np.ndarray,
+    radius: np.ndarray,
+) -> None:
+    """Write ``u ↦ xi_co_ddot`` on flat faces, ``[matrix | offset]`` (2n, m + 1), C order.
+
+    :meth:`~grasp_safety_filter.model.contact_stack.ContactStack.object_rate_terms` and
+    :attr:`~grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot` in closed form: a
+    face's chart is Cartesian (``M_co = I``, ``M_co_dot = 0``), so per contact, with
+    ``M_cf = diag(R, R cos a)``,
+
+        xi_co_ddot = R_psi M_cf xi_cf_ddot + R_psi_dot sliding + R_psi M_cf_dot xi_cf_dot
+        M_cf_dot = diag(0, -R sin(a) a_dot)
+        R_psi_dot = psi_dot [[-sin psi, -cos psi], [-cos psi, sin psi]]
+
+    (m/s² on the face), with ``xi_cf_ddot``'s rows ``[matrix | offset]``.
+
+    Args:
+        out: The packed buffer; entries ``at .. at + 2n (m + 1) - 1`` are written.
+        at: Where ``xi_co_ddot_augmented`` starts in it.
+        contacts: The 14 arrays of :func:`sphere_on_plane_contacts`.
+        xi_cf_ddot: ``u ↦ xi_cf_ddot``, ``[matrix | offset]`` (2n, m + 1).
+        radius: Each fingertip's radius, (n,), m.
+    """
+    xi_cf, psi_all, xi_cf_dot = contacts[0], contacts[2], contacts[7]
+    psi_dot_all, sliding = contacts[9], contacts[12]
+    n = radius.shape[0]
+    columns = xi_cf_ddot.shape[1]
+    m = columns - 1
+    for i in range(n):
+        R_f, a = radius[i], xi_cf[i, 0]
+        sliding_x, sliding_y = sliding[i, 0], sliding[i, 1]
+        psi, psi_dot = psi_all[i], psi_dot_all[i]
+        s, c = math.sin(psi), math.cos(psi)
+        M_cf_y = R_f * math.cos(a)
+        # M_cf_dot xi_cf_dot: only its second entry is nonzero.
+        fingertip_y = -R_f * math.sin(a) * xi_cf_dot[i, 0] * xi_cf_dot[i, 1]
+        bias_x = psi_dot * (-s * sliding_x - c * sliding_y) - s * fingertip_y
+        bias_y = psi_dot * (-c * sliding_x + s * sliding_y) - c * fingertip_y
+        # R_psi M_cf, R_psi = [[c, -s], [-s, -c]].
+        A_xx, A_xy, A_yx, A_yy = c * R_f, -s * M_cf_y, -s * R_f, -c * M_cf_y
+        top, bottom = at + 2 * i * columns, at + (2 * i + 1) * columns
+        for k in range(columns):
+            out[top + k] = A_xx * xi_cf_ddot[2 * i, k] + A_xy * xi_cf_ddot[2 * i + 1, k]
+            out[bottom + k] = A_yx * xi_cf_ddot[2 * i, k] + A_yy * xi_cf_ddot[2 * i + 1, k]
+        out[top + m] += bias_x
+        out[bottom + m] += bias_y

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.compiled import inline_kernel, kernel
 from grasp_safety_filter.model.rolling_kernels import (
     contact_on_object_surface,
     relative_rotation_in_contact,
@@ -220,15 +220,16 @@ def sphere_on_sphere_contacts(
     )
 
 
-@kernel
+@inline_kernel
 def sphere_object_coordinate_acceleration(
-    terms: np.ndarray,
-    starts: np.ndarray,
-    m: int,
+    out: np.ndarray,
+    at: int,
+    contacts: tuple[np.ndarray, ...],
+    xi_cf_ddot: np.ndarray,
     object_radius: np.ndarray,
     radius: np.ndarray,
-) -> np.ndarray:
-    """``u ↦ xi_co_ddot`` on a sphere object, ``[matrix | offset]`` (2n, m + 1), from the terms.
+) -> None:
+    """Write ``u ↦ xi_co_ddot`` on a sphere object, ``[matrix | offset]`` (2n, m + 1), C order.
 
     :meth:`~grasp_safety_filter.model.contact_stack.ContactStack.object_rate_terms` and
     :attr:`~grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot` in closed form:
@@ -242,25 +243,25 @@ def sphere_object_coordinate_acceleration(
     (rad/s² in the object's charts), with ``xi_cf_ddot``'s rows ``[matrix | offset]``.
 
     Args:
-        terms: The packed terms (:func:`~grasp_safety_filter.model.packed_terms.
-            packed_fields`).
-        starts: Where ``xi_cf``, ``xi_co``, ``psi``, ``xi_cf_dot``, ``xi_co_dot``,
-            ``psi_dot``, ``sliding_velocity`` and ``xi_cf_ddot_augmented`` start in it, (8,).
-        m: Joints.
+        out: The packed buffer; entries ``at .. at + 2n (m + 1) - 1`` are written.
+        at: Where ``xi_co_ddot_augmented`` starts in it.
+        contacts: The 14 arrays of :func:`sphere_on_sphere_contacts`.
+        xi_cf_ddot: ``u ↦ xi_cf_ddot``, ``[matrix | offset]`` (2n, m + 1).
         object_radius: The object's radius per contact, (n,), m.
         radius: Each fingertip's radius, (n,), m.
     """
+    xi_cf, xi_co, psi_all, xi_cf_dot = contacts[0], contacts[1], contacts[2], contacts[7]
+    xi_co_dot, psi_dot_all, sliding = contacts[8], contacts[9], contacts[12]
     n = radius.shape[0]
-    s_xi_cf, s_xi_co, s_psi, s_xi_cf_dot, s_xi_co_dot, s_psi_dot, s_sliding, s_ddot = starts
-    columns = m + 1
-    out = np.empty((2 * n, columns))
+    columns = xi_cf_ddot.shape[1]
+    m = columns - 1
     for i in range(n):
         R_f, R_o = radius[i], object_radius[i]
-        a_f, a_o = terms[s_xi_cf + 2 * i], terms[s_xi_co + 2 * i]
-        a_f_dot, b_f_dot = terms[s_xi_cf_dot + 2 * i], terms[s_xi_cf_dot + 2 * i + 1]
-        a_o_dot, b_o_dot = terms[s_xi_co_dot + 2 * i], terms[s_xi_co_dot + 2 * i + 1]
-        sliding_x, sliding_y = terms[s_sliding + 2 * i], terms[s_sliding + 2 * i + 1]
-        psi, psi_dot = terms[s_psi + i], terms[s_psi_dot + i]
+        a_f, a_o = xi_cf[i, 0], xi_co[i, 0]
+        a_f_dot, b_f_dot = xi_cf_dot[i, 0], xi_cf_dot[i, 1]
+        a_o_dot, b_o_dot = xi_co_dot[i, 0], xi_co_dot[i, 1]
+        sliding_x, sliding_y = sliding[i, 0], sliding[i, 1]
+        psi, psi_dot = psi_all[i], psi_dot_all[i]
         s, c = math.sin(psi), math.cos(psi)
         M_cf_x, M_cf_y = R_f, R_f * math.cos(a_f)
         M_co_x, M_co_y = R_o, R_o * math.cos(a_o)
@@ -272,10 +273,9 @@ def sphere_object_coordinate_acceleration(
         # M_co^-1 R_psi M_cf, R_psi = [[c, -s], [-s, -c]].
         A_xx, A_xy = c * M_cf_x / M_co_x, -s * M_cf_y / M_co_x
         A_yx, A_yy = -s * M_cf_x / M_co_y, -c * M_cf_y / M_co_y
-        top, bottom = s_ddot + 2 * i * columns, s_ddot + (2 * i + 1) * columns
+        top, bottom = at + 2 * i * columns, at + (2 * i + 1) * columns
         for k in range(columns):
-            out[2 * i, k] = A_xx * terms[top + k] + A_xy * terms[bottom + k]
-            out[2 * i + 1, k] = A_yx * terms[top + k] + A_yy * terms[bottom + k]
-        out[2 * i, m] += bias_x
-        out[2 * i + 1, m] += bias_y
-    return out
+            out[top + k] = A_xx * xi_cf_ddot[2 * i, k] + A_xy * xi_cf_ddot[2 * i + 1, k]
+            out[bottom + k] = A_yx * xi_cf_ddot[2 * i, k] + A_yy * xi_cf_ddot[2 * i + 1, k]
+        out[top + m] += bias_x
+        out[bottom + m] += bias_y

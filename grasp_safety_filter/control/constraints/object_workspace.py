@@ -119,6 +119,9 @@ class ObjectWorkspaceBarrier(BoxBarrier):
 
     family = 'object_workspace'
     state_fields = ('xi_co', 'xi_co_dot', 'xi_co_ddot')
+    #: A packed state holds ``u ↦ xi_co_ddot`` too, in the surface's closed form
+    #: (:func:`~grasp_safety_filter.model.packed_terms.packed_fields`).
+    packed_fields = ('xi_co', 'xi_co_dot', 'xi_co_ddot_augmented')
 
     def __init__(
         self,
