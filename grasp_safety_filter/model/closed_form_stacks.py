@@ -20,6 +20,7 @@ from grasp_safety_filter.model.contact_stack import (
     StackedContactGeometry,
     StackedRollingRates,
 )
+from grasp_safety_filter.model.packed_terms import sphere_on_plane_terms, sphere_on_sphere_terms
 from grasp_safety_filter.model.rolling import ContactPair
 from grasp_safety_filter.model.rolling_kernels import (
     sphere_on_plane_contacts,
@@ -39,12 +40,14 @@ class ClosedFormStack(ContactStack):
     """Spherical fingertips on one kind of object surface, by compiled closed forms.
 
     A subclass names its kernels (``geometry_kernel``, ``contacts_kernel``), each taking the
-    fingertips' and object's poses (and twists) followed by :attr:`surface_arrays`, and
-    gives :meth:`rolling_rates`.
+    fingertips' and object's poses (and twists) followed by :attr:`surface_arrays`, its
+    one-pass terms kernel (``terms_kernel``: :mod:`grasp_safety_filter.model.packed_terms`,
+    which takes :attr:`surface_arrays` in the same place), and gives :meth:`rolling_rates`.
     """
 
     geometry_kernel: Any
     contacts_kernel: Any
+    terms_kernel: Any
     _surface_arrays: tuple[np.ndarray, ...]
 
     @property
@@ -106,6 +109,7 @@ class SphereOnPlaneStack(ClosedFormStack):
 
     geometry_kernel = staticmethod(sphere_on_plane_geometry)
     contacts_kernel = staticmethod(sphere_on_plane_contacts)
+    terms_kernel = staticmethod(sphere_on_plane_terms)
 
     def __init__(self, contacts: Sequence[ContactPair]) -> None:
         super().__init__(contacts)
@@ -146,6 +150,7 @@ class SphereOnSphereStack(ClosedFormStack):
 
     geometry_kernel = staticmethod(sphere_on_sphere_geometry)
     contacts_kernel = staticmethod(sphere_on_sphere_contacts)
+    terms_kernel = staticmethod(sphere_on_sphere_terms)
 
     def __init__(self, contacts: Sequence[ContactPair]) -> None:
         super().__init__(contacts)

@@ -10,11 +10,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
-from grasp_safety_filter.model.closed_form_stacks import (
-    ClosedFormStack,
-    SphereOnPlaneStack,
-    SphereOnSphereStack,
-)
+from grasp_safety_filter.model.closed_form_stacks import ClosedFormStack
 from grasp_safety_filter.model.contact_stack import (
     ContactStack,
     StackedContactGeometry,
@@ -22,19 +18,8 @@ from grasp_safety_filter.model.contact_stack import (
 )
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
-from grasp_safety_filter.model.packed_terms import (
-    packed_fields,
-    PackedLayout,
-    sphere_on_plane_terms,
-    sphere_on_sphere_terms,
-)
+from grasp_safety_filter.model.packed_terms import packed_fields, PackedLayout
 from grasp_safety_filter.model.rigid_object import RigidObject
-
-#: The one-pass kernel of each kind of contacts (its surface arrays: the stack's).
-_TERMS_KERNELS = {
-    SphereOnPlaneStack: sphere_on_plane_terms,
-    SphereOnSphereStack: sphere_on_sphere_terms,
-}
 
 #: GraspState's affine terms and the packed ``[matrix | offset]`` each is a view of.
 _AFFINE = {
@@ -204,9 +189,9 @@ def packed_state(
 ) -> PackedGraspState | None:
     """Return every model term of one instant, computed in one compiled pass.
 
-    :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms` (spherical
-    fingertips on flat faces) or :func:`~grasp_safety_filter.model.packed_terms.
-    sphere_on_sphere_terms` (on a sphere object) gives the same terms as the staged computation of
+    The stack's ``terms_kernel`` (:func:`~grasp_safety_filter.model.packed_terms.
+    sphere_on_plane_terms` for spherical fingertips on flat faces, ``sphere_on_sphere_terms``
+    on a sphere object) gives the same terms as the staged computation of
     :meth:`~grasp_safety_filter.model.grasp_model.GraspModel.state` (the same formulas and
     LAPACK solve), computed in one compiled pass from Pinocchio's terms and the object's
     mass matrices into one buffer.
@@ -251,7 +236,7 @@ def packed_state(
     w_e = rigid_object.external_wrench()
     buffer = np.empty(layout.size)
     try:
-        _TERMS_KERNELS[type(stack)](
+        stack.terms_kernel(
             buffer,
             *raw,
             *hand.fingertip_frames,
