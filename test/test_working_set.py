@@ -101,6 +101,14 @@ def test_the_solve_is_dgesv_on_the_dense_kkt_system_to_the_bit(seed):
         np.testing.assert_array_equal(lam, solution[m:])
 
 
+def test_a_scratch_made_for_fewer_rows_is_refused_before_it_is_written():
+    rng = np.random.default_rng(7)
+    y0, C, b = problem(rng)
+    m, k = C.shape[1], C.shape[0]
+    with pytest.raises(ValueError, match='scratch too small'):
+        on_working_set(y0, C, b, np.array([0]), working_set_scratch(m, k - 1))
+
+
 def test_dependent_rows_are_singular():
     C = np.array([[1.0, 0.0], [2.0, 0.0], [0.0, 1.0]])
     b = np.array([1.0, 2.0, 0.0])

@@ -72,12 +72,15 @@ def optimum_on_working_set(
         b: Shape (k,), finite.
         working_set: Row indices W, distinct, shape (q,), q >= 1.
         tolerance: The distance tolerance tol (y's unit).
-        scratch: :func:`working_set_scratch` of (m, k).
+        scratch: :func:`working_set_scratch` of (m, k) (or of more rows).
 
     Returns:
         ``(outcome, y, lambda)``: outcome 1 when y is the optimum of the whole problem,
         0 when a row or a multiplier fails the check, -1 when the KKT system is singular
         (dependent rows) or its solution is not finite; lambda in W's order.
+
+    Raises:
+        ValueError: ``scratch`` is smaller than :func:`working_set_scratch` makes for C.
     """
     work, pivots = scratch
     k, m = C.shape
@@ -88,6 +91,10 @@ def optimum_on_working_set(
     rhs = size * size
     norms = rhs + size
     distances = norms + k
+    if work.shape[0] < distances + k or pivots.shape[0] < size + 1:
+        # No bounds checks in compiled code: a smaller scratch would be written past its end.
+        raise ValueError('optimum_on_working_set: scratch too small for C; expected '
+                         'working_set_scratch(m, k) of C (k, m)')
     for i in range(n * n):
         work[i] = 0.0
     finite = True
