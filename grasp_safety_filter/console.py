@@ -27,7 +27,35 @@ def _ignore_unraisable(unraisable: Any) -> None:
     """``sys.unraisablehook`` of a tool that was stopped: its one line is all it says."""
 
 
+class _HeldUnraisables:
+    """``sys.unraisablehook`` that keeps each report as text until the tool's end is known.
+
+    An interrupt can leave a library's object half-built (pyparsing's while matplotlib
+    imports, llvmlite's while numba compiles), whose ``__del__`` then fails when the
+    interrupt's traceback is dropped or as the interpreter exits. A stopped tool drops
+    these reports; one that was not prints them as Python would have. Kept as text, not
+    as the objects: holding an object being finalised would bring it back to life.
+    """
+
+    def __init__(self) -> None:
+        self.reports: list[str] = []
+
+    def __call__(self, unraisable: Any) -> None:
+        import traceback
+
+        where = unraisable.err_msg or 'Exception ignored in'
+        if unraisable.object is not None:
+            where = f'{where}: {unraisable.object!r}'
+        exception = traceback.format_exception(
+            unraisable.exc_type, unraisable.exc_value, unraisable.exc_traceback
+        )
+        self.reports.append(where + '\n' + ''.join(exception))
+
+
 def _run(prog: str, function: str, argv: list[str] | None) -> int:
+    held = _HeldUnraisables()
+    sys.unraisablehook = held
+    status: int | None = None
     try:
         with interrupt_on_signals():
             from grasp_safety_filter import cli
@@ -39,10 +67,14 @@ def _run(prog: str, function: str, argv: list[str] | None) -> int:
             file=sys.stderr,
         )
         status = INTERRUPTED
-    if status == INTERRUPTED:
-        # An interrupt can leave a library's object half-built (pyparsing's, while matplotlib
-        # imports), whose __del__ then fails as the interpreter exits, with a traceback.
-        sys.unraisablehook = _ignore_unraisable
+    finally:
+        if status == INTERRUPTED:
+            sys.unraisablehook = _ignore_unraisable
+        else:  # finished, or failed: what Python would have said, said now
+            sys.unraisablehook = sys.__unraisablehook__
+            for report in held.reports:
+                print(report, end='', file=sys.stderr)
+    assert status is not None  # set on every path that gets here
     return status
 
 

@@ -85,8 +85,17 @@ def test_a_signal_at_any_moment_leaves_whole_files_and_one_line(bag, tmp_path, s
     assert _bag_files(bag) == before
 
 
-def test_a_stopped_tool_says_one_line_even_if_a_half_built_object_fails_later(tmp_path):
-    """An interrupt may leave a library object half-built; its __del__ fails at exit."""
+#: When a half-built object is dropped: as the interpreter exits, or while the tool is
+#: still stopping (the interrupt's traceback, which held it, let go inside the tool).
+HALF_BUILT_DROPPED = {
+    'at exit': ('LEFT = HalfBuilt()\n', ''),
+    'while stopping': ('', '    HalfBuilt()\n'),
+}
+
+
+def _half_built_tool(tmp_path: Path, at_module: str, in_tool: str, stopped: bool) -> Path:
+    """Write a tool that leaves an object half-built and says it was stopped, or ends with 0."""
+    said, status = ('interrupted by SIGINT', 'console.INTERRUPTED') if stopped else ('done', '0')
     script = tmp_path / 'stopped.py'
     script.write_text(
         'import sys\n'
@@ -94,13 +103,33 @@ def test_a_stopped_tool_says_one_line_even_if_a_half_built_object_fails_later(tm
         'class HalfBuilt:\n'
         '    def __del__(self):\n'
         '        self.expr  # never set: the interrupt came first\n'
-        'LEFT = HalfBuilt()\n'
+        f'{at_module}'
         'def stopped(argv):\n'
-        '    print("grasp-analyze: interrupted by SIGINT", file=sys.stderr)\n'
-        '    return console.INTERRUPTED\n'
+        f'    print("grasp-analyze: {said}", file=sys.stderr)\n'
+        f'{in_tool}'
+        f'    return {status}\n'
         'cli.analyze_main = stopped\n'
         'sys.exit(console.analyze([]))\n'
     )
+    return script
+
+
+@pytest.mark.parametrize('at_module, in_tool', HALF_BUILT_DROPPED.values(), ids=HALF_BUILT_DROPPED)
+def test_a_stopped_tool_says_one_line_even_if_a_half_built_object_fails_later(
+    tmp_path, at_module, in_tool
+):
+    """An interrupt may leave a library object half-built; its __del__ fails later."""
+    script = _half_built_tool(tmp_path, at_module, in_tool, stopped=True)
     result = subprocess.run([sys.executable, script], capture_output=True, text=True)
     assert result.returncode == 130
     assert result.stderr.strip().splitlines() == ['grasp-analyze: interrupted by SIGINT']
+
+
+def test_a_tool_that_was_not_stopped_still_reports_a_failing_finaliser(tmp_path):
+    script = _half_built_tool(tmp_path, '', HALF_BUILT_DROPPED['while stopping'][1], stopped=False)
+    result = subprocess.run([sys.executable, script], capture_output=True, text=True)
+    assert result.returncode == 0
+    lines = result.stderr.strip().splitlines()
+    assert lines[0] == 'grasp-analyze: done'
+    assert lines[1].startswith('Exception ignored in: <function HalfBuilt.__del__'), lines
+    assert lines[-1] == "AttributeError: 'HalfBuilt' object has no attribute 'expr'", lines

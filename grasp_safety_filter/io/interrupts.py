@@ -103,6 +103,8 @@ class _InterruptState:
             on leaving the outermost block if it has not been by then.
         closing: The outermost block is restoring the previous handlers: a signal is held.
         lock: Orders the re-sending thread against ``closing``.
+        outer_hook: The ``sys.unraisablehook`` the outermost block replaced: the other
+            unraisable exceptions go there.
     """
 
     installed = 0
@@ -112,6 +114,7 @@ class _InterruptState:
     held: int | None = None
     closing = False
     lock = threading.Lock()
+    outer_hook: Any = sys.__unraisablehook__
 
 
 def _in_main_thread() -> bool:
@@ -229,15 +232,16 @@ class _Redelivery:
                     signal.raise_signal(signum)
 
 
-def _redeliver_swallowed(unraisable: Any, default: Any = sys.__unraisablehook__) -> None:
+def _redeliver_swallowed(unraisable: Any) -> None:
     """``sys.unraisablehook``: an interrupt raised where it cannot propagate is sent again.
 
     The new signal is raised from another thread: raised here, its handler would run inside
     this hook, where its exception cannot propagate either. A handler that still runs here
-    (the main thread was slow to leave) is caught and sent again the same way.
+    (the main thread was slow to leave) is caught and sent again the same way. Any other
+    unraisable exception goes to the hook the outermost block replaced.
     """
     if not isinstance(unraisable.exc_value, SignalInterrupt) or _Redelivery.queue is None:
-        default(unraisable)
+        _InterruptState.outer_hook(unraisable)
         return
     signum = unraisable.exc_value.signum
     while True:
@@ -273,9 +277,11 @@ def interrupt_on_signals(
     _Redelivery.start()
     previous = {s: signal.signal(s, _handle_signal) for s in signals}
     previous_hook = sys.unraisablehook
-    sys.unraisablehook = _redeliver_swallowed
     _InterruptState.installed += 1
     outermost = _InterruptState.installed == 1
+    if outermost:
+        _InterruptState.outer_hook = previous_hook
+    sys.unraisablehook = _redeliver_swallowed
     completed = False
     held = None
     try:
