@@ -272,6 +272,46 @@ def test_the_simulator_node_loads_its_kernels_before_the_first_step():
     assert result.stdout.strip() == '[]'
 
 
+#: The controller nodes: module and class.
+CONTROLLER_NODES = {
+    'nominal controller': (
+        'grasp_safety_filter.nodes.nominal_controller_node',
+        'NominalControllerNode',
+    ),
+    'safety filter': ('grasp_safety_filter.nodes.safety_filter_node', 'SafetyFilterNode'),
+}
+
+
+@pytest.mark.parametrize('module, name', CONTROLLER_NODES.values(), ids=CONTROLLER_NODES)
+def test_a_controller_node_sets_up_the_compiled_runtime_before_its_first_tick(module, name):
+    """The first kernel a process loads costs 0.25 s of CPU; at start-up, not at a tick."""
+    code = textwrap.dedent(
+        f"""
+        from numba.core.dispatcher import Dispatcher
+        import rclpy
+
+        from {module} import {name}
+
+        loaded = []
+        load = Dispatcher._compile_for_args
+
+        def counted(self, *args, **kwargs):
+            loaded.append(self.py_func.__name__)
+            return load(self, *args, **kwargs)
+
+        Dispatcher._compile_for_args = counted
+        rclpy.init()
+        node = {name}(cli_args=['--ros-args', '--params-file', {str(CONFIG)!r}])
+        print(loaded)
+        """
+    )
+    result = subprocess.run(
+        [sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "['_first_kernel']"
+
+
 def test_the_simulator_node_runs_the_mujoco_plant(ros_context):
     """plant:=mujoco: the node steps MuJoCo (with its -p mujoco.* options) in the same loop."""
     from rclpy.executors import SingleThreadedExecutor

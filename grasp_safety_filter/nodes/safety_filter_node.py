@@ -56,6 +56,7 @@ from grasp_safety_filter.io.topics import (
     MARGINS,
     OBJECT_ODOM,
 )
+from grasp_safety_filter.model.compiled import load_compiled_runtime
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
@@ -88,6 +89,7 @@ class SafetyFilterNode(EndpointNode):
             grasp_check_config=GraspCheckConfig.from_parameters(self.parameters),
             wall_clock=time.monotonic,
         )
+        load_compiled_runtime()  # its first tick then loads only its own kernels
         endpoint = self.endpoint
         monotonic = time.monotonic
         self.subscribe(
