@@ -33,12 +33,12 @@ from grasp_safety_filter.io.topics import (
     OBJECT_REFERENCE,
     OBJECT_REFERENCE_SAMPLE,
 )
-from grasp_safety_filter.model.compiled import load_compiled_runtime
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from grasp_safety_filter.nodes.grasp_watch import GAP_TOLERANCE_PARAMETER, GraspCheckConfig
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.outgoing import Outgoing
+from grasp_safety_filter.nodes.tick_kernels import load_nominal_kernels
 
 
 class NominalControllerNode(EndpointNode):
@@ -55,7 +55,8 @@ class NominalControllerNode(EndpointNode):
         self.endpoint = NominalControllerEndpoint(
             model, config, self.msgs, GraspCheckConfig.from_parameters(self.parameters)
         )
-        load_compiled_runtime()  # its first tick then loads only its own kernels
+        # Its first tick then costs what the others cost (tick_kernels).
+        load_nominal_kernels(self.parameters, self.config_directory, config, self.msgs)
         self.subscribe(JOINT_STATES, lambda msg: self.answer(self.endpoint.on_joint_states(msg)))
         self.subscribe(OBJECT_ODOM, lambda msg: self.answer(self.endpoint.on_odom(msg)))
         if config.reference_source == 'topic':
