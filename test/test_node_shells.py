@@ -232,12 +232,39 @@ def test_nodes_run_the_lockstep_loop_to_the_end(ros_context):
             node.destroy_node()
 
 
+#: Code that records in ``loaded`` the name of each kernel numba loads from then on.
+COUNT_KERNEL_LOADS = """
+from numba.core.dispatcher import Dispatcher
+
+loaded = []
+load = Dispatcher._compile_for_args
+
+
+def counted(self, *args, **kwargs):
+    loaded.append(self.py_func.__name__)
+    return load(self, *args, **kwargs)
+
+
+Dispatcher._compile_for_args = counted
+"""
+
+
+def kernels_loaded(before: str, during: str) -> list[str]:
+    """Run ``before`` then ``during`` in a fresh interpreter; the kernels loaded during it."""
+    code = '\n'.join(
+        (textwrap.dedent(before), COUNT_KERNEL_LOADS, textwrap.dedent(during), 'print(loaded)')
+    )
+    result = subprocess.run(
+        [sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    return ast.literal_eval(result.stdout.strip().splitlines()[-1])
+
+
 def test_the_simulator_node_loads_its_kernels_before_the_first_step():
     """Under load, numba loading kernels at the first step would stall the lockstep loop."""
-    code = textwrap.dedent(
-        f"""
+    before = f"""
         import numpy as np
-        from numba.core.dispatcher import Dispatcher
         import rclpy
         from rclpy.parameter import Parameter
 
@@ -249,27 +276,15 @@ def test_the_simulator_node_loads_its_kernels_before_the_first_step():
             cli_args=['--ros-args', '--params-file', {str(CONFIG)!r}],
             parameter_overrides=[Parameter('use_sim_time', value=True)],
         )
-        loaded = []
-        load = Dispatcher._compile_for_args
-
-        def counted(self, *args, **kwargs):
-            loaded.append(self.py_func.__name__)
-            return load(self, *args, **kwargs)
-
-        Dispatcher._compile_for_args = counted
+        """
+    first_step = """
         sim = node.endpoint
         sim.start()
         joints = list(sim.model.joint_names)
         sim.on_command(effort_to_msg(sim.msgs, sim.t, joints, np.zeros(len(joints))))
         assert sim.plant.step_index == 1
-        print(loaded)
         """
-    )
-    result = subprocess.run(
-        [sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, check=False
-    )
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.strip() == '[]'
+    assert kernels_loaded(before, first_step) == []
 
 
 #: The controller nodes: module, class, the inputs of a tick and more arguments.
@@ -306,10 +321,8 @@ def test_a_controller_node_loads_its_kernels_before_its_first_tick(
     The first tick is the paper's initial grasp, its messages as DDS delivers them
     (serialized and deserialized by rclpy).
     """
-    code = textwrap.dedent(
-        f"""
+    before = f"""
         import numpy as np
-        from numba.core.dispatcher import Dispatcher
         import rclpy
         from rclpy.serialization import deserialize_message, serialize_message
 
@@ -338,26 +351,14 @@ def test_a_controller_node_loads_its_kernels_before_its_first_tick(
             effort_to_msg(msgs, t, names, np.zeros_like(q)),
         ]
         delivered = [deserialize_message(serialize_message(m), type(m)) for m in made]
-        loaded = []
-        load = Dispatcher._compile_for_args
-
-        def counted(self, *args, **kwargs):
-            loaded.append(self.py_func.__name__)
-            return load(self, *args, **kwargs)
-
-        Dispatcher._compile_for_args = counted
+        """
+    first_tick = f"""
         answers = []
         for handler, msg in zip({handlers!r}, delivered):
             answers += getattr(node.endpoint, handler)(msg)
         assert answers, 'no tick'
-        print(loaded)
         """
-    )
-    result = subprocess.run(
-        [sys.executable, '-c', code], cwd=REPO, capture_output=True, text=True, check=False
-    )
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.strip() == '[]'
+    assert kernels_loaded(before, first_tick) == []
 
 
 def test_the_simulator_node_runs_the_mujoco_plant(ros_context):
