@@ -151,7 +151,7 @@ def grasp_findings(
         )
     if findings:
         return findings
-    return _hand_findings(model, q, p_object_in_palm, R_object_to_palm)
+    return hand_findings(model, q, p_object_in_palm, R_object_to_palm)
 
 
 def _contact_findings(
@@ -211,7 +211,7 @@ def _contact_findings(
     return findings
 
 
-def _hand_findings(
+def hand_findings(
     model: GraspModel, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
 ) -> list[GraspFinding]:
     """M_h positive definite, rank J_h = 3n, rank G = 6 at the configuration, at rest."""

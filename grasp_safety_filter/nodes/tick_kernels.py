@@ -16,7 +16,7 @@ the warm-up early and quietly: the first tick then loads what is left, as before
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -31,10 +31,12 @@ from grasp_safety_filter.io.messages import (
     joint_state_from_msg,
     joint_state_to_msg,
     MessageNamespace,
+    ObjectStateData,
     odometry_from_msg,
     odometry_to_msg,
 )
 from grasp_safety_filter.model.compiled import load_compiled_runtime
+from grasp_safety_filter.model.grasp_check import hand_findings
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -67,8 +69,14 @@ def made_up_messages(model: GraspModel, msgs: MessageNamespace) -> tuple[Any, An
     )
 
 
-def _made_up_state(model: GraspModel, msgs: MessageNamespace) -> tuple[GraspState, Any]:
-    """Parse :func:`made_up_messages` as the endpoints do; return the state and the effort."""
+def _made_up_tick(
+    model: GraspModel, msgs: MessageNamespace
+) -> tuple[GraspState, ObjectStateData, np.ndarray]:
+    """Parse :func:`made_up_messages` and check the state as the endpoints do.
+
+    Returns:
+        The state, the odometry and the effort command (N·m).
+    """
     joint_states_msg, odometry_msg, effort_msg = made_up_messages(model, msgs)
     names = tuple(model.joint_names)
     joints = joint_state_from_msg(joint_states_msg, names)
@@ -81,11 +89,28 @@ def _made_up_state(model: GraspModel, msgs: MessageNamespace) -> tuple[GraspStat
         odometry.R_object_to_palm,
         odometry.twist_object,
     )
-    # The start-up grasp check evaluates the hand at the state's own arrays, read-only
-    # views: another specialisation of the model's kernel (grasp_check._hand_findings).
-    rest = np.zeros_like(joints.velocity)
-    model.state(0.0, state.q, rest, state.p_object_in_palm, state.R_object_to_palm, np.zeros(6))
-    return state, (effort_from_msg(effort_msg, names).effort, odometry)
+    # The start-up grasp check's last step evaluates the hand at the state's own read-only
+    # arrays (another specialisation of the model's kernel); a made-up state never gets
+    # that far in grasp_findings, so it is called directly.
+    hand_findings(model, state.q, state.p_object_in_palm, state.R_object_to_palm)
+    return state, odometry, effort_from_msg(effort_msg, names).effort
+
+
+def _spare_tick(
+    parameters: Mapping[str, Any],
+    config_directory: Path,
+    msgs: MessageNamespace,
+    tick: Callable[[GraspModel, GraspState, ObjectStateData, np.ndarray], object],
+) -> bool:
+    """Run ``tick`` once on a spare model at the made-up state; False if refused."""
+    load_compiled_runtime()
+    try:
+        with np.errstate(all='ignore'):
+            spare = GraspModel.from_parameters(parameters, config_directory)
+            tick(spare, *_made_up_tick(spare, msgs))
+    except _REFUSALS:
+        return False
+    return True
 
 
 def load_filter_kernels(
@@ -103,18 +128,14 @@ def load_filter_kernels(
         msgs: The node's message classes.
 
     """
-    load_compiled_runtime()
-    try:
-        with np.errstate(all='ignore'):
-            spare = GraspModel.from_parameters(parameters, config_directory)
-            state, (u_nom, _) = _made_up_state(spare, msgs)
-            safety_filter = SafetyFilter.from_config(spare, config)
-            result = safety_filter.solve(state, u_nom)
-            result.margins  # noqa: B018 (read on the ticks that publish them: loads their kernels)
-            safety_filter.margins(state, u_nom)  # a filter switched off publishes these
-    except _REFUSALS:
-        return False
-    return True
+
+    def tick(spare: GraspModel, state: GraspState, _: ObjectStateData, u_nom: np.ndarray) -> None:
+        safety_filter = SafetyFilter.from_config(spare, config)
+        result = safety_filter.solve(state, u_nom)
+        result.margins  # noqa: B018 (read on the ticks that publish them: loads their kernels)
+        safety_filter.margins(state, u_nom)  # a filter switched off publishes these
+
+    return _spare_tick(parameters, config_directory, msgs, tick)
 
 
 def load_nominal_kernels(
@@ -124,16 +145,11 @@ def load_nominal_kernels(
     msgs: MessageNamespace,
 ) -> bool:
     """Run a spare nominal controller on a spare model once; False if refused (see above)."""
-    load_compiled_runtime()
-    try:
-        with np.errstate(all='ignore'):
-            spare = GraspModel.from_parameters(parameters, config_directory)
-            state, (_, odometry) = _made_up_state(spare, msgs)
-            pose = Pose(odometry.p_object_in_palm, odometry.R_object_to_palm)
-            reference = config.make_reference(pose, state.t)
-            sample = reference.sample(state.t)
-            NominalController(config).compute(state, sample)
-            sample.twist  # noqa: B018 (published with each tick's sample: loads its kernel)
-    except _REFUSALS:
-        return False
-    return True
+
+    def tick(_: GraspModel, state: GraspState, odometry: ObjectStateData, __: np.ndarray) -> None:
+        pose = Pose(odometry.p_object_in_palm, odometry.R_object_to_palm)
+        sample = config.make_reference(pose, state.t).sample(state.t)
+        NominalController(config).compute(state, sample)
+        sample.twist  # noqa: B018 (published with each tick's sample: loads its kernel)
+
+    return _spare_tick(parameters, config_directory, msgs, tick)
