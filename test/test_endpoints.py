@@ -35,14 +35,11 @@ from grasp_safety_filter.io.diagnostic_keys import (
 from grasp_safety_filter.io.messages import DiagnosticLevel, MessageNamespace, ObjectReference
 from grasp_safety_filter.io.schemas import load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.input_watchdog import WAITING_REPORT_PERIOD
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
-from grasp_safety_filter.nodes.safety_filter import (
-    SafetyFilterEndpoint,
-    WAITING_REPORT_PERIOD,
-    WATCHDOG_PERIOD,
-)
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
 from grasp_safety_filter.nodes.scenario import scenario_from_msg, scenario_from_text, ScenarioError
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint

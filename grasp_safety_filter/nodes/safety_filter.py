@@ -54,11 +54,8 @@ from grasp_safety_filter.control.safety_filter import (
     SafetyFilter,
     SafetyFilterConfig,
 )
-from grasp_safety_filter.io.diagnostic_keys import TickStatus
-from grasp_safety_filter.io.margin_stream import MarginEncoder
 from grasp_safety_filter.io.messages import (
     DiagnosticLevel,
-    effort_to_msg,
     FutureStampError,
     MessageError,
     MessageNamespace,
@@ -67,27 +64,16 @@ from grasp_safety_filter.io.messages import (
     StaleInputError,
     StampGuard,
 )
-from grasp_safety_filter.io.topics import (
-    EFFORT_COMMAND,
-    EFFORT_NOMINAL,
-    JOINT_STATES,
-    MARGINS,
-    OBJECT_ODOM,
-)
-from grasp_safety_filter.nodes.filter_status import status_message, tick_status, TickContext
+from grasp_safety_filter.io.topics import EFFORT_NOMINAL, JOINT_STATES, OBJECT_ODOM
+from grasp_safety_filter.nodes.filter_status import status_message, TickContext
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig, GraspWatch, LogLine
 from grasp_safety_filter.nodes.held_commands import HeldCommands
-from grasp_safety_filter.nodes.input_watchdog import InputWatchdog, WAITING_REPORT_PERIOD
+from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRate, PublicationRateConfig
 from grasp_safety_filter.nodes.shared_parse import SharedParse
-from grasp_safety_filter.nodes.tick_inputs import (
-    INPUTS,
-    MAX_PENDING,
-    REPLAY,
-    TickAssembler,
-    TickInputs,
-)
+from grasp_safety_filter.nodes.tick_answer import TickAnswer
+from grasp_safety_filter.nodes.tick_inputs import INPUTS, REPLAY, TickAssembler, TickInputs
 
 #: Period of the input watchdog, s (steady clock). The fallback goes out and /diagnostics
 #: say ERROR at most ``input.hold_timeout`` + this after the last accepted tick, and the
@@ -95,16 +81,6 @@ from grasp_safety_filter.nodes.tick_inputs import (
 #: with a command timeout of 20 ms or more fed, and costs the 1 kHz loop one subtraction
 #: per call.
 WATCHDOG_PERIOD = 0.02
-
-#: Names other modules and tests import from here (defined in the modules split from it).
-__all__ = [
-    'MAX_PENDING',
-    'WAITING_REPORT_PERIOD',
-    'WATCHDOG_PERIOD',
-    'SafetyFilterEndpoint',
-    'TickInputs',
-]
-
 
 class SafetyFilterEndpoint:
     """The CBF-QP safety filter over messages (module docstring).
@@ -130,7 +106,7 @@ class SafetyFilterEndpoint:
         filter: The safety filter core.
         hold: The input hold policy.
         inputs: The input checks (stamps) and the pending inputs of the ticks to come.
-        margin_stream: The ``/safety_filter/margins`` stream (row names only when due).
+        answer: Builds a computed tick's command, margins and status.
         grasp: The start-up and run-time grasp checks.
         enabled: Whether u* is filtered (True) or u_nom passed through (False); change it
             with :meth:`switch`.
@@ -161,10 +137,9 @@ class SafetyFilterEndpoint:
         )
         self.inputs = TickAssembler(input_policy_config.max_age, model, parse)
         self.rate = PublicationRate(publication_rate_config)
-        self.margin_stream = MarginEncoder()
         self.grasp = GraspWatch(model, grasp_check_config)
         self.last_result: FilterResult | None = None
-        self._joint_names = tuple(model.joint_names)
+        self.answer = TickAnswer(msgs, model.joint_names, self.rate, self._status_message)
         self._last_outputs: list[Outgoing] = []
         self.held = HeldCommands(model, self.hold, msgs, self.rate, self._status_message)
         self.input_watchdog = InputWatchdog(INPUTS)
@@ -219,7 +194,8 @@ class SafetyFilterEndpoint:
                 is under way).
 
         Returns:
-            Before the first answered tick, every :data:`WAITING_REPORT_PERIOD` s a WARN
+            Before the first answered tick, every :data:`~grasp_safety_filter.nodes.
+            input_watchdog.WAITING_REPORT_PERIOD` s a WARN
             naming the inputs not received yet, and no command (a hand driver should not get
             torques from a filter that has never seen its hand); nothing while the last tick
             is at most ``input.hold_timeout`` s old; else the fallback and an ERROR naming
@@ -361,27 +337,22 @@ class SafetyFilterEndpoint:
         resumed_after = (
             None if wall is None else self.input_watchdog.accepted(self._answered(wall))
         )
-        # Both messages are stamped t, whose ns is the tick's stamp.
-        command = effort_to_msg(self.msgs, t, self._joint_names, u)
-        outgoing = [Outgoing(EFFORT_COMMAND, stamp, command)]
-        # A result's margins and active rows are computed only when read: on the ticks
-        # that publish them.
-        if self.rate.margins_due(stamp):
-            margins = disabled_margins if result is None else result.margins
-            message = self.margin_stream.encode(self.msgs, t, margins.names, margins.array)
-            outgoing.append(Outgoing(MARGINS, stamp, message))
-        status = TickStatus.DISABLED if result is None else TickStatus.of(result.status)
-        if self.rate.status_due(stamp, status, force=resumed_after is not None):
-            tick_time = time.perf_counter() - start
-            context = TickContext(
+        # Every message is stamped t, whose ns is the tick's stamp.
+        outgoing = self.answer.messages(
+            stamp,
+            t,
+            u,
+            result,
+            disabled_margins,
+            (filter_time, start),
+            lambda: TickContext(
                 self._switched_at,
                 self.rate.counter_values(),
                 self.hold.diagnostic_values(now),
                 resumed_after,
-            )
-            margins = disabled_margins if result is None else result.margins
-            level, text, values = tick_status(result, margins, filter_time, tick_time, context)
-            outgoing.append(self._status_message(t, level, text, values))
+            ),
+            resumed=resumed_after is not None,
+        )
         self._last_outputs = outgoing
         return list(outgoing)
 
