@@ -82,6 +82,7 @@ from grasp_safety_filter.nodes.tick_inputs import INPUTS, REPLAY, TickAssembler,
 #: per call.
 WATCHDOG_PERIOD = 0.02
 
+
 class SafetyFilterEndpoint:
     """The CBF-QP safety filter over messages (module docstring).
 
