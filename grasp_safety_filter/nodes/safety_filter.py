@@ -196,11 +196,11 @@ class SafetyFilterEndpoint:
 
         Returns:
             Before the first answered tick, every :data:`~grasp_safety_filter.nodes.
-            input_watchdog.WAITING_REPORT_PERIOD` s a WARN
-            naming the inputs not received yet, and no command (a hand driver should not get
-            torques from a filter that has never seen its hand); nothing while the last tick
-            is at most ``input.hold_timeout`` s old; else the fallback and an ERROR naming
-            the silent inputs (:meth:`HeldCommands.absent`).
+            input_watchdog.WAITING_REPORT_PERIOD` s a WARN naming the inputs not received
+            yet, and no command (a hand driver should not get torques from a filter that has
+            never seen its hand); nothing while the last tick is at most
+            ``input.hold_timeout`` s old; else the fallback and an ERROR naming the silent
+            inputs (:meth:`HeldCommands.absent`).
 
         """
         if not self.input_watchdog.started:
