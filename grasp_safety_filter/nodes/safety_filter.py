@@ -345,7 +345,8 @@ class SafetyFilterEndpoint:
             u,
             result,
             disabled_margins,
-            (filter_time, start),
+            filter_time,
+            start,
             lambda: TickContext(
                 self._switched_at,
                 self.rate.counter_values(),

@@ -61,7 +61,8 @@ class TickAnswer:
         u: np.ndarray,
         result: FilterResult | None,
         margins_at_u_nom: Margins | None,
-        times: tuple[float, float],
+        filter_time: float,
+        tick_start: float,
         context: Callable[[], TickContext],
         resumed: bool,
     ) -> list[Outgoing]:
@@ -73,8 +74,8 @@ class TickAnswer:
             u: The command, (m,), N·m.
             result: The filter's result; None with the filter off.
             margins_at_u_nom: With the filter off, the margins at u_nom (else None).
-            times: The filter step's duration and when the tick started
-                (``time.perf_counter``), s.
+            filter_time: The filter step's duration, s.
+            tick_start: When the tick started (``time.perf_counter``), s.
             context: Gives the status's endpoint values (called only when it is due).
             resumed: The first tick after the input watchdog took over (the status goes
                 out whatever the rate).
@@ -87,8 +88,7 @@ class TickAnswer:
             outgoing.append(Outgoing(MARGINS, stamp, message))
         status = TickStatus.DISABLED if result is None else TickStatus.of(result.status)
         if self._rate.status_due(stamp, status, force=resumed):
-            filter_time, start = times
-            tick_time = time.perf_counter() - start
+            tick_time = time.perf_counter() - tick_start
             margins = margins_at_u_nom if result is None else result.margins
             level, text, values = tick_status(result, margins, filter_time, tick_time, context())
             outgoing.append(self._status(t, level, text, values))
