@@ -87,16 +87,34 @@ def test_a_signal_held_off_an_import_at_the_end_of_the_block_is_raised_as_it_end
     assert received == []
 
 
-def test_an_interrupt_is_held_off_numbas_callback_and_raised_after_it(tmp_path):
+def _raised_after(call, signum: signal.Signals) -> list:
+    """Call ``call`` in a block; return what it returned, asserting ``signum`` came after."""
+    returned = []
+    with interrupt_on_signals():
+        with pytest.raises(SignalInterrupt) as interrupt:
+            returned.append(call())
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:
+                time.sleep(0.001)
+    assert interrupt.value.signum == signum
+    return returned
+
+
+def test_an_interrupt_is_held_off_numbas_callback_and_raised_after_it(tmp_path, monkeypatch):
     """Numba's compiled code calls ``_numba_unpickle`` from C: an exception there is lost.
 
-    It becomes ``SystemError``; the module below stands in for numba's (same file and
-    function name) and is signalled inside it, as a Ctrl-C may land there.
+    It becomes ``SystemError``; the module below stands in for numba's (a package named
+    ``numba``, the same file and function name) and is signalled inside it, as a Ctrl-C
+    may land there.
     """
     import importlib.util
+    import sys
+    import types
 
-    serialize = tmp_path / 'numba' / 'core' / 'serialize.py'
+    package = tmp_path / 'numba'
+    serialize = package / 'core' / 'serialize.py'
     serialize.parent.mkdir(parents=True)
+    (package / '__init__.py').write_text('')
     serialize.write_text(
         'import signal, time\n'
         'def _numba_unpickle(address, bytedata, hashed):\n'
@@ -104,15 +122,46 @@ def test_an_interrupt_is_held_off_numbas_callback_and_raised_after_it(tmp_path):
         '    time.sleep(0.05)\n'
         '    return "unpickled"\n'
     )
+    stand_in = types.ModuleType('numba')
+    stand_in.__file__ = str(package / '__init__.py')
+    monkeypatch.setitem(sys.modules, 'numba', stand_in)
     spec = importlib.util.spec_from_file_location('stand_in_serialize', serialize)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    returned = []
-    with interrupt_on_signals():
-        with pytest.raises(SignalInterrupt) as interrupt:
-            returned.append(module._numba_unpickle(0, b'', b''))
-            deadline = time.monotonic() + 5.0
-            while time.monotonic() < deadline:
-                time.sleep(0.001)
-    assert returned == ['unpickled']
-    assert interrupt.value.signum == signal.SIGINT
+    assert _raised_after(lambda: module._numba_unpickle(0, b'', b''), signal.SIGINT) == [
+        'unpickled'
+    ]
+
+
+def test_an_interrupt_is_held_off_numbas_compiler_and_raised_after_it():
+    """A signal while numba compiles or loads a kernel reaches the program once it is done.
+
+    Raised inside numba's typing, an interrupt can leave its registries half-loaded: every
+    later compile or cache load in the process then fails (``generator raised
+    StopIteration``). Here the signal arrives while numba types a call, from inside an
+    overload that numba's compiler calls; the kernel must compile and run, and numba must
+    still compile afterwards.
+    """
+    import numba
+    from numba.extending import overload
+
+    def signalled() -> int:
+        raise NotImplementedError('only compiled')
+
+    @overload(signalled)
+    def _typed_while_signalled():
+        signal.raise_signal(signal.SIGTERM)
+        time.sleep(0.05)
+        return lambda: 7
+
+    @numba.njit(cache=False)
+    def kernel() -> int:
+        return signalled() + 1
+
+    assert _raised_after(kernel, signal.SIGTERM) == [8]
+
+    @numba.njit(cache=False)
+    def afterwards(x: float) -> float:
+        return 2.0 * x
+
+    assert afterwards(1.5) == 3.0

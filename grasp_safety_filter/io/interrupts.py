@@ -16,8 +16,11 @@ another thread), so it lands in the program's own code.
 Nor is it raised while the main thread is importing a module: an extension module that
 runs Python code while it initialises (numpy imports ``datetime``) turns an exception
 raised there into an ``ImportError``. The signal is delivered again a little later, until
-the import is done. The same for Python code that numba's compiled code calls
-(``_numba_unpickle``), which turns an exception raised there into ``SystemError``.
+the import is done. The same inside numba's own Python code: its compiled code turns an
+exception raised in a callback (``_numba_unpickle``) into ``SystemError``, and one raised
+while numba loads a cached kernel can leave its typing context broken for the rest of the
+process (a registry loader's generator ends, and every later load fails with
+``RuntimeError``).
 
 A long-running node takes no exception at all: :class:`TerminationRequests` records the
 signal and its loop ends at the next turn.
@@ -50,17 +53,12 @@ REDELIVERY_DELAY = 1e-3
 """Delay before an interrupt that could not be raised is sent again, s."""
 
 IMPORT_REDELIVERY_DELAY = 10e-3
-"""Delay before an interrupt held off an import is sent again, s."""
+"""Delay before an interrupt held off an import or numba's code is sent again, s."""
 
 #: Code of Python's import system: a frame of these on the stack means an import is running.
 _IMPORT_SYSTEM = frozenset(
     {'<frozen importlib._bootstrap>', '<frozen importlib._bootstrap_external>'}
 )
-
-
-#: Functions of numba's that its C code calls, in the file :data:`_NUMBA_SERIALIZE`.
-_NUMBA_CALLBACKS = frozenset({'_numba_unpickle'})
-_NUMBA_SERIALIZE = os.path.join('numba', 'core', 'serialize.py')
 
 
 class SignalInterrupt(KeyboardInterrupt):
@@ -130,15 +128,19 @@ def importing(frame: FrameType | None) -> bool:
     return False
 
 
-def in_numba_callback(frame: FrameType | None) -> bool:
-    """Whether ``frame`` or one of its callers is Python code that numba's C code called.
+def in_numba(frame: FrameType | None) -> bool:
+    """Whether ``frame`` or one of its callers is numba's own Python code at work.
 
-    Compiled code calls ``_numba_unpickle`` for an object constant (an exception it raises,
-    a cached kernel's globals); an exception raised in it becomes ``SystemError``.
+    Compiling or loading a kernel, or a callback from compiled code (module doc). False
+    while numba is not imported: then none of its code can be on the stack.
     """
+    numba = sys.modules.get('numba')
+    numba_file = getattr(numba, '__file__', None)
+    if numba_file is None:
+        return False
+    package = os.path.dirname(numba_file) + os.sep
     while frame is not None:
-        code = frame.f_code
-        if code.co_name in _NUMBA_CALLBACKS and code.co_filename.endswith(_NUMBA_SERIALIZE):
+        if frame.f_code.co_filename.startswith(package):
             return True
         frame = frame.f_back
     return False
@@ -152,7 +154,7 @@ def _handle_signal(signum: int, frame: FrameType | None) -> None:
         # Inside a write or close: interrupt once the block is done.
         _InterruptState.pending, _InterruptState.held = signum, None
         return
-    if (importing(frame) or in_numba_callback(frame)) and _Redelivery.queue is not None:
+    if (importing(frame) or in_numba(frame)) and _Redelivery.queue is not None:
         _InterruptState.held = signum
         _Redelivery.queue.put((signum, IMPORT_REDELIVERY_DELAY))
         return
