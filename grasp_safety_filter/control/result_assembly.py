@@ -64,6 +64,15 @@ class ResultAssembler:
         self.names = (*self.row_names, *actuator_limits.names)
         self._index = {name: i for i, name in enumerate(self.names)}
 
+    def load_kernels(self, A: np.ndarray, lower: np.ndarray) -> None:
+        """Call :meth:`result`'s row checks once, with its types (u* read-only): they load."""
+        u = np.zeros(A.shape[1])
+        u.setflags(write=False)
+        slack = np.empty(len(self.names))
+        residuals(A, lower, u, slack)
+        violated = np.zeros(len(self.families), dtype=np.bool_)
+        violations(slack[: len(self.row_names)], self._row_family, FEASIBILITY_TOLERANCE, violated)
+
     def margins(self, state: GraspState, u: np.ndarray) -> Margins:
         """Barrier values h per row name (families then actuator limits) at torque u."""
         u = np.asarray(u, dtype=float)

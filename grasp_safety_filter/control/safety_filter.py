@@ -244,6 +244,15 @@ class SafetyFilter:
             self.torque_rate.forget()
         self.backend.reset()
 
+    def load_kernels(self) -> None:
+        """Load the compiled steps of rarer ticks now (a node's start-up, after a spare tick).
+
+        The QP backend's and the result's row checks, run on the last tick's rows; then reset.
+        """
+        self.backend.load_kernels(self.problem)
+        self._results.load_kernels(self.problem.A, self.problem.lower)
+        self.reset()
+
     def constraint_rows(self, state: GraspState) -> ConstraintRows:
         """Return the barrier rows ``A u >= lower`` at this state (a copy; no actuator box)."""
         self._assemble_rows(state)

@@ -5,7 +5,10 @@ first tick would load those of its whole path (model terms, the filter's pass, m
 the nominal law's), about 0.1 s of CPU, while a lockstep simulator and the filter's input
 watchdog wait. Before it subscribes, a node runs its cores once on a spare model built from
 the same parameters, at a made-up state (:func:`made_up_messages`) parsed as its inputs
-are, so the arrays have the types the kernels are compiled for.
+are, so the arrays have the types the kernels are compiled for. The spare filter then runs
+the steps of its rarer ticks on that tick's rows (:meth:`SafetyFilter.load_kernels
+<grasp_safety_filter.control.safety_filter.SafetyFilter.load_kernels>`), which the first
+active-set or relaxed tick would load otherwise.
 
 The node's own model is not used: a model binds each contact to its object surface at its
 first state (:meth:`~grasp_safety_filter.model.grasp_model.GraspModel.bind_contacts`), which
@@ -134,6 +137,7 @@ def load_filter_kernels(
         result = safety_filter.solve(state, u_nom)
         result.margins  # noqa: B018 (read on the ticks that publish them: loads their kernels)
         safety_filter.margins(state, u_nom)  # a filter switched off publishes these
+        safety_filter.load_kernels()  # those of the rarer ticks, on this tick's rows
 
     return _spare_tick(parameters, config_directory, msgs, tick)
 

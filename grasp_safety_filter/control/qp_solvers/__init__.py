@@ -6,7 +6,9 @@ Every backend is a class ``Backend(problem, slack_weights, settings)`` with:
   (``problem.with_slack(w)``) right after a hard solve that did not end optimal;
 - ``warm_start(solution | None)``: a tick settled without the backend (u_nom feasible: its
   solution; no answer at all: None, and the next solve starts cold);
-- ``reset()``: forget every warm start.
+- ``reset()``: forget every warm start;
+- ``load_kernels(problem)``: run every step it compiles once on ``problem`` (a node's
+  start-up: no step then loads at the first tick that needs it), and reset.
 
 A backend is warm-started from its own previous tick; the problem's arrays may be rewritten
 in place between calls. :data:`BACKENDS` maps the ``qp.solver`` parameter to the classes.

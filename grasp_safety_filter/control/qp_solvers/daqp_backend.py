@@ -130,6 +130,9 @@ class DAQPBackend:
         if solution is None:
             self.reset()
 
+    def load_kernels(self, problem: Problem) -> None:
+        """Nothing to load: daqp and this backend's own steps are not compiled at run time."""
+
     def solve(self, problem: Problem) -> Solution:
         """Solve the hard or the relaxed problem."""
         m = self._m

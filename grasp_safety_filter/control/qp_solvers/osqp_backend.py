@@ -214,6 +214,29 @@ class OSQPBackend(ActiveSetSteps):
         """Skip step 1 in the next hard solve: a compiled pass found the guess not optimal."""
         self._guess_rejected = True
 
+    def load_kernels(self, problem: Problem) -> None:
+        """Run every step once on ``problem`` now, answers discarded; then :meth:`reset`.
+
+        numba loads a compiled step at its first call (:mod:`grasp_safety_filter.model.
+        compiled`), some 5 to 20 ms each. The steps after a rejected guess (the reading of
+        OSQP's multipliers, the exact active-set method) and the relaxed problem's run on a
+        few ticks in a thousand, so the first such tick would load them all; a node calls
+        this at start-up instead. Each is called as a tick calls it, so that its arrays
+        have a tick's types.
+        """
+        m, k = self._m, self._k
+        self._hard_rows[:k] = problem.A
+        self._hard_lower[:k] = problem.lower
+        self._set_metric(problem.metric_factor, -problem.g)
+        y = self._hard.solve(raise_error=False).y  # OSQP's multipliers, as a tick has them
+        guess = working_set_guess(y, k, m) or (0,)
+        self._on_guess(problem, guess, 0)
+        solve_least_distance(
+            self._y_nom, self._rows_y, self._hard_lower, ACTIVE_SET_TOLERANCE, working_set=guess
+        )
+        self._solve_relaxed(problem.with_slack(self.relaxed_qp.row_weights))
+        self.reset()
+
     def solve(self, problem: Problem) -> Solution:
         """Solve the hard or the relaxed problem (relaxed: right after its hard problem)."""
         return self._solve_relaxed(problem) if problem.relaxed else self._solve_hard(problem)
