@@ -20,7 +20,8 @@ the import is done. The same inside numba's own Python code: its compiled code t
 exception raised in a callback (``_numba_unpickle``) into ``SystemError``, and one raised
 while numba loads a cached kernel can leave its typing context broken for the rest of the
 process (a registry loader's generator ends, and every later load fails with
-``RuntimeError``).
+``RuntimeError``). A kernel compiled for the first time (no cache yet) can take seconds:
+the interrupt then comes when it is done.
 
 A long-running node takes no exception at all: :class:`TerminationRequests` records the
 signal and its loop ends at the next turn.
