@@ -250,6 +250,26 @@ Dispatcher._compile_for_args = counted
 """
 
 
+#: Code that defines ``delivered(endpoint, t, q, dq, p_o, R_po, twist, u_nom)``: one tick's
+#: joint state, odometry and nominal effort for the endpoint's hand, as rclpy delivers them.
+DELIVER_TICK = """
+from rclpy.serialization import deserialize_message, serialize_message
+
+from grasp_safety_filter.io.messages import effort_to_msg, joint_state_to_msg, odometry_to_msg
+
+
+def delivered(endpoint, t, q, dq, p_o, R_po, twist, u_nom):
+    model, msgs = endpoint.model, endpoint.msgs
+    names = list(model.joint_names)
+    made = [
+        joint_state_to_msg(msgs, t, names, q, dq, None),
+        odometry_to_msg(msgs, t, p_o, R_po, twist, model.palm_frame, model.object_frame),
+        effort_to_msg(msgs, t, names, u_nom),
+    ]
+    return [deserialize_message(serialize_message(m), type(m)) for m in made]
+"""
+
+
 def kernels_loaded(before: str, during: str) -> list[str]:
     """Run ``before`` then ``during`` in a fresh interpreter; the kernels loaded during it."""
     code = '\n'.join(
@@ -322,14 +342,10 @@ def test_a_controller_node_loads_its_kernels_before_its_first_tick(
     The first tick is the paper's initial grasp, its messages as DDS delivers them
     (serialized and deserialized by rclpy).
     """
-    before = f"""
+    before = DELIVER_TICK + textwrap.dedent(f"""
         import numpy as np
         import rclpy
-        from rclpy.serialization import deserialize_message, serialize_message
 
-        from grasp_safety_filter.io.messages import (
-            effort_to_msg, joint_state_to_msg, odometry_to_msg,
-        )
         from grasp_safety_filter.io.schemas import load_node_parameters
         from grasp_safety_filter.model.quaternion import rotation_matrix
         from {module} import {name}
@@ -339,23 +355,15 @@ def test_a_controller_node_loads_its_kernels_before_its_first_tick(
             cli_args=['--ros-args', '--params-file', {str(CONFIG)!r}, *{arguments!r}]
         )
         initial = load_node_parameters({str(CONFIG)!r}, 'hand_sim_node')
-        model, msgs, t = node.endpoint.model, node.endpoint.msgs, 0.001
-        names = list(model.joint_names)
         q = np.array(initial['initial.joint_positions'])
         R = rotation_matrix(np.array(initial['initial.object_orientation']))
-        made = [
-            joint_state_to_msg(msgs, t, names, q, np.zeros_like(q), None),
-            odometry_to_msg(
-                msgs, t, np.array(initial['initial.object_position']), R, np.zeros(6),
-                model.palm_frame, model.object_frame,
-            ),
-            effort_to_msg(msgs, t, names, np.zeros_like(q)),
-        ]
-        delivered = [deserialize_message(serialize_message(m), type(m)) for m in made]
-        """
+        p = np.array(initial['initial.object_position'])
+        zeros = np.zeros_like(q)
+        messages = delivered(node.endpoint, 0.001, q, zeros, p, R, np.zeros(6), zeros)
+        """)
     first_tick = f"""
         answers = []
-        for handler, msg in zip({handlers!r}, delivered):
+        for handler, msg in zip({handlers!r}, messages):
             answers += getattr(node.endpoint, handler)(msg)
         assert answers, 'no tick'
         """
@@ -377,39 +385,26 @@ def test_the_safety_filter_node_loads_the_kernels_of_its_rarer_ticks_before_its_
     recorded = tmp_path / 'ticks.npz'
     fields = ('t', 'q', 'dq', 'p_object_in_palm', 'R_object_to_palm', 'twist_object', 'u_nom')
     np.savez(recorded, **{f: np.array([getattr(tick, f) for tick in ticks]) for f in fields})
-    before = f"""
+    before = DELIVER_TICK + textwrap.dedent(f"""
         import numpy as np
         import rclpy
-        from rclpy.serialization import deserialize_message, serialize_message
 
-        from grasp_safety_filter.io.messages import (
-            effort_to_msg, joint_state_to_msg, odometry_to_msg,
-        )
         from grasp_safety_filter.nodes.safety_filter_node import SafetyFilterNode
 
         rclpy.init()
         node = SafetyFilterNode(
             cli_args=['--ros-args', '--params-file', {str(CONFIG)!r}, '-p', 'use_sim_time:=true']
         )
-        model, msgs = node.endpoint.model, node.endpoint.msgs
-        names = list(model.joint_names)
         ticks = np.load({str(recorded)!r})
-        delivered = []
-        for k, t in enumerate(ticks['t'].tolist()):
-            made = [
-                joint_state_to_msg(msgs, t, names, ticks['q'][k], ticks['dq'][k], None),
-                odometry_to_msg(
-                    msgs, t, ticks['p_object_in_palm'][k], ticks['R_object_to_palm'][k],
-                    ticks['twist_object'][k], model.palm_frame, model.object_frame,
-                ),
-                effort_to_msg(msgs, t, names, ticks['u_nom'][k]),
-            ]
-            delivered.append([deserialize_message(serialize_message(m), type(m)) for m in made])
+        every_tick_messages = [
+            delivered(node.endpoint, *(ticks[f][k] for f in {fields!r}))
+            for k in range(ticks['t'].size)
+        ]
         statuses = set()
-        """
+        """)
     every_tick = """
         endpoint = node.endpoint
-        for joints, odometry, effort in delivered:
+        for joints, odometry, effort in every_tick_messages:
             endpoint.last_result = None
             endpoint.on_joint_states(joints)
             endpoint.on_odom(odometry)
