@@ -195,6 +195,19 @@ def test_other_hands_are_timed_on_as_many_ticks_in_the_same_run(bench):
             hand['node_tick_cpu_us']['median'] / first['node_tick_cpu_us']['median']
         )
         assert f'{hand["cpu_median_over_first"]:.2f}x' in table
+        parts = hand['parts_us']
+        cpu_parts = ['pinocchio_cpu', 'model_terms_cpu', 'filter_step_cpu']
+        assert list(parts) == [*cpu_parts, 'qp_solve_wall']
+        for name in cpu_parts:
+            assert parts[name]['n'] == TICKS and positive_spread(parts[name]), name
+        # Every tick but a nominal one solves a QP here (no fallback in these ticks).
+        nominal = hand['statuses'].get(FilterStatus.NOMINAL.value, 0)
+        assert parts['qp_solve_wall']['n'] == TICKS - nominal > 0
+        for name, figures in parts.items():
+            assert figures['over_first'] == pytest.approx(
+                figures['median'] / first['parts_us'][name]['median']
+            ), name
+            assert f'{figures["median"]:.1f} ({figures["over_first"]:.2f}x)' in table, name
     assert 'four_finger_box.yaml' in table
 
 
@@ -210,22 +223,33 @@ def test_hands_take_turns_block_by_block(monkeypatch):
 
         def solve(self, state, u_nom):
             calls.append((self.name, state))
-            return SimpleNamespace(status=FilterStatus.SOLVED)
+            return SimpleNamespace(status=FilterStatus.SOLVED, solve_time=float(state))
 
     def hand(name, count):
         scenario = SimpleNamespace(
-            model=SimpleNamespace(n_joints=1, n_contacts=1), safety_filter=lambda: Filter(name)
+            model=SimpleNamespace(name=name, n_joints=1, n_contacts=1),
+            safety_filter=lambda: Filter(name),
         )
         return name, scenario, [SimpleNamespace(index=i, u_nom=None) for i in range(count)]
 
+    def pinocchio_terms(model, tick):
+        calls.append(('pinocchio', model.name, tick.index))
+
     monkeypatch.setattr(hands_module, 'state_of', lambda model, tick: tick.index)
+    monkeypatch.setattr(hands_module, 'pinocchio_terms', pinocchio_terms)
     replays = replay_hands([hand('a', 5), hand('b', 4)], block=2, warmup=1)
     assert calls == [
         ('a', 0), ('b', 0),  # warm-up
         ('a', 0), ('a', 1), ('b', 0), ('b', 1),
         ('b', 2), ('b', 3), ('a', 2), ('a', 3),
+        # Pinocchio's calls afterwards, in the node ticks' order.
+        ('pinocchio', 'a', 0), ('pinocchio', 'a', 1), ('pinocchio', 'b', 0), ('pinocchio', 'b', 1),
+        ('pinocchio', 'b', 2), ('pinocchio', 'b', 3), ('pinocchio', 'a', 2), ('pinocchio', 'a', 3),
     ]
     assert [r.cpu.size for r in replays] == [4, 4] and replays[1].statuses == {'solved': 4}
+    for replay in replays:
+        np.testing.assert_array_equal(replay.solve, [0.0, 1.0, 2.0, 3.0])  # each tick's own
+        np.testing.assert_allclose(replay.model_cpu + replay.filter_cpu, replay.cpu)
     with pytest.raises(ValueError, match='block: expected >= 1'):
         replay_hands([hand('a', 1)], block=0)
     with pytest.raises(ValueError, match='at least one tick'):
