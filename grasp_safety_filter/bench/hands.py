@@ -48,7 +48,6 @@ class HandTicks:
         wall: Wall time of each node tick, s, shape (ticks,).
         statuses: How many ticks ended with each filter status.
         model_cpu: Thread CPU time of each tick's model terms, s, shape (ticks,).
-        filter_cpu: Thread CPU time of each tick's filter step, s, shape (ticks,).
         solve: The filter's QP solve per tick (``FilterResult.solve_time``, wall; 0 on a
             tick that solved no QP), s, shape (ticks,).
         pinocchio_cpu: Thread CPU time of Pinocchio's calls at each tick's (q, dq), s,
@@ -62,9 +61,13 @@ class HandTicks:
     wall: np.ndarray
     statuses: dict[str, int]
     model_cpu: np.ndarray
-    filter_cpu: np.ndarray
     solve: np.ndarray
     pinocchio_cpu: np.ndarray
+
+    @property
+    def filter_cpu(self) -> np.ndarray:
+        """Thread CPU time of each tick's filter step (node tick - model terms), s."""
+        return self.cpu - self.model_cpu
 
 
 def pinocchio_terms(model: Any, tick: Tick) -> object:
@@ -139,7 +142,6 @@ def replay_hands(
             wall[j],
             dict(statuses[j]),
             model_cpu[j],
-            cpu[j] - model_cpu[j],
             solve[j],
             pinocchio_cpu[j],
         )
