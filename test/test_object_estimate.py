@@ -63,7 +63,7 @@ def twist_of(kind, t):
 
 
 def pose_of(kind, t):
-    """The exact pose of the synthetic motion (its twist integrated in closed form)."""
+    """Return the exact pose of the synthetic motion (its twist integrated in closed form)."""
     if kind == 'quadratic':
         x = twist_of(kind, 1.0) * t**3 / 3.0
     else:
@@ -223,7 +223,7 @@ def rigid_run(scenario):
 
 @pytest.fixture(scope='module')
 def mujoco_runs(scenario):
-    """MuJoCo contacts that hold the grasp, and MuJoCo's default ones (the object creeps)."""
+    """Run on the MuJoCo contacts that hold the grasp and on the default ones (which creep)."""
     options = {'no_slip': MjcfOptions(cone='elliptic', noslip_iterations=10), 'default': None}
     return {
         name: filtered_run(
@@ -289,7 +289,7 @@ def kinematics(scenario, rigid_run, mujoco_runs):
     ids=['static', 'translation', 'rotation'],
 )
 def test_the_kinematic_twist_inverts_the_rolling_constraint_at_the_paper_grasp(scenario, twist):
-    """dq that rolls the fingertips with a twist (J_h dq = G^T x): the estimate's twist is x."""
+    """The joint velocity that rolls the fingertips with a twist x: the estimate's twist is x."""
     start = RigidPlant(scenario.model, scenario.sim_config).observe()
     pose = (start.p_object_in_palm, start.R_object_to_palm)
     dq = scenario.model.rolling_joint_velocity(start.q, *pose, twist)
