@@ -52,6 +52,7 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
         (topics.CLOCK, m.clock_to_msg(msgs, t)),
         (topics.JOINT_STATES, m.joint_state_to_msg(msgs, t, JOINTS, *rng.normal(size=(3, 9)))),
         (topics.OBJECT_ODOM, m.odometry_to_msg(msgs, t, np.ones(3), np.eye(3), np.ones(6))),
+        (topics.OBJECT_POSE, m.pose_stamped_to_msg(msgs, t, np.ones(3), np.eye(3))),
         (topics.CONTACTS, m.contacts_to_msg(msgs, contacts, CONTACT_NAMES)),
         (topics.OBJECT_REFERENCE, m.reference_to_msg(msgs, t, [0.0], [reference])),
         (
@@ -60,6 +61,10 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
         ),
         (topics.EFFORT_NOMINAL, m.effort_to_msg(msgs, t, JOINTS, rng.normal(size=9))),
         (topics.EFFORT_COMMAND, m.effort_to_msg(msgs, t, JOINTS, rng.normal(size=9))),
+        (
+            topics.EFFORT_CONTROLLER_COMMANDS,
+            m.effort_array_to_msg(msgs, np.arange(9)[::-1], rng.normal(size=9)),
+        ),
         (topics.MARGINS, m.margins_to_msg(msgs, t, ['a', 'b'], rng.normal(size=2))),
         (
             topics.DIAGNOSTICS,
@@ -90,7 +95,9 @@ def test_written_bag_is_read_back_with_topics_types_counts_and_qos(tmp_path, sto
     with BagRecorder(path, storage=storage) as recorder:
         for k in range(STEPS):
             for topic, msg in tick_messages(recorder, k, rng):
-                recorder.write(topic, stamp_ns(msg), msg)
+                # An unstamped command is recorded at its tick's stamp, as a node publishes it.
+                unstamped = topic == topics.EFFORT_CONTROLLER_COMMANDS
+                recorder.write(topic, round(k * DT * 1e9) if unstamped else stamp_ns(msg), msg)
                 if topic == topics.EFFORT_COMMAND:
                     sent_efforts.append(np.array(msg.effort))
         recorder.set_custom_data('run', 'paper_demo')
@@ -124,7 +131,8 @@ def test_written_bag_is_read_back_with_topics_types_counts_and_qos(tmp_path, sto
     for topic, entries in bag.items():
         stamps = [stamp for stamp, _ in entries]
         assert stamps == [round(k * DT * 1e9) for k in range(expected_count(topic))], topic
-        assert [stamp_ns(msg) for _, msg in entries] == stamps
+        if topic != topics.EFFORT_CONTROLLER_COMMANDS:
+            assert [stamp_ns(msg) for _, msg in entries] == stamps
     received = [m.effort_from_msg(msg, JOINTS).effort for _, msg in bag[topics.EFFORT_COMMAND]]
     for got, sent in zip(received, sent_efforts, strict=True):
         assert got.tobytes() == sent.tobytes()
@@ -330,6 +338,8 @@ def test_every_node_and_conversion_type_is_in_the_table():
     expected_types = {
         'sensor_msgs/msg/JointState',
         'nav_msgs/msg/Odometry',
+        'geometry_msgs/msg/PoseStamped',
+        'std_msgs/msg/Float64MultiArray',
         'trajectory_msgs/msg/MultiDOFJointTrajectory',
         'diagnostic_msgs/msg/DiagnosticArray',
         'rosgraph_msgs/msg/Clock',

@@ -52,6 +52,10 @@ class TickStatus(str, Enum):
     since the last safe u*: that u* again, no QP."""
     GRASP_FALLBACK = 'grasp_fallback'
     """A contact's gap or penetration is above tolerance for longer: the fallback, no QP."""
+    INPUT_IGNORED = 'input_ignored'
+    """An input rejected where it answers no tick: before the first tick (no command has
+    been computed yet, so none is sent) or a tracker sample (the ticks go on with the
+    object's estimate). No command."""
 
     @classmethod
     def of(cls, status: FilterStatus) -> TickStatus:
@@ -136,6 +140,8 @@ class Key:
     """Node-clock time since the last accepted tick, s (``inf`` before any)."""
     INPUT_TOPIC = 'input.topic'
     """On a rejected tick: the topic whose message was rejected (or ``state``)."""
+    INPUT_IGNORED = 'input.ignored'
+    """On an ``input_ignored`` status: the inputs rejected without a command so far."""
     INPUT_WATCHDOG = 'input.watchdog'
     """``true`` on the input watchdog's statuses (inputs missing), which answer no tick."""
     INPUT_MISSING = 'input.missing'

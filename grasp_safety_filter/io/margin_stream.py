@@ -28,6 +28,8 @@ from grasp_safety_filter.io.messages import (
     margins_to_msg,
     MessageNamespace,
     seconds_to_nanoseconds,
+    Stamp,
+    stamp_nanoseconds,
 )
 
 #: Longest stamp interval between two margins messages that name their rows, s.
@@ -51,13 +53,13 @@ class MarginEncoder:
     def encode(
         self,
         msgs: MessageNamespace,
-        t: float,
+        t: Stamp,
         names: Sequence[str],
         h: np.ndarray,
         h_dot: np.ndarray | None = None,
     ) -> Any:
-        """Return the margins message of stamp ``t`` (s), with the names if they are due."""
-        stamp = seconds_to_nanoseconds(t)
+        """Return the margins message of stamp ``t`` (ns, or s), with the names if they are due."""
+        stamp = stamp_nanoseconds(t)
         same = names is self._names or (
             self._names is not None and tuple(names) == self._names
         )

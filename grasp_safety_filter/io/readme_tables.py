@@ -11,12 +11,14 @@ import re
 import sys
 
 from grasp_safety_filter.io.schemas import (
+    COMMAND_PARAMETERS,
     GRASP_CHECK_PARAMETERS,
     HAND_SIM_PARAMETERS,
     MODEL_PARAMETERS,
     NOMINAL_CONTROLLER_PARAMETERS,
     parameter_table_markdown,
     SAFETY_FILTER_PARAMETERS,
+    STREAM_PARAMETERS,
 )
 from grasp_safety_filter.io.topics import topic_table_markdown
 
@@ -27,7 +29,11 @@ def parameter_tables() -> str:
         ('Shared by all nodes (`/**`)', MODEL_PARAMETERS),
         ('`hand_sim_node`', HAND_SIM_PARAMETERS),
         ('`nominal_controller_node`', NOMINAL_CONTROLLER_PARAMETERS + GRASP_CHECK_PARAMETERS),
-        ('`safety_filter_node`', SAFETY_FILTER_PARAMETERS),
+        ('`safety_filter_node`', SAFETY_FILTER_PARAMETERS + COMMAND_PARAMETERS),
+        (
+            'Input streams of both controllers (`nominal_controller_node`, `safety_filter_node`)',
+            STREAM_PARAMETERS,
+        ),
     )
     return '\n\n'.join(
         f'### {title}\n\n{parameter_table_markdown(specs).strip()}' for title, specs in sections

@@ -54,11 +54,13 @@ Durability = Literal['volatile', 'transient_local']
 # Topic names, for code that publishes or subscribes one topic.
 JOINT_STATES = '/hand/joint_states'
 OBJECT_ODOM = '/object/odom'
+OBJECT_POSE = '/object/pose'
 CONTACTS = '/hand/contacts'
 OBJECT_REFERENCE = '/object/reference'
 OBJECT_REFERENCE_SAMPLE = '/object/reference_sample'
 EFFORT_NOMINAL = '/hand/effort_nominal'
 EFFORT_COMMAND = '/hand/effort_command'
+EFFORT_CONTROLLER_COMMANDS = '/effort_controller/commands'
 DIAGNOSTICS = '/diagnostics'
 MARGINS = '/safety_filter/margins'
 CLOCK = '/clock'
@@ -66,6 +68,8 @@ SCENARIO = '/grasp/scenario'
 
 # The planner is whatever the user connects to /object/reference.
 PLANNER = 'planner'
+# The object tracker is whatever publishes the object's pose (a camera, motion capture).
+TRACKER = 'tracker'
 
 
 @dataclass(frozen=True)
@@ -182,7 +186,16 @@ TOPICS: tuple[TopicSpec, ...] = (
         'nav_msgs/msg/Odometry',
         (HAND_SIM_NODE,),
         STREAM_QOS,
-        'Object pose in the palm frame; twist in the object frame (REP 105).',
+        'Object pose in the palm frame; twist in the object frame (REP 105). From the '
+        "simulator (lockstep: exact, on every tick) or a tracker (input.sync 'latest').",
+    ),
+    TopicSpec(
+        OBJECT_POSE,
+        'geometry_msgs/msg/PoseStamped',
+        (TRACKER, HAND_SIM_NODE),
+        STREAM_QOS,
+        'Object pose in the palm frame, stamped with its capture time, no twist: a tracker '
+        "read with input.object_message 'pose' (the simulator's hardware mode emulates one).",
     ),
     TopicSpec(
         CONTACTS,
@@ -222,6 +235,15 @@ TOPICS: tuple[TopicSpec, ...] = (
         (SAFETY_FILTER_NODE,),
         STREAM_QOS,
         'Filtered joint torques u* by name, effort only (N·m).',
+    ),
+    TopicSpec(
+        EFFORT_CONTROLLER_COMMANDS,
+        'std_msgs/msg/Float64MultiArray',
+        (SAFETY_FILTER_NODE,),
+        STREAM_QOS,
+        "u* as ros2_control's effort_controllers/JointGroupEffortController takes it on "
+        '<controller>/commands: N·m in command.joints order, unstamped (command.message '
+        "'float64_multi_array'; u* is on /hand/effort_command as well).",
     ),
     TopicSpec(
         DIAGNOSTICS,

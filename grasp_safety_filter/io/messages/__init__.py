@@ -21,11 +21,14 @@ Joints and contacts are matched by name, in any order. Building (``*_to_msg``) c
 shapes and names, not values: a producer that publishes a NaN is caught by its consumer.
 :class:`StampGuard` rejects stale, future and out-of-order stamps.
 
-Times are float seconds on the numpy side and ``builtin_interfaces`` ``(sec, nanosec)``
-in messages; the conversion rounds to the nearest nanosecond, so any time ``ns / 1e9``
-(``ns`` an integer, the time below 2**23 s = 97 days, where a float still resolves
-nanoseconds) round-trips exactly. Rotations round-trip through unit quaternions
-(``x, y, z, w`` order in messages) to within a few ulp, not bit for bit.
+Stamps are ``builtin_interfaces`` ``(sec, nanosec)`` in messages, integer ns in every
+parsed sample (``stamp_ns``, with ``t`` in float s for the model) and in whatever answers
+it: a builder given an ``int`` stamps it exactly (a wall-clock stamp of today needs 61
+bits; a float in s resolves it to about 0.24 us only). A builder given a float time in s
+rounds it to the nearest nanosecond, so any simulation time ``ns / 1e9`` (below 2**23 s
+= 97 days, where a float still resolves nanoseconds) round-trips exactly. Rotations
+round-trip through unit quaternions (``x, y, z, w`` order in messages) to within a few ulp,
+not bit for bit.
 
 One module per message family; this package re-exports their public names.
 """
@@ -47,6 +50,11 @@ from grasp_safety_filter.io.messages.diagnostics import (  # noqa: F401
     diagnostics_to_msg,
     DiagnosticsData,
     format_diagnostic_value,
+)
+from grasp_safety_filter.io.messages.effort_arrays import (  # noqa: F401
+    effort_array_from_msg,
+    effort_array_to_msg,
+    joint_order,
 )
 from grasp_safety_filter.io.messages.errors import (  # noqa: F401
     bounded_text,
@@ -74,11 +82,14 @@ from grasp_safety_filter.io.messages.fields import (  # noqa: F401
     NANOSECONDS_PER_SECOND,
     nanoseconds_to_seconds,
     OBJECT_FRAME,
+    other_names,
     PALM_FRAME,
     quaternion_msg,
     quaternion_xyzw_from_matrix,
     seconds_to_nanoseconds,
     shaped_array,
+    Stamp,
+    stamp_nanoseconds,
     time_from_msg,
     time_msg_to_nanoseconds,
     time_to_msg,
@@ -110,6 +121,8 @@ from grasp_safety_filter.io.messages.odometry import (  # noqa: F401
     ObjectStateData,
     odometry_from_msg,
     odometry_to_msg,
+    pose_stamped_from_msg,
+    pose_stamped_to_msg,
 )
 from grasp_safety_filter.io.messages.reference import (  # noqa: F401
     MAX_REFERENCE_POINTS,

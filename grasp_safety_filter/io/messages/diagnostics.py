@@ -10,7 +10,12 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.io.messages.errors import MessageError
-from grasp_safety_filter.io.messages.fields import checked_names, header_msg, time_from_msg
+from grasp_safety_filter.io.messages.fields import (
+    checked_names,
+    header_msg,
+    Stamp,
+    time_from_msg,
+)
 from grasp_safety_filter.io.messages.namespace import byte_value, MessageNamespace
 
 
@@ -89,7 +94,7 @@ class DiagnosticsData:
 
 
 def diagnostics_to_msg(
-    msgs: MessageNamespace, t: float, reports: DiagnosticReport | Sequence[DiagnosticReport]
+    msgs: MessageNamespace, t: Stamp, reports: DiagnosticReport | Sequence[DiagnosticReport]
 ) -> Any:
     """Build a ``diagnostic_msgs/DiagnosticArray`` of one or more statuses."""
     if isinstance(reports, DiagnosticReport):

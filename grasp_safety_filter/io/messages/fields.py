@@ -71,16 +71,37 @@ def nanoseconds_to_seconds(ns: int) -> float:
     return int(ns) / NANOSECONDS_PER_SECOND
 
 
-def _sec_nanosec(t: float, what: str) -> tuple[int, int]:
-    ns = seconds_to_nanoseconds(t)
+#: A time as the message builders take it: a stamp in integer ns (an ``int``, passed on
+#: exactly: a command answers a state with the state's own stamp) or a time in float s
+#: (simulation time, exact to the ns below 2**23 s; at today's epoch a float in s resolves
+#: only about 0.24 us, so wall-clock stamps travel as ns).
+Stamp = int | float
+
+
+def stamp_nanoseconds(t: Stamp) -> int:
+    """Return a :data:`Stamp` in integer ns: an ``int`` as it is, a float (s) rounded.
+
+    Raises:
+        MessageError: A negative ns, or a time that :func:`seconds_to_nanoseconds` refuses.
+
+    """
+    if isinstance(t, int | np.integer) and not isinstance(t, bool):
+        if t < 0:
+            raise MessageError(f'stamp: expected integer ns >= 0, got {t}')
+        return int(t)
+    return seconds_to_nanoseconds(t)
+
+
+def _sec_nanosec(t: Stamp, what: str) -> tuple[int, int]:
+    ns = stamp_nanoseconds(t)
     sec, nanosec = divmod(ns, NANOSECONDS_PER_SECOND)
     if sec > _INT32_MAX:
         raise MessageError(f'{what}: {t!r} s does not fit builtin_interfaces (int32 seconds)')
     return sec, nanosec
 
 
-def time_to_msg(msgs: MessageNamespace, t: float) -> Any:
-    """Time ``t`` (s, >= 0) as ``builtin_interfaces/Time``."""
+def time_to_msg(msgs: MessageNamespace, t: Stamp) -> Any:
+    """Return ``t`` (a :data:`Stamp`, >= 0) as ``builtin_interfaces/Time``."""
     sec, nanosec = _sec_nanosec(t, 'time')
     return msgs.Time(sec=sec, nanosec=nanosec)
 
@@ -111,8 +132,8 @@ def header_stamp_ns(msg: Any) -> int:
     return time_msg_to_nanoseconds(msg.header.stamp, 'header.stamp')
 
 
-def header_msg(msgs: MessageNamespace, t: float, frame_id: str) -> Any:
-    """Build a ``std_msgs/Header`` stamped ``t`` s in ``frame_id``."""
+def header_msg(msgs: MessageNamespace, t: Stamp, frame_id: str) -> Any:
+    """Build a ``std_msgs/Header`` stamped ``t`` (a :data:`Stamp`) in ``frame_id``."""
     return msgs.Header(stamp=time_to_msg(msgs, t), frame_id=frame_id)
 
 
@@ -157,24 +178,30 @@ def checked_names(source: str, names: Sequence[str], kind: str) -> list[str]:
 
 
 #: Name lists already matched: ``{(received, expected): index}`` (see :func:`match_names`).
-_MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...]], np.ndarray] = {}
+_MATCHED: dict[tuple[tuple[str, ...], tuple[str, ...], bool], np.ndarray] = {}
 #: Most name lists remembered (a stream sends one or two; the cache is emptied when full).
 _MAX_MATCHED = 256
 
 
 def match_names(
-    source: str, received_names: Sequence[str], expected_names: Sequence[str], kind: str
+    source: str,
+    received_names: Sequence[str],
+    expected_names: Sequence[str],
+    kind: str,
+    *,
+    others: bool = False,
 ) -> np.ndarray:
     """Index of each expected name in the received names (any order, each exactly once).
 
-    Every stream sends the same names again and again: a pair of name lists that matched
-    once gives the same (read-only) index without checking again; one that did not is
-    checked, and refused, every time.
+    ``others``: received names that are not expected are ignored (else refused). Every
+    stream sends the same names again and again: a pair of name lists that matched once
+    gives the same (read-only) index without checking again; one that did not is checked,
+    and refused, every time.
     """
-    key = (tuple(map(str, received_names)), tuple(expected_names))
+    key = (tuple(map(str, received_names)), tuple(expected_names), others)
     index = _MATCHED.get(key)
     if index is None:
-        index = _match_names(source, list(key[0]), expected_names, kind)
+        index = _match_names(source, list(key[0]), expected_names, kind, others)
         index.flags.writeable = False
         if len(_MATCHED) >= _MAX_MATCHED:
             _MATCHED.clear()
@@ -182,15 +209,24 @@ def match_names(
     return index
 
 
+def other_names(received_names: Sequence[str], expected_names: Sequence[str]) -> list[str]:
+    """Return the received names that are not expected, in received order."""
+    expected = set(expected_names)
+    return [str(name) for name in received_names if name not in expected]
+
+
 def _match_names(
-    source: str, received_names: Sequence[str], expected_names: Sequence[str], kind: str
+    source: str,
+    received_names: Sequence[str],
+    expected_names: Sequence[str],
+    kind: str,
+    others: bool = False,
 ) -> np.ndarray:
     """:func:`match_names` without the memory of name lists already matched."""
     received = checked_names(source, received_names, kind)
     index = {name: i for i, name in enumerate(received)}
-    expected = set(expected_names)
-    unknown = [n for n in received if n not in expected]
-    if unknown:
+    unknown = other_names(received, expected_names)
+    if unknown and not others:
         raise MessageError(
             f'{source}: {len(unknown)} unknown {kind} names {name_list(unknown)}; expected '
             f'{list(expected_names)}'
@@ -368,8 +404,8 @@ def twist_from_msg(source: str, what: str, msg: Any) -> np.ndarray:
 # Clock
 
 
-def clock_to_msg(msgs: MessageNamespace, t: float) -> Any:
-    """Build a ``rosgraph_msgs/Clock`` at ``t`` s."""
+def clock_to_msg(msgs: MessageNamespace, t: Stamp) -> Any:
+    """Build a ``rosgraph_msgs/Clock`` at ``t`` (a :data:`Stamp`)."""
     return msgs.Clock(clock=time_to_msg(msgs, t))
 
 

@@ -13,7 +13,9 @@ from grasp_safety_filter.io.messages.fields import (
     array_field,
     header_msg,
     match_names,
-    time_from_msg,
+    nanoseconds_to_seconds,
+    Stamp,
+    time_msg_to_nanoseconds,
     unique_names,
 )
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
@@ -25,6 +27,7 @@ class JointStateData:
 
     Attributes:
         t: Header stamp, s.
+        stamp_ns: Header stamp, integer ns (exact: what an answer to it is stamped with).
         position: Joint angles, shape (m,), rad.
         velocity: Joint velocities, shape (m,), rad/s.
         effort: Applied joint torques, shape (m,), N·m; None when the message has none
@@ -33,6 +36,7 @@ class JointStateData:
     """
 
     t: float
+    stamp_ns: int
     position: np.ndarray
     velocity: np.ndarray
     effort: np.ndarray | None
@@ -44,11 +48,13 @@ class EffortData:
 
     Attributes:
         t: Header stamp, s.
+        stamp_ns: Header stamp, integer ns.
         effort: Joint torques, shape (m,), N·m.
 
     """
 
     t: float
+    stamp_ns: int
     effort: np.ndarray
 
 
@@ -58,7 +64,7 @@ _FIELDS = ('position', 'velocity', 'effort')
 
 def joint_state_to_msg(
     msgs: MessageNamespace,
-    t: float,
+    t: Stamp,
     names: Sequence[str],
     position: np.ndarray | None,
     velocity: np.ndarray | None,
@@ -69,7 +75,7 @@ def joint_state_to_msg(
 
     Args:
         msgs: Message classes.
-        t: Stamp, s.
+        t: Stamp: integer ns, or s (:data:`~grasp_safety_filter.io.messages.fields.Stamp`).
         names: Joint names, one per array entry.
         position: Joint angles, rad.
         velocity: Joint velocities, rad/s.
@@ -101,7 +107,7 @@ def _sized_field(msgs: MessageNamespace, field_name: str, values: Any, n_names: 
 
 
 def joint_state_from_msg(
-    msg: Any, joint_names: Sequence[str], source: str = 'JointState'
+    msg: Any, joint_names: Sequence[str], source: str = 'JointState', others: bool = False
 ) -> JointStateData:
     """Parse a JointState carrying position and velocity (effort optional) of ``joint_names``.
 
@@ -109,24 +115,31 @@ def joint_state_from_msg(
         msg: A ``sensor_msgs/JointState``.
         joint_names: Expected joints; the result follows this order.
         source: Name used in error messages (e.g. the topic).
+        others: Joints not in ``joint_names`` are ignored (a ``joint_state_broadcaster``'s
+            ``/joint_states`` carries every joint of the robot, an arm's too); their values
+            are still checked, as the message's own. False: they are refused.
 
     Raises:
-        MessageError: Duplicate, unknown or missing names; a field whose length is not the
-            number of names; a non-finite value.
+        MessageError: Duplicate, unknown (unless ``others``) or missing names; a field whose
+            length is not the number of names; a non-finite value.
 
     """
-    order = match_names(source, msg.name, joint_names, 'joint')
+    order = match_names(source, msg.name, joint_names, 'joint', others=others)
     names = list(msg.name)
     arrays = {
         f: array_field(source, getattr(msg, f), f, names, required=f != 'effort')
         for f in ('position', 'velocity', 'effort')
     }
-    t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
-    return JointStateData(t=t, **{f: None if a is None else a[order] for f, a in arrays.items()})
+    stamp_ns = time_msg_to_nanoseconds(msg.header.stamp, f'{source}: header.stamp')
+    return JointStateData(
+        t=nanoseconds_to_seconds(stamp_ns),
+        stamp_ns=stamp_ns,
+        **{f: None if a is None else a[order] for f, a in arrays.items()},
+    )
 
 
 def effort_to_msg(
-    msgs: MessageNamespace, t: float, names: Sequence[str], effort: np.ndarray
+    msgs: MessageNamespace, t: Stamp, names: Sequence[str], effort: np.ndarray
 ) -> Any:
     """Build a JointState with names and efforts (N·m) only: position and velocity empty."""
     return joint_state_to_msg(msgs, t, names, None, None, effort)
@@ -149,5 +162,5 @@ def effort_from_msg(
     effort = array_field(source, msg.effort, 'effort', names, required=True)
     for f in ('position', 'velocity'):
         array_field(source, getattr(msg, f), f, names, required=False)
-    t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
-    return EffortData(t=t, effort=effort[order])
+    stamp_ns = time_msg_to_nanoseconds(msg.header.stamp, f'{source}: header.stamp')
+    return EffortData(t=nanoseconds_to_seconds(stamp_ns), stamp_ns=stamp_ns, effort=effort[order])

@@ -14,6 +14,7 @@ from grasp_safety_filter.io.messages.fields import (
     checked_names,
     header_msg,
     match_names,
+    Stamp,
     time_from_msg,
 )
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
@@ -39,7 +40,7 @@ class MarginData:
 
 def margins_to_msg(
     msgs: MessageNamespace,
-    t: float,
+    t: Stamp,
     names: Sequence[str],
     h: np.ndarray,
     h_dot: np.ndarray | None = None,

@@ -22,6 +22,9 @@ MESSAGE_TYPES: dict[str, str] = {
     'TwistWithCovariance': 'geometry_msgs/msg/TwistWithCovariance',
     'JointState': 'sensor_msgs/msg/JointState',
     'Odometry': 'nav_msgs/msg/Odometry',
+    'PoseStamped': 'geometry_msgs/msg/PoseStamped',
+    'Float64MultiArray': 'std_msgs/msg/Float64MultiArray',
+    'MultiArrayLayout': 'std_msgs/msg/MultiArrayLayout',
     'MultiDOFJointTrajectory': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
     'MultiDOFJointTrajectoryPoint': 'trajectory_msgs/msg/MultiDOFJointTrajectoryPoint',
     'DiagnosticArray': 'diagnostic_msgs/msg/DiagnosticArray',
@@ -40,7 +43,8 @@ class MessageNamespace:
 
     Attributes:
         Time, Duration, Header, Point, Quaternion, Vector3, Pose, Twist, Transform,
-        PoseWithCovariance, TwistWithCovariance, JointState, Odometry,
+        PoseWithCovariance, TwistWithCovariance, JointState, Odometry, PoseStamped,
+        Float64MultiArray, MultiArrayLayout,
         MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint, DiagnosticArray,
         DiagnosticStatus, KeyValue, Clock, String: The message classes.
         sequences_as_lists: Float arrays are Python lists (rclpy), else float64 numpy
@@ -62,6 +66,9 @@ class MessageNamespace:
     TwistWithCovariance: Any
     JointState: Any
     Odometry: Any
+    PoseStamped: Any
+    Float64MultiArray: Any
+    MultiArrayLayout: Any
     MultiDOFJointTrajectory: Any
     MultiDOFJointTrajectoryPoint: Any
     DiagnosticArray: Any

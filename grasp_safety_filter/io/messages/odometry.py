@@ -1,4 +1,8 @@
-"""``nav_msgs/Odometry``: the object's pose and twist in the palm frame."""
+"""The object's pose and twist in the palm frame: ``Odometry``, or ``PoseStamped`` (no twist).
+
+The simulator publishes ``nav_msgs/Odometry`` (pose and twist); an object tracker often
+publishes a ``geometry_msgs/PoseStamped`` (pose only), stamped with its capture time.
+"""
 
 from __future__ import annotations
 
@@ -12,11 +16,13 @@ from grasp_safety_filter.io.messages.fields import (
     finite_vector,
     header_msg,
     matrix_from_quaternion_xyzw,
+    nanoseconds_to_seconds,
     OBJECT_FRAME,
     PALM_FRAME,
     quaternion_msg,
     shaped_array,
-    time_from_msg,
+    Stamp,
+    time_msg_to_nanoseconds,
     twist_from_msg,
     twist_msg,
     unit_quaternion,
@@ -34,21 +40,24 @@ class ObjectStateData:
 
     Attributes:
         t: Header stamp, s.
+        stamp_ns: Header stamp, integer ns.
         p_object_in_palm: Object centre of mass, shape (3,), m.
         R_object_to_palm: Object orientation, shape (3, 3).
-        twist_object: ``(v_o, w_o)`` in palm coordinates, shape (6,), (m/s, rad/s).
+        twist_object: ``(v_o, w_o)`` in palm coordinates, shape (6,), (m/s, rad/s); None
+            from a ``PoseStamped``, which has no twist.
 
     """
 
     t: float
+    stamp_ns: int
     p_object_in_palm: np.ndarray
     R_object_to_palm: np.ndarray
-    twist_object: np.ndarray
+    twist_object: np.ndarray | None
 
 
 def odometry_to_msg(
     msgs: MessageNamespace,
-    t: float,
+    t: Stamp,
     p_object_in_palm: np.ndarray,
     R_object_to_palm: np.ndarray,
     twist_object: np.ndarray,
@@ -65,7 +74,7 @@ def odometry_to_msg(
 
     Args:
         msgs: Message classes.
-        t: Stamp, s.
+        t: Stamp: integer ns, or s.
         p_object_in_palm: Shape (3,), m.
         R_object_to_palm: Shape (3, 3), a rotation.
         twist_object: ``(v_o, w_o)`` in palm coordinates, shape (6,).
@@ -114,5 +123,51 @@ def odometry_from_msg(
     R = matrix_from_quaternion_xyzw(unit_quaternion(source, 'pose.orientation', pose.orientation))
     twist_in_object = twist_from_msg(source, 'twist', msg.twist.twist)
     twist = np.concatenate((R @ twist_in_object[:3], R @ twist_in_object[3:]))
-    t = time_from_msg(msg.header.stamp, f'{source}: header.stamp')
-    return ObjectStateData(t=t, p_object_in_palm=p, R_object_to_palm=R, twist_object=twist)
+    return _object_state(msg, source, p, R, twist)
+
+
+def pose_stamped_to_msg(
+    msgs: MessageNamespace,
+    t: Stamp,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    frame_id: str = PALM_FRAME,
+) -> Any:
+    """Build the object's ``geometry_msgs/PoseStamped``: its pose in the frame ``frame_id``."""
+    p = shaped_array('p_object_in_palm', p_object_in_palm, (3,))
+    R = shaped_array('R_object_to_palm', R_object_to_palm, (3, 3))
+    x, y, z = p.tolist()
+    return msgs.PoseStamped(
+        header=header_msg(msgs, t, frame_id),
+        pose=msgs.Pose(position=msgs.Point(x=x, y=y, z=z), orientation=quaternion_msg(msgs, R)),
+    )
+
+
+def pose_stamped_from_msg(
+    msg: Any, frame_id: str = PALM_FRAME, source: str = 'PoseStamped'
+) -> ObjectStateData:
+    """Parse an object ``PoseStamped`` (palm frame ``frame_id``); its twist is None.
+
+    Raises:
+        MessageError: Another frame, non-finite values, or a quaternion whose norm differs
+            from 1 by more than 1e-6.
+
+    """
+    check_frame(source, 'header.frame_id', msg.header.frame_id, frame_id)
+    pose = msg.pose
+    p = finite_vector(source, 'pose.position', (pose.position.x, pose.position.y, pose.position.z))
+    R = matrix_from_quaternion_xyzw(unit_quaternion(source, 'pose.orientation', pose.orientation))
+    return _object_state(msg, source, p, R, None)
+
+
+def _object_state(
+    msg: Any, source: str, p: np.ndarray, R: np.ndarray, twist: np.ndarray | None
+) -> ObjectStateData:
+    stamp_ns = time_msg_to_nanoseconds(msg.header.stamp, f'{source}: header.stamp')
+    return ObjectStateData(
+        t=nanoseconds_to_seconds(stamp_ns),
+        stamp_ns=stamp_ns,
+        p_object_in_palm=p,
+        R_object_to_palm=R,
+        twist_object=twist,
+    )

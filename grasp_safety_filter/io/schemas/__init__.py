@@ -14,8 +14,11 @@ reason for every value the paper does not give). Checks that need only parameter
 (e.g. ``a_min < a_max``) live here; checks against the URDF and the object geometry belong
 to the model.
 
+``STREAM_PARAMETERS`` (:mod:`.inputs`: how the inputs make a tick) belong to both
+controllers, ``COMMAND_PARAMETERS`` to the safety filter.
+
 Modules: :mod:`.common`, :mod:`.model`, :mod:`.hand_sim`, :mod:`.nominal`,
-:mod:`.safety_filter`, :mod:`.nodes` (schemas, cross-parameter checks, loading) and
+:mod:`.safety_filter`, :mod:`.inputs`, :mod:`.nodes` (schemas, cross-parameter checks, loading) and
 :mod:`.docs` (README tables); this package re-exports their public names.
 """
 
@@ -47,6 +50,22 @@ from grasp_safety_filter.io.schemas.docs import (  # noqa: F401
 )
 from grasp_safety_filter.io.schemas.hand_sim import (  # noqa: F401
     HAND_SIM_PARAMETERS,
+)
+from grasp_safety_filter.io.schemas.inputs import (  # noqa: F401
+    check_command_parameters,
+    check_stream_parameters,
+    COMMAND_MESSAGES,
+    COMMAND_PARAMETERS,
+    EXACT_SYNC,
+    FLOAT64_MULTI_ARRAY_COMMAND,
+    JOINT_STATE_COMMAND,
+    LATEST_SYNC,
+    MODEL_JOINT_ORDER,
+    OBJECT_MESSAGES,
+    ODOMETRY_MESSAGE,
+    POSE_MESSAGE,
+    STREAM_PARAMETERS,
+    SYNC_POLICIES,
 )
 from grasp_safety_filter.io.schemas.model import (  # noqa: F401
     MODEL_PARAMETERS,

@@ -17,6 +17,12 @@ from grasp_safety_filter.io.parameters import (
     validate_parameters,
 )
 from grasp_safety_filter.io.schemas.hand_sim import HAND_SIM_PARAMETERS
+from grasp_safety_filter.io.schemas.inputs import (
+    check_command_parameters,
+    check_stream_parameters,
+    COMMAND_PARAMETERS,
+    STREAM_PARAMETERS,
+)
 from grasp_safety_filter.io.schemas.model import MODEL_PARAMETERS
 from grasp_safety_filter.io.schemas.nominal import (
     GRASP_CHECK_PARAMETERS,
@@ -35,9 +41,14 @@ NODE_SCHEMAS: dict[str, NodeSchema] = {
         MODEL_PARAMETERS,
         NOMINAL_CONTROLLER_PARAMETERS,
         GRASP_CHECK_PARAMETERS,
+        STREAM_PARAMETERS,
     ),
     SAFETY_FILTER_NODE: NodeSchema.from_sections(
-        SAFETY_FILTER_NODE, MODEL_PARAMETERS, SAFETY_FILTER_PARAMETERS
+        SAFETY_FILTER_NODE,
+        MODEL_PARAMETERS,
+        SAFETY_FILTER_PARAMETERS,
+        STREAM_PARAMETERS,
+        COMMAND_PARAMETERS,
     ),
 }
 
@@ -139,8 +150,12 @@ def check_hand_sim_parameters(values: Mapping[str, Any], source: str = 'paramete
 
 _NODE_CHECKS: dict[str, tuple[Callable[[Mapping[str, Any], str], None], ...]] = {
     HAND_SIM_NODE: (check_model_parameters, check_hand_sim_parameters),
-    NOMINAL_CONTROLLER_NODE: (check_model_parameters,),
-    SAFETY_FILTER_NODE: (check_model_parameters,),
+    NOMINAL_CONTROLLER_NODE: (check_model_parameters, check_stream_parameters),
+    SAFETY_FILTER_NODE: (
+        check_model_parameters,
+        check_stream_parameters,
+        check_command_parameters,
+    ),
 }
 
 
