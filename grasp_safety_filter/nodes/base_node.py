@@ -22,6 +22,7 @@ This module and the ``*_node.py`` modules are the only ones that import rclpy.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
+import dataclasses
 from pathlib import Path
 import signal
 import sys
@@ -159,17 +160,32 @@ class EndpointNode(Node):
         """The package's ``config/`` directory, base of relative paths left at their default."""
         return share_directory() / 'config'
 
-    def subscribe(self, topic: str, callback: Callable[[Any], None]) -> Any:
+    def subscribe(
+        self, topic: str, callback: Callable[[Any], None], *, sensor: bool = False
+    ) -> Any:
         """Subscribe to a topic of the table with its type and QoS.
+
+        ``sensor``: best effort instead of the table's reliability (same depth), as a
+        subscription to a hand driver's or a tracker's stream should be: it matches reliable
+        and best-effort publishers alike (many trackers publish best effort, as rclcpp's
+        ``SensorDataQoS``), where a reliable one matches reliable publishers only.
 
         The callback is wrapped by :func:`guarded_callback`: an exception it raises is
         logged (ERROR, throttled) and reported on ``/diagnostics`` (when this node
         publishes them) instead of ending ``rclpy.spin``.
         """
         spec = topic_spec(topic)
+        qos = dataclasses.replace(spec.qos, reliability='best_effort') if sensor else spec.qos
         guarded = guarded_callback(topic, callback, self._report_callback_error, self.context.ok)
         return self.create_subscription(
-            rclpy_message_class(spec.msgtype), topic, guarded, spec.qos.to_rclpy()
+            rclpy_message_class(spec.msgtype), topic, guarded, qos.to_rclpy()
+        )
+
+    def add_publisher(self, topic: str) -> None:
+        """Publish ``topic`` too (its type and QoS from the table), once the node knows it must."""
+        spec = topic_spec(topic)
+        self._publishers_by_topic[topic] = self.create_publisher(
+            rclpy_message_class(spec.msgtype), spec.name, spec.qos.to_rclpy()
         )
 
     def _report_callback_error(self, topic: str, error: Exception) -> None:

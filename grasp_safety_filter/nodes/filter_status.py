@@ -38,6 +38,7 @@ from grasp_safety_filter.io.messages import (
     DiagnosticReport,
     diagnostics_to_msg,
     MessageNamespace,
+    Stamp,
 )
 from grasp_safety_filter.io.topics import DIAGNOSTICS
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
@@ -54,13 +55,13 @@ _STATUS_TEXT: dict[TickStatus, str] = {
 
 def status_message(
     msgs: MessageNamespace,
-    t: float,
+    t: Stamp,
     enabled: bool,
     level: DiagnosticLevel,
     text: str,
     values: Mapping[str, Any],
 ) -> Outgoing:
-    """Return the ``safety_filter`` status stamped ``t``, s: ``filter.enabled``, ``values``."""
+    """Return the ``safety_filter`` status stamped ``t`` (ns, or s): enabled, ``values``."""
     report = DiagnosticReport.create(
         FILTER_DIAGNOSTIC, level, text, {Key.FILTER_ENABLED: enabled, **values}
     )

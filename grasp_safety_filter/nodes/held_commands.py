@@ -28,17 +28,20 @@ from grasp_safety_filter.io.diagnostic_keys import (
 from grasp_safety_filter.io.messages import (
     bounded_text,
     DiagnosticLevel,
-    effort_to_msg,
     MessageNamespace,
+    Stamp,
 )
-from grasp_safety_filter.io.topics import EFFORT_COMMAND
+from grasp_safety_filter.nodes.command_output import CommandOutput
 from grasp_safety_filter.nodes.grasp_watch import findings_text, GraspWatch
 from grasp_safety_filter.nodes.input_watchdog import Silence
-from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRate
 
-#: Builds the ``safety_filter`` status: stamp (s), level, summary, values.
-StatusBuilder = Callable[[float, DiagnosticLevel, str, dict[str, Any]], Outgoing]
+#: Least stamp interval between two reports of ignored input, ns.
+IGNORED_REPORT_PERIOD_NS = 1_000_000_000
+
+#: Builds the ``safety_filter`` status: stamp (integer ns, or s), level, summary, values.
+StatusBuilder = Callable[[Stamp, DiagnosticLevel, str, dict[str, Any]], Outgoing]
 
 
 class HeldCommands:
@@ -48,12 +51,14 @@ class HeldCommands:
         model: The ``GraspModel`` (joint names, ``hand.terms`` for ``g(q)``).
         hold: The hold policy.
         msgs: Message classes to build.
+        command: Builds the command messages.
         rate: The publication rate (counts every status).
         status: Builds the ``safety_filter`` status.
 
     Attributes:
         last_positions: The joint positions of the last answered tick, rad (None before):
             the gravity fallback's q.
+        ignored_count: Inputs rejected without a command (:meth:`ignored`) so far.
 
     """
 
@@ -62,15 +67,20 @@ class HeldCommands:
         model: Any,
         hold: HoldPolicy,
         msgs: MessageNamespace,
+        command: CommandOutput,
         rate: PublicationRate,
         status: StatusBuilder,
     ) -> None:
         self.model = model
         self.hold = hold
         self.msgs = msgs
+        self.command = command
         self.rate = rate
         self.status = status
         self.last_positions: np.ndarray | None = None
+        self.ignored_count = 0
+        self._ignored_since: dict[str, int] = {}
+        self._ignored_reported_ns: dict[str, int] = {}
         self._joint_names = list(model.joint_names)
 
     def gravity(self) -> tuple[np.ndarray | None, str]:
@@ -93,13 +103,35 @@ class HeldCommands:
             return 'holding the last safe command'
         return f'fallback command: {self.hold.fallback.value}{note}'
 
-    def _command(self, t: float, u: np.ndarray) -> Outgoing:
-        return stamped(EFFORT_COMMAND, effort_to_msg(self.msgs, t, self._joint_names, u))
+    def ignored(self, topic: str, error: Exception, stamp: int) -> list[Outgoing]:
+        """Report an input rejected where no command answers it (WARN), at most once a second.
 
-    def rejected(
-        self, topic: str, error: Exception, stamp: int, t: float, now: float
-    ) -> list[Outgoing]:
-        """Answer a rejected input of ``topic`` at ``stamp`` (ns; ``t`` in s)."""
+        Before the filter's first tick (a driver that holds its position until commanded must
+        not get a torque from a filter that has not computed one yet) and for a tracker
+        sample (the ticks go on with the object's estimate). A stream rejected at the
+        driver's rate is reported once per :data:`IGNORED_REPORT_PERIOD_NS` of stamps per
+        topic, with the count since the last report.
+        """
+        self.ignored_count += 1
+        self._ignored_since[topic] = self._ignored_since.get(topic, 0) + 1
+        last = self._ignored_reported_ns.get(topic)
+        if last is not None and 0 <= stamp - last < IGNORED_REPORT_PERIOD_NS:
+            return []
+        self._ignored_reported_ns[topic] = stamp
+        values: dict[str, Any] = {
+            Key.STATUS: TickStatus.INPUT_IGNORED.value,
+            Key.INPUT_TOPIC: topic,
+            Key.INPUT_IGNORED: self.ignored_count,
+        }
+        text = bounded_text(
+            f'input rejected, no command sent ({self._ignored_since[topic]} on {topic} since '
+            f'the last report): {error}'
+        )
+        self._ignored_since[topic] = 0
+        return [self.status(stamp, DiagnosticLevel.WARN, text, values)]
+
+    def rejected(self, topic: str, error: Exception, stamp: int, now: float) -> list[Outgoing]:
+        """Answer a rejected input of ``topic`` at ``stamp`` (integer ns): held or fallback."""
         gravity, note = self.gravity()
         u = self.hold.reject(now, f'{topic}: {error}', gravity)
         status = INPUT_MODE_STATUS[self.hold.mode]
@@ -108,9 +140,12 @@ class HeldCommands:
         values.update(self.hold.diagnostic_values(now))
         values.update(self.rate.counter_values())
         text = bounded_text(f'input rejected, {self._action(note)}: {error}')
-        return [self._command(t, u), self.status(t, self.hold.diagnostic_level, text, values)]
+        return [
+            *self.command.messages(stamp, u),
+            self.status(stamp, self.hold.diagnostic_level, text, values),
+        ]
 
-    def grasp_lost(self, grasp: GraspWatch, stamp: int, t: float, now: float) -> list[Outgoing]:
+    def grasp_lost(self, grasp: GraspWatch, stamp: int, now: float) -> list[Outgoing]:
         """Answer a state that is not a grasp: always ERROR, naming each finding.
 
         Before any valid grasp the policy has no safe command: the fallback
@@ -131,10 +166,15 @@ class HeldCommands:
         values.update(self.hold.diagnostic_values(now))
         values.update(self.rate.counter_values())
         text = bounded_text(f'{what}, {self._action(note)}: {findings}')
-        return [self._command(t, u), self.status(t, DiagnosticLevel.ERROR, text, values)]
+        return [
+            *self.command.messages(stamp, u),
+            self.status(stamp, DiagnosticLevel.ERROR, text, values),
+        ]
 
-    def absent(self, silence: Silence, last_tick: float, t: float, now: float) -> list[Outgoing]:
-        """Answer for the input watchdog: the fallback (at ``t``, s) and an ERROR naming why."""
+    def absent(
+        self, silence: Silence, last_tick: float, stamp: int, now: float
+    ) -> list[Outgoing]:
+        """Answer for the input watchdog: the fallback (at ``stamp``, ns) and an ERROR."""
         reason = (
             f'no tick accepted for {silence.elapsed:.3f} s of wall-clock time (last at t = '
             f'{last_tick:.6f} s): {silence.describe()}'
@@ -150,15 +190,13 @@ class HeldCommands:
         values.update({silent_for(topic): age for topic, age in silence.silent.items()})
         values.update(self.hold.diagnostic_values(now))
         text = f'inputs missing, fallback command: {self.hold.fallback.value}{note}: {reason}'
-        return [self._command(t, u), self.status(t, self.hold.diagnostic_level, text, values)]
+        return [
+            *self.command.messages(stamp, u),
+            self.status(stamp, self.hold.diagnostic_level, text, values),
+        ]
 
-    def waiting(self, waited: float, missing: list[str], now: float) -> Outgoing:
-        """Return the watchdog's WARN before any tick (no command): how long, for which inputs."""
-        what = (
-            f'nothing on {", ".join(missing)}'
-            if missing
-            else 'inputs arrive, but no complete valid set of one stamp'
-        )
+    def waiting(self, waited: float, missing: list[str], what: str, now: float) -> Outgoing:
+        """Return the watchdog's WARN before any tick (no command): how long, for what."""
         return self.status(
             max(now, 0.0),
             DiagnosticLevel.WARN,

@@ -16,12 +16,34 @@ long; the first tick answered afterwards says how long the inputs were missing.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 import math
 
 #: Wall-clock period of the watchdog's "waiting for a first tick" status before any tick, s.
 WAITING_REPORT_PERIOD = 1.0
+
+
+#: What a watchdog says when every input arrives but no tick comes of them.
+NO_TICK = 'inputs arrive, but no complete valid set of one stamp'
+
+
+def _hint(hints: Mapping[str, str], topic: str) -> str:
+    hint = hints.get(topic)
+    return f' ({hint})' if hint else ''
+
+
+def describe_missing(
+    missing: Sequence[str], silent: Mapping[str, float] | None, hints: Mapping[str, str]
+) -> str:
+    """Say which inputs are silent (for how long, when known), with their hints."""
+    if not missing:
+        return NO_TICK
+    if silent is None:
+        return 'nothing on ' + ', '.join(f'{topic}{_hint(hints, topic)}' for topic in missing)
+    return ', '.join(
+        f'nothing on {topic} for {silent[topic]:.3f} s{_hint(hints, topic)}' for topic in missing
+    )
 
 
 @dataclass(frozen=True)
@@ -30,34 +52,42 @@ class Silence:
 
     Attributes:
         elapsed: Wall-clock time since the last answered tick, s.
-        missing: The topics with no message since that tick.
+        missing: The topics (as the node named them) with no message since that tick.
         silent: Per topic, wall-clock time since its last message, s (``inf``: never).
+        hints: Per topic, why it may be silent.
 
     """
 
     elapsed: float
     missing: list[str]
     silent: dict[str, float]
+    hints: Mapping[str, str] = field(default_factory=dict)
 
     def describe(self) -> str:
-        """Which inputs are silent, and for how long."""
-        if self.missing:
-            return ', '.join(
-                f'nothing on {topic} for {self.silent[topic]:.3f} s' for topic in self.missing
-            )
-        return 'inputs arrive, but no complete valid set of one stamp'
+        """Which inputs are silent, and for how long (and why they may be)."""
+        return describe_missing(self.missing, self.silent, self.hints)
 
 
 class InputWatchdog:
     """Wall-clock bookkeeping of the inputs and ticks (module docstring).
 
     Args:
-        topics: The input topics a tick needs.
+        topics: The input topics a tick needs (table names).
+        names: Their names as the node resolved them (remapped), by table name, for the
+            reports; default: the table names.
+        hints: Per table name, why that input may be missing (said with it).
 
     """
 
-    def __init__(self, topics: Sequence[str]) -> None:
+    def __init__(
+        self,
+        topics: Sequence[str],
+        names: Mapping[str, str] | None = None,
+        hints: Mapping[str, str] | None = None,
+    ) -> None:
         self.topics = tuple(topics)
+        self.names = {topic: topic for topic in self.topics} | dict(names or {})
+        self.hints = {self.names[topic]: hint for topic, hint in (hints or {}).items()}
         self._received: dict[str, float] = {}
         self._accepted: float | None = None
         self._since: float | None = None
@@ -70,7 +100,7 @@ class InputWatchdog:
         return self._accepted is not None
 
     def received(self, topic: str, wall: float) -> None:
-        """Record a message on ``topic`` at ``wall``, s."""
+        """Record a message on ``topic`` (table name) at ``wall``, s."""
         self._received[topic] = wall
 
     def accepted(self, wall: float) -> float | None:
@@ -108,21 +138,24 @@ class InputWatchdog:
         if elapsed <= hold_timeout:
             return None
         missing = [
-            topic
+            self.names[topic]
             for topic in self.topics
             if self._received.get(topic, -math.inf) <= self._accepted
         ]
-        silent = {topic: now_wall - self._received.get(topic, -math.inf) for topic in self.topics}
+        silent = {
+            self.names[topic]: now_wall - self._received.get(topic, -math.inf)
+            for topic in self.topics
+        }
         if self._since is None:
             self._since = now_wall
-        return Silence(elapsed, missing, silent)
+        return Silence(elapsed, missing, silent, self.hints)
 
     def waiting(self, now_wall: float) -> tuple[float, list[str]] | None:
         """Before any tick: every :data:`WAITING_REPORT_PERIOD` s, how long and for what.
 
         Returns:
-            The wall-clock wait so far, s, and the topics not received yet; None when no
-            report is due (the first call only starts the wait).
+            The wall-clock wait so far, s, and the topics (as the node named them) not
+            received yet; None when no report is due (the first call only starts the wait).
 
         """
         if self._waiting_since is None:
@@ -131,5 +164,9 @@ class InputWatchdog:
         if now_wall - self._waiting_reported < WAITING_REPORT_PERIOD:
             return None
         self._waiting_reported = now_wall
-        missing = [topic for topic in self.topics if topic not in self._received]
+        missing = [self.names[topic] for topic in self.topics if topic not in self._received]
         return now_wall - self._waiting_since, missing
+
+    def describe_waiting(self, missing: Sequence[str]) -> str:
+        """Say what a first tick still waits for (:meth:`waiting`'s topics), with hints."""
+        return describe_missing(missing, None, self.hints)

@@ -1,13 +1,19 @@
 """The nominal controller's message-level endpoint: state in, ``/hand/effort_nominal`` out.
 
 Pure Python, shared by the rclpy node (:mod:`grasp_safety_filter.nodes.nominal_controller_node`)
-and the ROS-free runner. A tick runs when a joint state and an object odometry with the
-same stamp t are in hand::
+and the ROS-free runner. With ``input.sync: exact`` (the lockstep simulator) a tick runs when
+a joint state and an object odometry with the same stamp t are in hand::
 
     /hand/joint_states (t) + /object/odom (t)
         ──▶ GraspModel.state ──▶ reference sample r(t) ──▶ NominalController.compute
         ──▶ /hand/effort_nominal stamped t (u_nom by joint name, N·m)
         ──▶ /object/reference_sample stamped t (the r(t) it tracked, nav_msgs/Odometry)
+
+With ``input.sync: latest`` (a real hand's driver and tracker) each joint state is a tick;
+the object's state is the estimate at its stamp
+(:class:`~grasp_safety_filter.nodes.object_stream.ObjectStream`), and u_nom is stamped as the
+joint state (the safety filter pairs them by stamp). Joints the model does not have are
+ignored in joint states.
 
 The reference is the paper's ``r(t)`` around the first object pose received
 (``reference.source: paper``), or the planner's ``/object/reference``
@@ -34,13 +40,16 @@ object frame, as ``/object/odom``), so a bag holds the object's pose and its ref
 same stamps (the analysis reports the tracking error). Gravity-compensation ticks before a
 valid grasp track nothing and publish none.
 
-An input that does not parse (non-finite values, wrong lengths, unknown or missing joint
-names, a non-unit quaternion, a wrong frame) yields a WARN status naming the problem and no
-command: the safety filter then holds its last safe command.
+An input that does not parse (non-finite values, wrong lengths, missing joint names, a
+non-unit quaternion, a wrong frame), or a joint state with no current object estimate,
+yields a WARN status naming the problem (at most one a second, with the count since the
+last) and no command: the safety filter then holds its last safe command. Before its first
+tick, :meth:`NominalControllerEndpoint.watchdog` says every second what it waits for.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 import math
 from typing import Any
 
@@ -64,13 +73,13 @@ from grasp_safety_filter.io.messages import (
     JointStateData,
     MessageError,
     MessageNamespace,
-    nanoseconds_to_seconds,
     ObjectStateData,
     odometry_from_msg,
     odometry_to_msg,
     reference_from_msg,
     ReferenceTrajectory,
     seconds_to_nanoseconds,
+    Stamp,
 )
 from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
@@ -87,6 +96,8 @@ from grasp_safety_filter.nodes.grasp_watch import (
     GraspWatch,
     LogLine,
 )
+from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
+from grasp_safety_filter.nodes.object_stream import EXACT, ObjectStream, StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
 
@@ -95,6 +106,12 @@ DIAGNOSTIC_NAME = NOMINAL_DIAGNOSTIC
 
 #: Unpaired inputs kept waiting for their partner (older ones are dropped).
 MAX_PENDING = 64
+
+#: Least interval between two reports of rejected input, s (node clock).
+REJECTION_REPORT_PERIOD = 1.0
+
+#: The inputs of a tick.
+INPUTS = (JOINT_STATES, OBJECT_ODOM)
 
 
 class NominalControllerEndpoint:
@@ -107,12 +124,17 @@ class NominalControllerEndpoint:
         grasp_check_config: ``grasp_check.gap_tolerance`` (default: the start-up check's).
         parse: The joint state and odometry parses, shared with the safety filter in
             process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
+        stream: ``input.sync`` and the object's estimate (default: ``exact``).
+        topic_names: The input topics as the node resolved them (remapped), by table name,
+            for the texts (default: the table's; the object's: the configured one).
 
     Attributes:
         controller: The nominal controller core.
         reference: The reference source, built at the first tick (None before).
         last_output: The last tick's :class:`NominalOutput` (None before the first).
         grasp: The start-up grasp check.
+        ticked: Whether a tick has been answered.
+        rejected_count: Inputs rejected so far.
 
     """
 
@@ -123,6 +145,8 @@ class NominalControllerEndpoint:
         msgs: MessageNamespace,
         grasp_check_config: GraspCheckConfig | None = None,
         parse: SharedParse | None = None,
+        stream: StreamConfig = EXACT,
+        topic_names: Mapping[str, str] | None = None,
     ) -> None:
         self.model = model
         self._parse = parse_directly if parse is None else parse
@@ -132,6 +156,22 @@ class NominalControllerEndpoint:
         self.controller = NominalController(nominal_config)
         self.reference: ReferenceSource | None = None
         self.last_output: NominalOutput | None = None
+        self.stream = stream
+        self.topic_names = {
+            JOINT_STATES: JOINT_STATES,
+            OBJECT_ODOM: stream.object_topic,
+        } | dict(topic_names or {})
+        self.objects = (
+            ObjectStream(model, stream, self.topic_names[OBJECT_ODOM], parse)
+            if stream.latest
+            else None
+        )
+        self.input_watchdog = InputWatchdog(INPUTS, self.topic_names)
+        self.ticked = False
+        self.rejected_count = 0
+        self._rejected_since = 0
+        self._rejection_reported: float | None = None
+        self._last_rejection: str | None = None
         self._joint_names = list(model.joint_names)
         self._joint_name_tuple = tuple(self._joint_names)
         self._initial_pose: Pose | None = None
@@ -142,27 +182,93 @@ class NominalControllerEndpoint:
         self._last_tick_ns: int | None = None
 
     # -------------------------------------------------------------------------- inputs
-    def on_joint_states(self, msg: Any) -> list[Outgoing]:
-        """Handle ``/hand/joint_states``; tick if the odometry of its stamp is in hand."""
-        try:
-            data = self._parse(joint_state_from_msg, msg, self._joint_name_tuple, JOINT_STATES)
-            stamp = seconds_to_nanoseconds(data.t)
-        except MessageError as error:
-            return self._rejected(error)
-        self._joint_states[stamp] = data
-        return self._tick_if_complete(stamp)
+    def on_joint_states(
+        self, msg: Any, now: float | None = None, wall: float | None = None
+    ) -> list[Outgoing]:
+        """Handle ``/hand/joint_states``: a tick (``latest``), or one if its odometry is in.
 
-    def on_odom(self, msg: Any) -> list[Outgoing]:
-        """Handle ``/object/odom``; tick if the joint state of its stamp is in hand."""
+        Args:
+            msg: The message.
+            now: The node's clock, s: the stamp of a rejection's status (None: the last
+                tick's).
+            wall: The steady clock at receipt, s (for :meth:`watchdog`; None: not watched).
+
+        """
+        if wall is not None:
+            self.input_watchdog.received(JOINT_STATES, wall)
+        source = self.topic_names[JOINT_STATES]
         try:
-            data = self._parse(
-                odometry_from_msg, msg, self.model.palm_frame, self.model.object_frame, OBJECT_ODOM
-            )
-            stamp = seconds_to_nanoseconds(data.t)
+            data = self._parse(joint_state_from_msg, msg, self._joint_name_tuple, source, True)
         except MessageError as error:
-            return self._rejected(error)
-        self._odometry[stamp] = data
-        return self._tick_if_complete(stamp)
+            return self._rejected(error, now)
+        if self.objects is None:
+            self._joint_states[data.stamp_ns] = data
+            return self._tick_if_complete(data.stamp_ns, now)
+        try:
+            state = self.objects.grasp_state(data)
+        except (ValueError, np.linalg.LinAlgError) as error:  # MessageError is a ValueError
+            return self._rejected(error, now, data.stamp_ns)
+        return self._tick(data.stamp_ns, state, now)
+
+    def on_odom(
+        self, msg: Any, now: float | None = None, wall: float | None = None
+    ) -> list[Outgoing]:
+        """Handle the object's pose: a sample of the tracker (``latest``), or a tick's odometry.
+
+        Args as :meth:`on_joint_states`; ``latest`` checks the sample's age against ``now``.
+
+        """
+        if wall is not None:
+            self.input_watchdog.received(OBJECT_ODOM, wall)
+        if self.objects is not None:
+            try:
+                sample = self.objects.parse(msg)
+                now_ns = None if now is None else seconds_to_nanoseconds(max(now, 0.0))
+                self.objects.add(sample, now_ns)
+            except MessageError as error:
+                return self._rejected(error, now)
+            return []
+        try:
+            frames = (self.model.palm_frame, self.model.object_frame)
+            data = self._parse(odometry_from_msg, msg, *frames, self.topic_names[OBJECT_ODOM])
+        except MessageError as error:
+            return self._rejected(error, now)
+        self._odometry[data.stamp_ns] = data
+        return self._tick_if_complete(data.stamp_ns, now)
+
+    def watchdog(self, now_wall: float, now: float) -> list[Outgoing]:
+        """Before the first tick, every second: a WARN saying what the first tick waits for.
+
+        Args:
+            now_wall: The steady clock, s (that of the handlers' ``wall``).
+            now: The node's clock, s: the status's stamp.
+
+        Returns:
+            Nothing once a tick has been answered, or when no report is due.
+
+        """
+        if self.ticked:
+            return []
+        waiting = self.input_watchdog.waiting(now_wall)
+        if waiting is None:
+            return []
+        waited, missing = waiting
+        what = self.input_watchdog.describe_waiting(missing)
+        if not missing:
+            what = (
+                'inputs arrive, but no joint state and object pose make a tick'
+                if self.objects is not None
+                else 'inputs arrive, but no joint state and odometry of one stamp'
+            )
+            if self._last_rejection is not None:
+                what += f'; the last rejected: {self._last_rejection}'
+        report = DiagnosticReport.create(
+            DIAGNOSTIC_NAME,
+            DiagnosticLevel.WARN,
+            bounded_text(f'waiting {waited:.1f} s for a first tick, no command: {what}'),
+            {'input.waiting': True, 'input.missing': ','.join(missing)},
+        )
+        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, max(now, 0.0), report))]
 
     def on_reference(self, msg: Any) -> list[Outgoing]:
         """Handle ``/object/reference``: keep it for the ticks to come (topic source only).
@@ -177,7 +283,7 @@ class NominalControllerEndpoint:
                 msg, self.model.palm_frame, source=OBJECT_REFERENCE
             )
         except MessageError as error:
-            return self._rejected(error)
+            return self._rejected(error, None)
         return []
 
     def take_log(self) -> list[LogLine]:
@@ -213,7 +319,7 @@ class NominalControllerEndpoint:
                 self.reference.update(previous.sample(previous.stamp), previous.stamp)
 
     # ------------------------------------------------------------------------- the tick
-    def _tick_if_complete(self, stamp: int) -> list[Outgoing]:
+    def _tick_if_complete(self, stamp: int, now: float | None) -> list[Outgoing]:
         if stamp not in self._joint_states or stamp not in self._odometry:
             self._prune()
             return []
@@ -223,37 +329,47 @@ class NominalControllerEndpoint:
         for pending in (self._joint_states, self._odometry):
             for old in [s for s in pending if s < stamp]:
                 del pending[old]
-        self._last_tick_ns = stamp
-        t = joints.t
         try:
             state = self.model.state(
-                t,
+                joints.t,
                 joints.position,
                 joints.velocity,
                 odometry.p_object_in_palm,
                 odometry.R_object_to_palm,
                 odometry.twist_object,
             )
+        except (ValueError, np.linalg.LinAlgError) as error:
+            self._last_tick_ns = stamp
+            return self._rejected(error, now, stamp)
+        return self._tick(stamp, state, now)
+
+    def _tick(self, stamp: int, state: GraspState, now: float | None) -> list[Outgoing]:
+        """u_nom of one state (and the reference sample it tracked), stamped ``stamp`` (ns)."""
+        self._last_tick_ns = stamp
+        self.ticked = True
+        t = state.t
+        try:
             if not self.grasp.started and self.grasp.check(state):
-                return self._no_grasp(state)
-            sample = self._reference_sample(t, odometry)
+                return self._no_grasp(stamp, state)
+            sample = self._reference_sample(t, state)
             output = self.controller.compute(state, sample)
         except (ValueError, np.linalg.LinAlgError) as error:
-            return self._rejected(error, t)
+            return self._rejected(error, now, stamp)
         if not np.all(np.isfinite(output.u)):
-            return self._rejected(MessageError(f'u_nom is not finite: {output.u.tolist()}'), t)
+            error = MessageError(f'u_nom is not finite: {output.u.tolist()}')
+            return self._rejected(error, now, stamp)
         self.last_output = output
         outgoing = [
-            stamped(EFFORT_NOMINAL, effort_to_msg(self.msgs, t, self._joint_names, output.u)),
-            stamped(OBJECT_REFERENCE_SAMPLE, self._reference_msg(t, sample)),
+            stamped(EFFORT_NOMINAL, effort_to_msg(self.msgs, stamp, self._joint_names, output.u)),
+            stamped(OBJECT_REFERENCE_SAMPLE, self._reference_msg(stamp, sample)),
         ]
         if output.reference_stale:
-            outgoing.append(self._stale_reference_status(t))
+            outgoing.append(self._stale_reference_status(stamp, t))
         return outgoing
 
-    def _reference_sample(self, t: float, odometry: ObjectStateData) -> ReferenceSample:
+    def _reference_sample(self, t: float, state: GraspState) -> ReferenceSample:
         if self.reference is None:
-            self._initial_pose = Pose(odometry.p_object_in_palm, odometry.R_object_to_palm)
+            self._initial_pose = Pose(state.p_object_in_palm, state.R_object_to_palm)
             self._t0 = t
             self.reference = self.config.make_reference(self._initial_pose, t)
         if isinstance(self.reference, TopicReference) and self._trajectory is not None:
@@ -269,13 +385,13 @@ class NominalControllerEndpoint:
             self.reference.update(sample, trajectory.t + float(trajectory.time_from_start[k]))
         return self.reference.sample(t)
 
-    def _reference_msg(self, t: float, sample: ReferenceSample) -> Any:
+    def _reference_msg(self, stamp: int, sample: ReferenceSample) -> Any:
         """Return the tracked sample as ``nav_msgs/Odometry``, framed as ``/object/odom``."""
         # The pose's parts without a Pose: a rotation built from Euler angles needs no check
         # here, and odometry_to_msg checks it again anyway.
         return odometry_to_msg(
             self.msgs,
-            t,
+            stamp,
             sample.p_in_palm,
             sample.R_to_palm,
             sample.twist,
@@ -283,7 +399,7 @@ class NominalControllerEndpoint:
             child_frame_id=self.model.object_frame,
         )
 
-    def _stale_reference_status(self, t: float) -> Outgoing:
+    def _stale_reference_status(self, stamp: int, t: float) -> Outgoing:
         reference = self.reference
         age = reference.age(t) if isinstance(reference, TopicReference) else math.inf
         text = (
@@ -302,9 +418,9 @@ class NominalControllerEndpoint:
                 'reference.timeout': self.config.timeout,
             },
         )
-        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))
+        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report))
 
-    def _no_grasp(self, state: GraspState) -> list[Outgoing]:
+    def _no_grasp(self, stamp: int, state: GraspState) -> list[Outgoing]:
         """``u_nom = g(q)`` and an ERROR naming what fails: the grasp is not valid yet."""
         findings = findings_text(self.grasp.findings)
         report = DiagnosticReport.create(
@@ -319,21 +435,44 @@ class NominalControllerEndpoint:
         return [
             stamped(
                 EFFORT_NOMINAL,
-                effort_to_msg(self.msgs, state.t, self._joint_names, state.gravity_torque),
+                effort_to_msg(self.msgs, stamp, self._joint_names, state.gravity_torque),
             ),
-            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, state.t, report)),
+            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report)),
         ]
 
-    def _rejected(self, error: Exception, t: float | None = None) -> list[Outgoing]:
-        if t is None:
-            t = 0.0 if self._last_tick_ns is None else nanoseconds_to_seconds(self._last_tick_ns)
+    def _rejected(
+        self, error: Exception, now: float | None, stamp: int | None = None
+    ) -> list[Outgoing]:
+        """Return a WARN naming the rejected input, no command; at most one a second.
+
+        Stamped ``stamp`` (ns: the tick's, when one was under way), else the node clock's
+        ``now`` (s), else the last tick's stamp.
+        """
+        self.rejected_count += 1
+        self._rejected_since += 1
+        self._last_rejection = str(error)
+        if stamp is not None:
+            at: Stamp = stamp
+        elif now is not None:
+            at = max(now, 0.0)
+        else:
+            at = self._last_tick_ns or 0
+        seconds = at / 1e9 if isinstance(at, int) else at
+        last = self._rejection_reported
+        if last is not None and 0.0 <= seconds - last < REJECTION_REPORT_PERIOD:
+            return []
+        self._rejection_reported = seconds
         report = DiagnosticReport.create(
             DIAGNOSTIC_NAME,
             DiagnosticLevel.WARN,
-            bounded_text(f'input rejected, no command: {error}'),
-            {'input.rejected': True},
+            bounded_text(
+                f'input rejected, no command ({self._rejected_since} since the last '
+                f'report): {error}'
+            ),
+            {'input.rejected': True, 'input.rejected_count': self.rejected_count},
         )
-        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, t, report))]
+        self._rejected_since = 0
+        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, at, report))]
 
     def _prune(self) -> None:
         for pending in (self._joint_states, self._odometry):

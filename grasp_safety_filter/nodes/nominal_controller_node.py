@@ -3,13 +3,17 @@
 Run: ``ros2 run grasp_safety_filter nominal_controller_node --ros-args --params-file
 config/paper_scenario.yaml -p use_sim_time:=true``.
 
-Subscribes to ``/hand/joint_states``, ``/object/odom`` and, with ``reference.source:
-topic``, ``/object/reference`` (a planner's ``trajectory_msgs/MultiDOFJointTrajectory`` of
+Subscribes to ``/hand/joint_states``, ``/object/odom`` (or ``/object/pose``,
+``input.object_message: pose``) and, with ``reference.source: topic``,
+``/object/reference`` (a planner's ``trajectory_msgs/MultiDOFJointTrajectory`` of
 the joint ``object``, palm frame); publishes ``/hand/effort_nominal``,
 ``/object/reference_sample`` (each tick's reference sample, for the analysis) and
 ``/diagnostics``.
 Everything else is
-:class:`grasp_safety_filter.nodes.nominal_controller.NominalControllerEndpoint`.
+:class:`grasp_safety_filter.nodes.nominal_controller.NominalControllerEndpoint`. With
+``input.sync: latest`` every joint state is a tick and the joint states and the object's
+pose are subscribed best effort (which matches any publisher). Before its first tick it
+says every second what it waits for (WARN on ``/diagnostics``, logged).
 
 Live parameters: ``gains.kp``, ``gains.kd``, ``gains.kf``, ``null_space.kp``,
 ``null_space.kd``, ``reference.amplitude``, ``reference.frequency`` and
@@ -21,7 +25,10 @@ null-space posture is kept);
 from __future__ import annotations
 
 from collections.abc import Mapping
+import time
 from typing import Any
+
+from rclpy.clock import Clock, ClockType
 
 from grasp_safety_filter.control.nominal import NominalConfig
 from grasp_safety_filter.io.schemas import NOMINAL_CONTROLLER_NODE
@@ -37,8 +44,12 @@ from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from grasp_safety_filter.nodes.grasp_watch import GAP_TOLERANCE_PARAMETER, GraspCheckConfig
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
+from grasp_safety_filter.nodes.object_stream import StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.tick_kernels import load_nominal_kernels
+
+#: Steady-clock period of the check whether a "waiting for a first tick" report is due, s.
+WAITING_CHECK_PERIOD = 0.1
 
 
 class NominalControllerNode(EndpointNode):
@@ -52,13 +63,42 @@ class NominalControllerNode(EndpointNode):
         )
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         config = NominalConfig.from_parameters(self.parameters)
+        stream = StreamConfig.from_parameters(self.parameters)
+        topics = {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: stream.object_topic}
         self.endpoint = NominalControllerEndpoint(
-            model, config, self.msgs, GraspCheckConfig.from_parameters(self.parameters)
+            model,
+            config,
+            self.msgs,
+            GraspCheckConfig.from_parameters(self.parameters),
+            stream=stream,
+            topic_names={key: self.resolve_topic_name(name) for key, name in topics.items()},
         )
         # Its first tick then costs what the others cost (tick_kernels).
         load_nominal_kernels(self.parameters, self.config_directory, config, self.msgs)
-        self.subscribe(JOINT_STATES, lambda msg: self.answer(self.endpoint.on_joint_states(msg)))
-        self.subscribe(OBJECT_ODOM, lambda msg: self.answer(self.endpoint.on_odom(msg)))
+        endpoint = self.endpoint
+        monotonic = time.monotonic
+        self.subscribe(
+            JOINT_STATES,
+            lambda msg: self.answer(
+                endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
+            ),
+            sensor=stream.latest,
+        )
+        self.subscribe(
+            stream.object_topic,
+            lambda msg: self.answer(
+                endpoint.on_odom(msg, now=self.now_seconds(), wall=monotonic())
+            ),
+            sensor=stream.latest,
+        )
+        # Before its first tick it says every second what it waits for (steady clock: under
+        # use_sim_time a simulator that never starts stops the node clock too).
+        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
+        self._watchdog_timer = self.create_timer(
+            WAITING_CHECK_PERIOD,
+            lambda: self.publish(endpoint.watchdog(monotonic(), now=self.now_seconds())),
+            clock=self._steady_clock,
+        )
         if config.reference_source == 'topic':
             self.subscribe(
                 OBJECT_REFERENCE, lambda msg: self.publish(self.endpoint.on_reference(msg))

@@ -1,8 +1,8 @@
 """The safety filter's message-level endpoint: state and u_nom in, u* out.
 
 Pure Python, shared by the rclpy node (:mod:`grasp_safety_filter.nodes.safety_filter_node`)
-and the ROS-free runner. A tick runs when the three inputs of one stamp t are in hand and
-valid::
+and the ROS-free runner. With ``input.sync: exact`` (the lockstep simulator) a tick runs when
+the three inputs of one stamp t are in hand and valid::
 
     /hand/joint_states (t) + /object/odom (t) + /hand/effort_nominal (t)
         ──▶ GraspModel.state ──▶ SafetyFilter.solve(state, u_nom) ──▶ HoldPolicy.accept
@@ -11,14 +11,21 @@ valid::
                 first message, on change and once a second: io.margin_stream)
             /diagnostics: status ``safety_filter`` (below)
 
-Inputs are parsed by joint name and their stamps checked (stale, future, out of order:
+With ``input.sync: latest`` (a real hand's driver and tracker) each joint state is a tick,
+the object's state estimated at its stamp, its u_nom the nominal controller's answer to it or
+the newest one (:mod:`~grasp_safety_filter.nodes.latest_inputs`).
+
+Inputs are parsed by joint name (joints the model does not have are ignored in joint
+states) and their stamps checked (stale, future, out of order:
 :mod:`~grasp_safety_filter.nodes.tick_inputs`). A rejected input yields no computed command:
 the hold policy gives the last safe command or, after ``input.hold_timeout``, the fallback
 (:mod:`~grasp_safety_filter.nodes.held_commands`), stamped with the rejected message's stamp
 when it is readable and current (a lockstep simulator waiting for that stamp goes on), else
 with ``now``; the tick of that stamp is then closed. A complete, valid set arriving again for
 the last tick's stamp (a simulator that re-sent its state) gets the same messages again, and
-the input watchdog then waits from it: those inputs did not stop.
+the input watchdog then waits from it: those inputs did not stop. Before the first tick no
+command goes out at all: a rejected input gets a WARN ``input_ignored`` status only (once a
+second), as does a rejected tracker sample at any time (the ticks go on with the estimate).
 
 Input watchdog (:mod:`~grasp_safety_filter.nodes.input_watchdog`): :meth:`watchdog`, called
 every :data:`WATCHDOG_PERIOD` s on a steady clock, sends the fallback and an ERROR once no
@@ -41,7 +48,7 @@ turns the filter on or off at run time and records when. The status's values:
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 import time
 from typing import Any
 
@@ -62,18 +69,28 @@ from grasp_safety_filter.io.messages import (
     nanoseconds_to_seconds,
     OutOfOrderError,
     StaleInputError,
+    Stamp,
     StampGuard,
 )
 from grasp_safety_filter.io.topics import EFFORT_NOMINAL, JOINT_STATES, OBJECT_ODOM
+from grasp_safety_filter.nodes.command_output import CommandConfig, CommandOutput
 from grasp_safety_filter.nodes.filter_status import status_message, TickContext
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig, GraspWatch, LogLine
 from grasp_safety_filter.nodes.held_commands import HeldCommands
 from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
+from grasp_safety_filter.nodes.latest_inputs import LatestTickAssembler
+from grasp_safety_filter.nodes.object_stream import EXACT, ObjectStream, StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRate, PublicationRateConfig
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 from grasp_safety_filter.nodes.tick_answer import TickAnswer
 from grasp_safety_filter.nodes.tick_inputs import INPUTS, REPLAY, TickAssembler, TickInputs
+
+#: Why u_nom may be missing while the state arrives (the watchdog's reports say it).
+NOMINAL_HINT = (
+    'the nominal controller publishes u_nom only for the ticks it makes of its own inputs: '
+    'see its status on /diagnostics'
+)
 
 #: Period of the input watchdog, s (steady clock). The fallback goes out and /diagnostics
 #: say ERROR at most ``input.hold_timeout`` + this after the last accepted tick, and the
@@ -102,6 +119,10 @@ class SafetyFilterEndpoint:
             tick that took longer than ``input.hold_timeout`` (its first, which loads the
             compiled kernels) is not followed by the fallback. None: a tick is dated by its
             ``wall``, when its last input came.
+        stream: ``input.sync`` and the object's estimate (default: ``exact``).
+        command_config: ``command.*``: u* also in ros2_control's form (default: JointState).
+        topic_names: The input topics as the node resolved them (remapped), by table name,
+            for the texts (default: the table's; the object's: the configured one).
 
     Attributes:
         filter: The safety filter core.
@@ -127,6 +148,9 @@ class SafetyFilterEndpoint:
         grasp_check_config: GraspCheckConfig | None = None,
         parse: SharedParse | None = None,
         wall_clock: Callable[[], float] | None = None,
+        stream: StreamConfig = EXACT,
+        command_config: CommandConfig | None = None,
+        topic_names: Mapping[str, str] | None = None,
     ) -> None:
         self.model = model
         self.msgs = msgs
@@ -136,14 +160,37 @@ class SafetyFilterEndpoint:
         self.hold = HoldPolicy.from_config(
             input_policy_config, model.n_joints, -effort_limits, effort_limits
         )
-        self.inputs = TickAssembler(input_policy_config.max_age, model, parse)
+        self.stream = stream
+        self.topic_names = {
+            JOINT_STATES: JOINT_STATES,
+            OBJECT_ODOM: stream.object_topic,
+            EFFORT_NOMINAL: EFFORT_NOMINAL,
+        } | dict(topic_names or {})
+        max_age = input_policy_config.max_age
+        self.inputs: TickAssembler = (
+            LatestTickAssembler(
+                max_age,
+                model,
+                ObjectStream(model, stream, self.topic_names[OBJECT_ODOM]),
+                self.topic_names,
+            )
+            if stream.latest
+            else TickAssembler(max_age, model, parse, self.topic_names)
+        )
         self.rate = PublicationRate(publication_rate_config)
         self.grasp = GraspWatch(model, grasp_check_config)
         self.last_result: FilterResult | None = None
-        self.answer = TickAnswer(msgs, model.joint_names, self.rate, self._status_message)
+        self.command = CommandOutput(msgs, model.joint_names, command_config)
+        self.answer = TickAnswer(msgs, self.command, self.rate, self._status_message)
         self._last_outputs: list[Outgoing] = []
-        self.held = HeldCommands(model, self.hold, msgs, self.rate, self._status_message)
-        self.input_watchdog = InputWatchdog(INPUTS)
+        self.held = HeldCommands(
+            model, self.hold, msgs, self.command, self.rate, self._status_message
+        )
+        self.input_watchdog = InputWatchdog(
+            INPUTS, self.topic_names, hints={EFFORT_NOMINAL: NOMINAL_HINT}
+        )
+        self.ticked = False
+        self._last_rejection: str | None = None
         self._wall_clock = wall_clock
         self._switched_at: float | None = None
 
@@ -205,7 +252,14 @@ class SafetyFilterEndpoint:
         """
         if not self.input_watchdog.started:
             waiting = self.input_watchdog.waiting(now_wall)
-            return [] if waiting is None else [self.held.waiting(*waiting, now)]
+            if waiting is None:
+                return []
+            waited, missing = waiting
+            what = self.input_watchdog.describe_waiting(missing)
+            if not missing and self._last_rejection is not None:
+                what += f'; the last rejected: {self._last_rejection}'
+
+            return [self.held.waiting(waited, missing, what, now)]
         silence = self.input_watchdog.silence(now_wall, self.hold.hold_timeout)
         if silence is None:
             return []
@@ -216,7 +270,7 @@ class SafetyFilterEndpoint:
             # place, so that the tick still gets its own u* when its inputs are complete.
             stamp += 1
         last_tick = nanoseconds_to_seconds(self.inputs.last_tick_ns or 0)
-        return self.held.absent(silence, last_tick, nanoseconds_to_seconds(stamp), now)
+        return self.held.absent(silence, last_tick, stamp, now)
 
     def switch(self, enabled: bool, now: float | None = None) -> str | None:
         """Switch the filter on or off from the next tick; say so (None if unchanged).
@@ -277,10 +331,13 @@ class SafetyFilterEndpoint:
             self.input_watchdog.received(topic, wall)
         try:
             data = self.inputs.parse(topic, msg)
-            stamp = self.inputs.check(topic, data.t, now_s)
+            stamp = self.inputs.check(topic, data, now_s)
         except MessageError as error:
             return self._reject(topic, msg, error, now_s, close=is_clock)
-        tick = self.inputs.add(topic, stamp, data)
+        try:
+            tick = self.inputs.add(topic, stamp, data)
+        except MessageError as error:  # another input of its tick (input.sync latest)
+            return self._reject(topic, msg, error, now_s, stamp=stamp)
         if tick is None:
             return []
         if tick == REPLAY:
@@ -290,7 +347,7 @@ class SafetyFilterEndpoint:
             if wall is not None:
                 self.input_watchdog.answered_again(self._answered(wall))
             return list(self._last_outputs)
-        return self._tick(stamp, tick, now_s, wall)
+        return self._tick(tick.joint_states.stamp_ns, tick, now_s, wall)
 
     @property
     def guard(self) -> StampGuard:
@@ -302,6 +359,7 @@ class SafetyFilterEndpoint:
     ) -> list[Outgoing]:
         start = time.perf_counter()
         t = inputs.joint_states.t
+        self.ticked = True
         u_nom = inputs.nominal.effort
         state, model_time = self.inputs.state(stamp, inputs)
         start -= model_time  # the tick's time includes its model terms, whenever computed
@@ -341,7 +399,6 @@ class SafetyFilterEndpoint:
         # Every message is stamped t, whose ns is the tick's stamp.
         outgoing = self.answer.messages(
             stamp,
-            t,
             u,
             result,
             disabled_margins,
@@ -367,8 +424,9 @@ class SafetyFilterEndpoint:
         joint state is the gravity fallback's q (a valid measurement of a hand that does not
         hold the object as the model assumes).
         """
+        self.ticked = True
         self.held.last_positions = np.array(inputs.joint_states.position)
-        outgoing = self.held.grasp_lost(self.grasp, stamp, inputs.joint_states.t, now)
+        outgoing = self.held.grasp_lost(self.grasp, stamp, now)
         self.inputs.close(stamp)
         if wall is not None:
             self.input_watchdog.accepted(self._answered(wall))
@@ -395,7 +453,8 @@ class SafetyFilterEndpoint:
         """Held or fallback command for a rejected input, and the status saying why.
 
         ``close``: the tick of the command's stamp is closed (not when ``now`` is no clock:
-        a garbled first stamp must not close ticks that have not happened).
+        a garbled first stamp must not close ticks that have not happened). Before the first
+        tick, and for a tracker sample with ``input.sync: latest``, no command: a status.
         """
         if stamp is None and not isinstance(
             error, StaleInputError | OutOfOrderError | FutureStampError
@@ -404,14 +463,22 @@ class SafetyFilterEndpoint:
         if stamp is None:
             # The message's own stamp is unusable: stamp the command with the clock.
             stamp = self.inputs.clock_stamp(now)
-        outgoing = self.held.rejected(topic, error, stamp, nanoseconds_to_seconds(stamp), now)
+        name = self.topic_names.get(topic, topic)
+        self._last_rejection = str(error)
+        if self.stream.latest and topic == OBJECT_ODOM:
+            return self.held.ignored(name, error, stamp)  # the ticks go on with the estimate
+        if not self.ticked:
+            if close:
+                self.inputs.close(stamp)
+            return self.held.ignored(name, error, stamp)
+        outgoing = self.held.rejected(name, error, stamp, now)
         if close:
             self.inputs.close(stamp)
         self._last_outputs = outgoing
         return list(outgoing)
 
     def _status_message(
-        self, t: float, level: DiagnosticLevel, text: str, values: dict[str, Any]
+        self, t: Stamp, level: DiagnosticLevel, text: str, values: dict[str, Any]
     ) -> Outgoing:
-        """Return the ``safety_filter`` status stamped ``t``, s: ``filter.enabled``, ``values``."""
+        """Return the ``safety_filter`` status stamped ``t``: ``filter.enabled``, ``values``."""
         return status_message(self.msgs, t, self.enabled, level, text, values)

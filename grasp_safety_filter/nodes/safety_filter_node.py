@@ -6,12 +6,16 @@ config/paper_scenario.yaml``, remapping the topics to a real hand's driver and p
     -r /hand/joint_states:=/my_hand/joint_states -r /object/odom:=/object_tracker/odom
     -r /hand/effort_nominal:=/my_planner/effort -r /hand/effort_command:=/my_hand/effort
 
-Subscribes to ``/hand/joint_states``, ``/object/odom`` and ``/hand/effort_nominal``;
-publishes ``/hand/effort_command`` (u*), ``/safety_filter/margins`` and ``/diagnostics``.
-Everything else is :class:`grasp_safety_filter.nodes.safety_filter.SafetyFilterEndpoint`.
-Input stamps are checked against the node's clock: with the simulator, run it with
-``use_sim_time:=true``; with a real hand, the driver's stamps must be on the same clock as
-this node.
+Subscribes to ``/hand/joint_states``, ``/object/odom`` (or ``/object/pose``,
+``input.object_message: pose``) and ``/hand/effort_nominal``; publishes
+``/hand/effort_command`` (u*), with ``command.message: float64_multi_array`` also
+``/effort_controller/commands`` (u* for ros2_control's JointGroupEffortController),
+``/safety_filter/margins`` and ``/diagnostics``. Everything else is
+:class:`grasp_safety_filter.nodes.safety_filter.SafetyFilterEndpoint`. Input stamps are
+checked against the node's clock: with the simulator, run it with ``use_sim_time:=true``;
+with a real hand, the driver's stamps must be on the same clock as this node, and
+``input.sync: latest`` makes a tick of each joint state (with ``latest``, the joint states
+and the object's pose are subscribed best effort, which matches any publisher).
 
 Input watchdog: a timer on the steady clock (every
 :data:`~grasp_safety_filter.nodes.safety_filter.WATCHDOG_PERIOD` s; under ``use_sim_time`` a
@@ -58,7 +62,9 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.command_output import CommandConfig
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
+from grasp_safety_filter.nodes.object_stream import StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import (
     PUBLICATION_RATE_PARAMETERS,
@@ -76,9 +82,15 @@ class SafetyFilterNode(EndpointNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(
-            SAFETY_FILTER_NODE, publishes=(EFFORT_COMMAND, MARGINS, DIAGNOSTICS), **kwargs
+            SAFETY_FILTER_NODE,
+            publishes=(EFFORT_COMMAND, MARGINS, DIAGNOSTICS),
+            **kwargs,
         )
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
+        stream = StreamConfig.from_parameters(self.parameters)
+        command_config = CommandConfig.from_parameters(self.parameters)
+        topics = {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: stream.object_topic}
+        topics[EFFORT_NOMINAL] = EFFORT_NOMINAL
         self.endpoint = SafetyFilterEndpoint(
             model,
             SafetyFilterConfig.from_parameters(self.parameters),
@@ -88,24 +100,33 @@ class SafetyFilterNode(EndpointNode):
             publication_rate_config=PublicationRateConfig.from_parameters(self.parameters),
             grasp_check_config=GraspCheckConfig.from_parameters(self.parameters),
             wall_clock=time.monotonic,
+            stream=stream,
+            command_config=command_config,
+            topic_names={key: self.resolve_topic_name(name) for key, name in topics.items()},
         )
         # Its first tick then costs what the others cost (tick_kernels).
         load_filter_kernels(
             self.parameters, self.config_directory, self.endpoint.filter.config, self.msgs
         )
+        for topic in self.endpoint.command.topics:
+            if topic != EFFORT_COMMAND:
+                self.add_publisher(topic)
         endpoint = self.endpoint
         monotonic = time.monotonic
+        sensor = stream.latest
         self.subscribe(
             JOINT_STATES,
             lambda msg: self.answer(
                 endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
             ),
+            sensor=sensor,
         )
         self.subscribe(
-            OBJECT_ODOM,
+            stream.object_topic,
             lambda msg: self.answer(
                 endpoint.on_odom(msg, now=self.now_seconds(), wall=monotonic())
             ),
+            sensor=sensor,
         )
         self.subscribe(
             EFFORT_NOMINAL,

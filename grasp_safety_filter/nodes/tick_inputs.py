@@ -13,6 +13,7 @@ simulator that re-sent its state) is a replay: the endpoint sends the same answe
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 import time
 from typing import Any, NamedTuple
 
@@ -74,6 +75,8 @@ class TickAssembler:
         model: The ``GraspModel`` whose ``state(...)`` gives a tick's model terms.
         parse: The joint state and odometry parses, shared with the nominal controller in
             process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
+        topic_names: The input topics' names as the node resolved them (remapped), by table
+            name, for the error texts; default: the table's.
 
     Attributes:
         guard: Stale and out-of-order stamp checks, per input topic.
@@ -81,8 +84,15 @@ class TickAssembler:
 
     """
 
-    def __init__(self, max_age: float, model: Any, parse: SharedParse | None = None) -> None:
+    def __init__(
+        self,
+        max_age: float,
+        model: Any,
+        parse: SharedParse | None = None,
+        topic_names: Mapping[str, str] | None = None,
+    ) -> None:
         self.guard = StampGuard(max_age)
+        self.topic_names = {topic: topic for topic in INPUTS} | dict(topic_names or {})
         self._parse = parse_directly if parse is None else parse
         self.last_tick_ns: int | None = None
         self.model = model
@@ -98,12 +108,13 @@ class TickAssembler:
             MessageError: The message is not valid (names what and where).
 
         """
+        source = self.topic_names[topic]
         if topic == OBJECT_ODOM:
             frames = (self.model.palm_frame, self.model.object_frame)
-            return self._parse(odometry_from_msg, msg, *frames, OBJECT_ODOM)
+            return self._parse(odometry_from_msg, msg, *frames, source)
         if topic == JOINT_STATES:
-            return self._parse(joint_state_from_msg, msg, self._joint_name_tuple, JOINT_STATES)
-        return effort_from_msg(msg, self._joint_name_tuple, EFFORT_NOMINAL)
+            return self._parse(joint_state_from_msg, msg, self._joint_name_tuple, source, True)
+        return effort_from_msg(msg, self._joint_name_tuple, source)
 
     def timed_state(self, joint_states: JointStateData, odometry: ObjectStateData) -> TimedState:
         """Compute a state's model terms (or the model's refusal of it), timed in s."""
@@ -136,18 +147,19 @@ class TickAssembler:
         except (AttributeError, MessageError):
             return 0.0, False
 
-    def check(self, topic: str, t: float, now: float) -> int:
-        """Return the stamp of an input of time ``t`` (s) on ``topic``, ns, if it is current.
+    def check(self, topic: str, data: Any, now: float) -> int:
+        """Return the stamp of a parsed input on ``topic``, integer ns, if it is current.
 
         Raises:
             MessageError: Stale, future or out of order, or of a tick already closed.
 
         """
-        self.guard.accept(topic, t, now)
-        stamp = seconds_to_nanoseconds(t)
+        source = self.topic_names[topic]
+        self.guard.accept(source, data.t, now)
+        stamp = data.stamp_ns
         if self.last_tick_ns is not None and stamp < self.last_tick_ns:
             raise OutOfOrderError(
-                f'{topic}: stamp {t:.9f} s belongs to a tick already closed (last '
+                f'{source}: stamp {data.t:.9f} s belongs to a tick already closed (last '
                 f'tick {nanoseconds_to_seconds(self.last_tick_ns):.9f} s)'
             )
         return stamp
