@@ -320,12 +320,14 @@ WATCHDOG_TEXTS = (RESENT_TEXT, LATE_TEXT)
 
 
 def _waiting_for_a_first_tick(status: Any) -> bool:
-    """Tell the filter's watchdog status from before its first tick.
+    """Tell a controller's status from before its first tick, saying what it waits for.
 
     It answers no tick (no status value) and comes every second of wall time while the
     graph connects; the runner, which has no wall clock, has none.
     """
     keys = {pair.key for pair in status.values}
+    if status.name == 'nominal_controller':
+        return 'input.waiting' in keys
     return status.name == 'safety_filter' and 'input.watchdog' in keys and 'status' not in keys
 
 

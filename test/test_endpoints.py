@@ -374,7 +374,8 @@ def short_velocity(msg):
     return msg
 
 
-def unknown_joint(msg):
+def renamed_joint(msg):
+    """Rename a model joint: it is missing then (the other name is ignored)."""
     msg.name[3] = 'wrist'
     return msg
 
@@ -390,7 +391,7 @@ def missing_joint(msg):
     [
         (bad_joint_states, 'position'),
         (short_velocity, 'velocity'),
-        (unknown_joint, 'unknown joint'),
+        (renamed_joint, r"missing joint names \['finger2_joint1'\]"),
         (missing_joint, 'missing joint'),
     ],
 )
@@ -514,7 +515,11 @@ def skewed_quaternion(msg):
 CASES = {
     'non-finite joint position': (topics.JOINT_STATES, bad_joint_states, 'position'),
     'wrong velocity length': (topics.JOINT_STATES, short_velocity, 'velocity'),
-    'unknown joint name': (topics.JOINT_STATES, unknown_joint, 'unknown joint'),
+    'renamed joint': (
+        topics.JOINT_STATES,
+        renamed_joint,
+        "missing joint names ['finger2_joint1']",
+    ),
     'missing joint name': (topics.JOINT_STATES, missing_joint, 'missing joint'),
     'NaN nominal effort': (topics.EFFORT_NOMINAL, nan_nominal, 'effort'),
     'non-unit quaternion': (topics.OBJECT_ODOM, skewed_quaternion, 'quaternion'),
@@ -574,12 +579,12 @@ def test_filter_rejects_stale_and_out_of_order_stamps(params):
     out_of_order = fresh.on_odom(restamp(odometry, 0.001))
     (report,) = statuses(out_of_order, 'safety_filter')
     assert 'out-of-order' in report.message
-    # Nothing was ever accepted: fallback (gravity compensation needs a joint state first).
-    assert report.level is DiagnosticLevel.ERROR
-    assert report.values[Key.STATUS] == TickStatus.INPUT_FALLBACK.value
-    (fallback,) = commands(out_of_order, sim.model.joint_names)
-    np.testing.assert_array_equal(fallback, 0.0)
-    assert 'zero torque' in report.message
+    # Before its first tick the filter has computed no command: it sends none (a driver
+    # that holds its position until commanded must not go limp), only a WARN.
+    assert [o.topic for o in out_of_order] == [topics.DIAGNOSTICS]
+    assert report.level is DiagnosticLevel.WARN
+    assert report.values[Key.STATUS] == TickStatus.INPUT_IGNORED.value
+    assert 'no command sent' in report.message
     assert fresh.filter.calls == 0
 
 
@@ -1222,7 +1227,7 @@ HUGE_INPUTS = {
     '100k joint names': (topics.JOINT_STATES, many_names, '99995 more'),
     '100k duplicate names': (topics.EFFORT_NOMINAL, many_duplicates, 'duplicate'),
     '100 kB frame id': (topics.OBJECT_ODOM, huge_frame, 'frame'),
-    '100 kB joint name': (topics.JOINT_STATES, huge_name, 'unknown'),
+    '100 kB joint name': (topics.JOINT_STATES, huge_name, 'missing'),
 }
 
 

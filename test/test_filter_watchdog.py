@@ -230,9 +230,16 @@ class Probe:
         )
 
     def ticks_answered(self, since: float) -> list[Received]:
-        """Return the normal tick statuses received after ``since`` (steady clock, s)."""
+        """Return the normal tick statuses received after ``since`` (steady clock, s).
+
+        Not the watchdog's, nor the reports of input ignored before the first tick.
+        """
         return [
-            s for s in self.statuses if s.wall > since and Key.INPUT_WATCHDOG not in s.msg.values
+            s
+            for s in self.statuses
+            if s.wall > since
+            and Key.INPUT_WATCHDOG not in s.msg.values
+            and s.msg.values.get(Key.STATUS) != TickStatus.INPUT_IGNORED.value
         ]
 
     def watchdog_statuses(self, since: float) -> list[Received]:

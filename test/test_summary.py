@@ -67,7 +67,7 @@ def record_faulty_run(bag_path: Path) -> None:
     """Record a lockstep run whose filter meets failed QPs, bad input and missing input.
 
     Wired as the runner wires the endpoints, except that the filter receives a corrupt
-    joint state at t_0 (nothing accepted yet: fallback) and at t_10..t_12 (held), its QP
+    joint state at t_10..t_12 (held), its QP
     "fails" on its 5th and 6th solve, and its watchdog finds no input twice after t_20.
     """
     typestore = get_typestore(Stores.ROS2_JAZZY)
@@ -79,7 +79,7 @@ def record_faulty_run(bag_path: Path) -> None:
         safety_filter.filter,
         {5: FilterStatus.FALLBACK_NOMINAL, 6: FilterStatus.FALLBACK_LAST_GOOD},
     )
-    corrupt_steps = {0, 10, 11, 12}
+    corrupt_steps = {10, 11, 12}
     watchdog_step = 20
 
     def filter_joint_states(msg):
@@ -128,13 +128,13 @@ def test_summary_counts_failed_rejected_and_watchdog_ticks_from_the_bag(tmp_path
     # One status per tick stamp, t_0..t_N; the watchdog's are counted apart.
     assert counts['steps'] == STEPS + 1
     assert counts['failed_steps'] == 2
-    assert counts['rejected_steps'] == 4
+    assert counts['rejected_steps'] == 3
     assert counts['watchdog_fallbacks'] == 2
     assert counts['watchdog_statuses_after_end'] == AFTER_END_WATCHDOG_CALLS
     statuses = counts['statuses']
     assert statuses['fallback_nominal'] == 1
     assert statuses['fallback_last_good'] == 1
-    assert statuses['input_fallback'] == 1  # t_0: no safe command to hold yet
+    assert 'input_fallback' not in statuses  # held within input.hold_timeout
     assert statuses['input_held'] == 3
     assert sum(statuses.values()) == counts['steps']
     assert run_data.watchdog_statuses == {'input_fallback': 2}
