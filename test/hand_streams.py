@@ -88,7 +88,7 @@ class StreamRun:
     outgoing: list[Outgoing] = field(default_factory=list)
 
     def tick_statuses(self) -> list[str]:
-        """The ``status`` value of each ``safety_filter`` status, in order."""
+        """Return the ``status`` value of each ``safety_filter`` status, in order."""
         return [
             report.values.get('status', '')
             for report in self.statuses

@@ -131,7 +131,7 @@ def test_the_filter_computes_u_star_for_every_joint_state_of_a_real_hands_stream
 
 @pytest.mark.parametrize(('enabled', 'stop'), [(True, None), (False, 'fingertip_workspace')])
 def test_the_papers_outcome_on_real_streams(enabled, stop):
-    """The paper's runs with a 500 Hz driver and a 100 Hz tracker: filtered holds, nominal not."""
+    """Run the paper's runs with a 500 Hz driver and a 100 Hz tracker: filtered holds."""
     run = stream_run(Streams(period=0.002), 2.0, enabled=enabled)
     assert run.stop_reason == stop
     if stop is not None:  # the paper's nominal run leaves the workspace at 1.2 s
@@ -144,7 +144,7 @@ def test_the_papers_outcome_on_real_streams(enabled, stop):
 
 
 def static_messages(k: int, offset_ns: int = 0):
-    """The initial grasp at rest as the k-th sample of a 1 kHz driver (joint state, odometry)."""
+    """Return the initial grasp at rest as sample k of a 1 kHz driver (joints, odometry)."""
     values = node_values('hand_sim_node')
     model = GraspModel.from_parameters(values)
     config = SimConfig.from_parameters(values)
