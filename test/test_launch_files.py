@@ -26,6 +26,8 @@ from grasp_safety_filter.io.launch_arguments import (
     paper_demo,
     parameter_argument,
     parse_bool,
+    real_hand,
+    REAL_HAND_TOPICS,
     recorder_command,
     RECORDER_NODE,
     recorder_problem,
@@ -291,3 +293,56 @@ def test_overrides_file_holds_the_node_section(tmp_path):
     files, values, _ = parse_ros_arguments(command[1:])
     assert files == ['config.yaml'] and values == expected
     assert launch_arguments.PACKAGE == 'grasp_safety_filter'
+
+
+# ----------------------------------------------------------------------------------------
+# real_hand.launch.py
+
+
+def test_real_hand_starts_both_controllers_on_the_hands_streams_and_wall_clock(monkeypatch):
+    actions = launch(monkeypatch, 'real_hand.launch.py')
+    nodes = kind(actions, 'Node')
+    assert_same_as_the_tested_command_lines(nodes, real_hand(str(config_path())))
+    parameters = {n.kwargs['name']: n.kwargs['parameters'][-1] for n in nodes}
+    assert sorted(parameters) == ['nominal_controller_node', 'safety_filter_node']
+    for values in parameters.values():
+        assert values['input.sync'] == 'latest'
+        assert values['use_sim_time'] is False
+    assert all(n.kwargs['remappings'] == [] for n in nodes)
+
+
+def test_real_hand_wires_ros2_control_a_tracker_and_the_simulators_hardware_mode(monkeypatch):
+    arguments = {
+        'sim': 'true',
+        'object_message': 'pose',
+        'command_message': 'float64_multi_array',
+        'joint_states': '/joint_states',
+        'object_pose': '/tracker/object_pose',
+        'effort_controller': '/hand_effort_controller/commands',
+    }
+    nodes = kind(launch(monkeypatch, 'real_hand.launch.py', **arguments), 'Node')
+    expected = real_hand(
+        str(config_path()),
+        simulate=True,
+        object_message='pose',
+        command_message='float64_multi_array',
+        remaps={k: v for k, v in arguments.items() if k in REAL_HAND_TOPICS},
+    )
+    assert_same_as_the_tested_command_lines(nodes, expected)
+    parameters = {n.kwargs['name']: n.kwargs['parameters'][-1] for n in nodes}
+    assert parameters['hand_sim_node']['lockstep'] is False
+    assert parameters['hand_sim_node']['tracker.message'] == 'pose'
+    assert parameters['safety_filter_node']['command.message'] == 'float64_multi_array'
+    assert parameters['nominal_controller_node']['input.object_message'] == 'pose'
+    remaps = {n.kwargs['name']: dict(n.kwargs['remappings']) for n in nodes}
+    for node_remaps in remaps.values():
+        assert node_remaps == {
+            topics.JOINT_STATES: '/joint_states',
+            topics.OBJECT_POSE: '/tracker/object_pose',
+            topics.EFFORT_CONTROLLER_COMMANDS: '/hand_effort_controller/commands',
+        }
+
+
+def test_real_hand_with_a_controller_of_ones_own_starts_the_filter_alone(monkeypatch):
+    nodes = kind(launch(monkeypatch, 'real_hand.launch.py', nominal='false'), 'Node')
+    assert [n.kwargs['name'] for n in nodes] == ['safety_filter_node']

@@ -233,6 +233,93 @@ def safety_filter_alone(
     )
 
 
+#: ``real_hand.launch.py`` argument -> the topic it remaps, in every node it starts.
+REAL_HAND_TOPICS: dict[str, str] = {
+    'joint_states': topics.JOINT_STATES,
+    'object_odom': topics.OBJECT_ODOM,
+    'object_pose': topics.OBJECT_POSE,
+    'effort_nominal': topics.EFFORT_NOMINAL,
+    'effort_command': topics.EFFORT_COMMAND,
+    'effort_controller': topics.EFFORT_CONTROLLER_COMMANDS,
+}
+
+#: ``real_hand.launch.py``: the simulator's hardware mode (a driver and a tracker on the
+#: wall clock, no /clock) when ``sim:=true``.
+HARDWARE_MODE = {'lockstep': False, 'publish_clock': False, 'use_sim_time': False}
+
+
+def real_hand(
+    config: str | Path,
+    *,
+    simulate: bool = False,
+    nominal: bool = True,
+    enabled: bool = True,
+    object_message: str = 'odometry',
+    command_message: str = 'joint_state',
+    remaps: Mapping[str, str] | None = None,
+) -> list[NodeLaunch]:
+    """Return the nodes of ``real_hand.launch.py``: the controllers on a hand's streams.
+
+    Both controllers tick on each joint state (``input.sync: latest``) on the wall clock
+    (no ``use_sim_time``), the object's state estimated from the tracker's samples.
+
+    Args:
+        config: The parameter file (the hand's model; the controllers' sections).
+        simulate: Also start ``hand_sim_node`` in its hardware mode (a driver and a tracker
+            on the wall clock) in place of the real hand.
+        nominal: Start the package's nominal controller (False: a controller of one's own
+            publishes u_nom).
+        enabled: False: the safety filter passes u_nom through.
+        object_message: ``odometry`` (``/object/odom``) or ``pose`` (``/object/pose``).
+        command_message: ``joint_state`` or ``float64_multi_array`` (u* also on
+            ``/effort_controller/commands`` for a ros2_control effort controller).
+        remaps: Launch argument (a key of :data:`REAL_HAND_TOPICS`) -> the topic to use,
+            in every node started; topics not given or mapped to themselves stay.
+
+    Raises:
+        ValueError: An unknown remapping argument.
+
+    """
+    remaps = dict(remaps or {})
+    unknown = sorted(set(remaps) - set(REAL_HAND_TOPICS))
+    if unknown:
+        raise ValueError(
+            f'remappings: unknown arguments {unknown}; known: {sorted(REAL_HAND_TOPICS)}'
+        )
+    remappings = tuple(
+        (topic, remaps[name])
+        for name, topic in REAL_HAND_TOPICS.items()
+        if remaps.get(name, topic) != topic
+    )
+    files = (str(config),)
+    streams = {
+        'use_sim_time': False,
+        'input.sync': 'latest',
+        'input.object_message': object_message,
+    }
+    nodes = []
+    if simulate:
+        sim = {
+            **HARDWARE_MODE,
+            'tracker.message': object_message,
+            'hardware.command_message': command_message,
+        }
+        nodes.append(
+            NodeLaunch(HAND_SIM_NODE, HAND_SIM_NODE, files, sim, remappings, ends_launch=True)
+        )
+    if nominal:
+        nodes.append(
+            NodeLaunch(
+                NOMINAL_CONTROLLER_NODE, NOMINAL_CONTROLLER_NODE, files, streams, remappings
+            )
+        )
+    filter_overrides = {**streams, 'enabled': bool(enabled), 'command.message': command_message}
+    nodes.append(
+        NodeLaunch(SAFETY_FILTER_NODE, SAFETY_FILTER_NODE, files, filter_overrides, remappings)
+    )
+    return nodes
+
+
 def recorder_command(
     bag: str | Path,
     node_name: str = RECORDER_NODE,
