@@ -69,16 +69,11 @@ from grasp_safety_filter.io.messages import (
     DiagnosticReport,
     diagnostics_to_msg,
     effort_to_msg,
-    joint_state_from_msg,
-    JointStateData,
     MessageError,
     MessageNamespace,
-    ObjectStateData,
-    odometry_from_msg,
     odometry_to_msg,
     reference_from_msg,
     ReferenceTrajectory,
-    seconds_to_nanoseconds,
     Stamp,
 )
 from grasp_safety_filter.io.topics import (
@@ -97,15 +92,13 @@ from grasp_safety_filter.nodes.grasp_watch import (
     LogLine,
 )
 from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
-from grasp_safety_filter.nodes.object_stream import EXACT, ObjectStream, StreamConfig
+from grasp_safety_filter.nodes.nominal_inputs import NominalInputs, Rejection, Tick
+from grasp_safety_filter.nodes.object_stream import EXACT, StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
-from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
+from grasp_safety_filter.nodes.shared_parse import SharedParse
 
 #: Name of the nominal controller's ``DiagnosticStatus``.
 DIAGNOSTIC_NAME = NOMINAL_DIAGNOSTIC
-
-#: Unpaired inputs kept waiting for their partner (older ones are dropped).
-MAX_PENDING = 64
 
 #: Least interval between two reports of rejected input, s (node clock).
 REJECTION_REPORT_PERIOD = 1.0
@@ -149,7 +142,6 @@ class NominalControllerEndpoint:
         topic_names: Mapping[str, str] | None = None,
     ) -> None:
         self.model = model
-        self._parse = parse_directly if parse is None else parse
         self.grasp = GraspWatch(model, grasp_check_config)
         self.msgs = msgs
         self.config = nominal_config
@@ -161,11 +153,7 @@ class NominalControllerEndpoint:
             JOINT_STATES: JOINT_STATES,
             OBJECT_ODOM: stream.object_topic,
         } | dict(topic_names or {})
-        self.objects = (
-            ObjectStream(model, stream, self.topic_names[OBJECT_ODOM], parse)
-            if stream.latest
-            else None
-        )
+        self.inputs = NominalInputs(model, stream, self.topic_names, parse)
         self.input_watchdog = InputWatchdog(INPUTS, self.topic_names)
         self.ticked = False
         self.rejected_count = 0
@@ -177,15 +165,13 @@ class NominalControllerEndpoint:
         self._initial_pose: Pose | None = None
         self._t0: float | None = None
         self._trajectory: ReferenceTrajectory | None = None
-        self._joint_states: dict[int, JointStateData] = {}
-        self._odometry: dict[int, ObjectStateData] = {}
         self._last_tick_ns: int | None = None
 
     # -------------------------------------------------------------------------- inputs
     def on_joint_states(
         self, msg: Any, now: float | None = None, wall: float | None = None
     ) -> list[Outgoing]:
-        """Handle ``/hand/joint_states``: a tick (``latest``), or one if its odometry is in.
+        """Handle ``/hand/joint_states``: a tick, or one once its odometry is in (``exact``).
 
         Args:
             msg: The message.
@@ -196,19 +182,7 @@ class NominalControllerEndpoint:
         """
         if wall is not None:
             self.input_watchdog.received(JOINT_STATES, wall)
-        source = self.topic_names[JOINT_STATES]
-        try:
-            data = self._parse(joint_state_from_msg, msg, self._joint_name_tuple, source, True)
-        except MessageError as error:
-            return self._rejected(error, now)
-        if self.objects is None:
-            self._joint_states[data.stamp_ns] = data
-            return self._tick_if_complete(data.stamp_ns, now)
-        try:
-            state = self.objects.grasp_state(data)
-        except (ValueError, np.linalg.LinAlgError) as error:  # MessageError is a ValueError
-            return self._rejected(error, now, data.stamp_ns)
-        return self._tick(data.stamp_ns, state, now)
+        return self._answer(self.inputs.joint_states(msg), now)
 
     def on_odom(
         self, msg: Any, now: float | None = None, wall: float | None = None
@@ -220,21 +194,16 @@ class NominalControllerEndpoint:
         """
         if wall is not None:
             self.input_watchdog.received(OBJECT_ODOM, wall)
-        if self.objects is not None:
-            try:
-                sample = self.objects.parse(msg)
-                now_ns = None if now is None else seconds_to_nanoseconds(max(now, 0.0))
-                self.objects.add(sample, now_ns)
-            except MessageError as error:
-                return self._rejected(error, now)
+        return self._answer(self.inputs.object_pose(msg, now), now)
+
+    def _answer(self, answer: Tick | Rejection | None, now: float | None) -> list[Outgoing]:
+        if answer is None:
             return []
-        try:
-            frames = (self.model.palm_frame, self.model.object_frame)
-            data = self._parse(odometry_from_msg, msg, *frames, self.topic_names[OBJECT_ODOM])
-        except MessageError as error:
-            return self._rejected(error, now)
-        self._odometry[data.stamp_ns] = data
-        return self._tick_if_complete(data.stamp_ns, now)
+        if isinstance(answer, Rejection):
+            if answer.stamp is not None and self.inputs.objects is None:
+                self._last_tick_ns = answer.stamp  # a pair the model refused: a tick
+            return self._rejected(answer.error, now, answer.stamp)
+        return self._tick(answer.stamp, answer.state, now)
 
     def watchdog(self, now_wall: float, now: float) -> list[Outgoing]:
         """Before the first tick, every second: a WARN saying what the first tick waits for.
@@ -257,7 +226,7 @@ class NominalControllerEndpoint:
         if not missing:
             what = (
                 'inputs arrive, but no joint state and object pose make a tick'
-                if self.objects is not None
+                if self.inputs.objects is not None
                 else 'inputs arrive, but no joint state and odometry of one stamp'
             )
             if self._last_rejection is not None:
@@ -319,30 +288,6 @@ class NominalControllerEndpoint:
                 self.reference.update(previous.sample(previous.stamp), previous.stamp)
 
     # ------------------------------------------------------------------------- the tick
-    def _tick_if_complete(self, stamp: int, now: float | None) -> list[Outgoing]:
-        if stamp not in self._joint_states or stamp not in self._odometry:
-            self._prune()
-            return []
-        joints = self._joint_states.pop(stamp)
-        odometry = self._odometry.pop(stamp)
-        # Anything older than this tick can no longer be paired in order.
-        for pending in (self._joint_states, self._odometry):
-            for old in [s for s in pending if s < stamp]:
-                del pending[old]
-        try:
-            state = self.model.state(
-                joints.t,
-                joints.position,
-                joints.velocity,
-                odometry.p_object_in_palm,
-                odometry.R_object_to_palm,
-                odometry.twist_object,
-            )
-        except (ValueError, np.linalg.LinAlgError) as error:
-            self._last_tick_ns = stamp
-            return self._rejected(error, now, stamp)
-        return self._tick(stamp, state, now)
-
     def _tick(self, stamp: int, state: GraspState, now: float | None) -> list[Outgoing]:
         """u_nom of one state (and the reference sample it tracked), stamped ``stamp`` (ns)."""
         self._last_tick_ns = stamp
@@ -473,8 +418,3 @@ class NominalControllerEndpoint:
         )
         self._rejected_since = 0
         return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, at, report))]
-
-    def _prune(self) -> None:
-        for pending in (self._joint_states, self._odometry):
-            while len(pending) > MAX_PENDING:
-                del pending[min(pending)]
