@@ -9,11 +9,13 @@ rigid plant or on MuJoCo before the real hand. Pure Python, as the lockstep endp
 
 - **Driver periods.** The period ``1 / hardware.rate`` is a whole number of ``time_step``
   (``1 / (rate time_step)`` integration steps of the plant). Period ``k`` is due at
-  ``start + k period`` of the steady clock; a timer call takes the periods due (up to half a
-  period early, the timer's jitter) and integrates them with the command held, at most
-  :data:`MAX_CATCH_UP_PERIODS` of them: more are skipped (never integrated: simulated time
-  falls behind the wall clock). Periods integrated late and skipped are counted and reported
-  in the ``hand_sim`` status (:mod:`hand_sim_node.hardware_status`).
+  ``start + k period`` of the steady clock, where the timer (created at ``start``, never
+  early) fires; a call integrates the periods due with the command held: one when it comes
+  less than a period late. A later call catches up the periods it missed, at most
+  :data:`MAX_CATCH_UP_PERIODS` in all: more are skipped (never integrated: simulated time
+  falls behind the wall clock). Periods integrated late (their state not published) and
+  skipped are counted and reported in the ``hand_sim`` status
+  (:mod:`hand_sim_node.hardware_status`).
 - **Published every period**, whether or not a command came, each stamped with the node's
   clock (system time, integer ns, read once per state; strictly increasing): the tracker's
   samples due (:mod:`hand_sim_node.tracker`), ``/hand/joint_states`` and
@@ -238,7 +240,7 @@ class HardwareEndpoint:
             return []
         self._now_ns = now_ns = int(now_ns)
         period = self.period_ns
-        k = (now_ns - self._origin_ns + period // 2) // period
+        k = (now_ns - self._origin_ns) // period
         due = k - self._periods_done
         if due <= 0:
             return []

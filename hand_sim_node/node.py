@@ -208,12 +208,21 @@ class HandSimNode(EndpointNode):
         recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
         if isinstance(self.endpoint, HardwareEndpoint):
             self.get_logger().info(f'hardware mode{recorder}: starting the driver')
-            now_ns = self._steady_clock.now().nanoseconds
-            self.publish(self.endpoint.start(now_ns, self.get_clock().now().nanoseconds))
             self._check_timer.cancel()
+            # The driver's periods start at now_ns; the timer, created just after, fires at
+            # them (never before), at exactly the period: rclpy truncates its float period
+            # to whole ns, so it is given half a nanosecond more.
+            now_ns = self._steady_clock.now().nanoseconds
+            period_ns = self.endpoint.period_ns
             self._driver_timer = self.create_timer(
-                self.endpoint.period_ns / 1e9, self._tick, clock=self._steady_clock
+                (period_ns + 0.5) / 1e9, self._tick, clock=self._steady_clock
             )
+            if self._driver_timer.timer_period_ns != period_ns:
+                self.get_logger().warning(
+                    f'driver timer period {self._driver_timer.timer_period_ns} ns, expected '
+                    f'{period_ns} ns: periods will be counted late or early'
+                )
+            self.publish(self.endpoint.start(now_ns, self.get_clock().now().nanoseconds))
             return
         self.get_logger().info(f'controllers{recorder} connected: starting the run')
         self.publish(self.endpoint.start(now=now))

@@ -156,8 +156,9 @@ def test_a_state_every_period_without_any_command(params, model, rate, time_step
     rng = np.random.default_rng(1)
     stamps = [m.header_stamp_ns(of([o for _, o in clock.log], topics.JOINT_STATES)[0])]
     for k in range(1, 121):
-        # The timer fires up to 0.4 periods off its instant; the stamp clock reads its own.
-        now = clock.now(k, int(rng.uniform(-0.4, 0.4) * sim.period_ns))
+        # The timer fires up to 0.9 periods after its instant (never before); the stamp
+        # clock reads its own time.
+        now = clock.now(k, int(rng.uniform(0.0, 0.9) * sim.period_ns))
         stamp = EPOCH_NS + now - STEADY_NS + int(rng.integers(0, 1000))
         out = sim.tick(now, stamp)
         (state,) = of(out, topics.JOINT_STATES)
@@ -188,8 +189,9 @@ def test_late_calls_catch_up_a_few_periods_and_skip_the_rest(params, model, hold
     clock.tick()
     assert sim.plant.step_index == 2
     assert sim.tick(clock.now(1, 1000)) == []  # the same period again: nothing due
-    # 0.45 periods early is the timer's jitter: its period, on time.
-    assert of(sim.tick(clock.now(2, -int(0.45 * sim.period_ns))), topics.JOINT_STATES)
+    assert sim.tick(clock.now(2, -1)) == []  # 1 ns before period 2: not due yet
+    # Less than a period late: its period alone, not counted late.
+    assert of(sim.tick(clock.now(2, int(0.95 * sim.period_ns))), topics.JOINT_STATES)
     assert sim.counts.late == 0 and sim.plant.step_index == 4
     out = sim.tick(clock.now(5))  # 3 periods due: one state, 3 periods integrated
     assert len(of(out, topics.JOINT_STATES)) == 1
