@@ -1,8 +1,8 @@
 """The simulator's hardware mode: a hand's driver and an object tracker on the wall clock.
 
 With ``lockstep: false`` ``hand_sim_node`` behaves as a real hand's driver plus an object
-tracker do (DESIGN.md §9), so that a ROS stack can be tried on the
-rigid plant or on MuJoCo before the real hand. Pure Python, as the lockstep endpoint
+tracker do (DESIGN.md §9), so that a ROS stack can be tried on the rigid plant or on MuJoCo
+before the real hand. Pure Python, as the lockstep endpoint
 (:mod:`hand_sim_node.endpoint`): the node (:mod:`hand_sim_node.node`) calls
 :meth:`HardwareEndpoint.tick` from a steady-clock timer at ``hardware.rate`` and
 :meth:`HardwareEndpoint.on_command` for each command, and publishes what they return.
@@ -171,14 +171,8 @@ class HardwareEndpoint:
     @property
     def topics(self) -> tuple[str, ...]:
         """The topics this endpoint publishes."""
-        return (
-            SCENARIO,
-            JOINT_STATES,
-            self.hardware.tracker.topic,
-            OBJECT_TRUE_ODOM,
-            CONTACTS,
-            DIAGNOSTICS,
-        )
+        tracker = self.hardware.tracker.topic
+        return (SCENARIO, JOINT_STATES, tracker, OBJECT_TRUE_ODOM, CONTACTS, DIAGNOSTICS)
 
     @property
     def started(self) -> bool:
@@ -194,11 +188,6 @@ class HardwareEndpoint:
     def timed_out(self) -> bool:
         """Whether the commands are timed out (the timeout torque is applied)."""
         return self._timed_out
-
-    @property
-    def applied_effort(self) -> np.ndarray:
-        """The torque applied over the last integrated period, (m,), N·m (zero before)."""
-        return self._applied_effort.copy()
 
     @property
     def finished(self) -> bool:

@@ -2,8 +2,8 @@
 
 A vision or motion-capture tracker sees the object at its own rate, publishes each pose
 stamped with its capture time, some tens of milliseconds late, with millimetre noise
-(DESIGN.md §9). :class:`TrackerEmulator` does the same with the
-states the hardware mode's driver publishes (:mod:`hand_sim_node.hardware`):
+(DESIGN.md §9). :class:`TrackerEmulator` does the same with the states the hardware mode's
+driver publishes (:mod:`hand_sim_node.hardware`):
 
 - **capture**: sample ``j`` is due once ``j / rate`` s of driver time have passed since the
   start; it is taken at the first driver period at or after that instant, of the plant's
