@@ -157,7 +157,9 @@ def build_endpoints(
         )
         if value is not None
     }
-    sim_config = dataclasses.replace(sim_config, **overrides)
+    # The runner is the lockstep graph: a file's hardware mode (lockstep false) runs in
+    # lockstep here, and its scenario says so.
+    sim_config = dataclasses.replace(sim_config, lockstep=True, **overrides)
     sim = HandSimEndpoint(
         GraspModel.from_parameters(params[HAND_SIM_NODE]),
         sim_config,

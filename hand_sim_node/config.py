@@ -61,9 +61,11 @@ class SimConfig:
         stop_on_workspace_exit: Whether a contact leaving its fingertip workspace stops it.
         position_gain: Baumgarte gain ``K_p`` on the normal interpenetration, 1/s².
         velocity_gain: Baumgarte gain ``K_v`` on the contact velocity residual, 1/s.
-        lockstep: Node only: wait for the command stamped t_k before integrating.
+        lockstep: Node only: wait for the command stamped t_k before integrating (the
+            lockstep endpoint); False: the hardware mode (:mod:`hand_sim_node.hardware`,
+            configured by :class:`~hand_sim_node.hardware_config.HardwareConfig`).
         command_timeout: Node only: lockstep wait before a diagnostic, s.
-        publish_clock: Node only: publish /clock.
+        publish_clock: Node only, lockstep: publish /clock.
 
     Raises:
         ParameterError: Naming the parameter, what was expected and what was received.

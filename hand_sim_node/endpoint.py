@@ -15,8 +15,8 @@ the same stream. One tick in lockstep mode (the default)::
   (see :func:`grasp_safety_filter.io.messages.odometry_to_msg`);
 - ``/clock`` the simulation time (when ``publish_clock`` is set).
 
-A command is applied only if it parses (every joint by name, finite efforts) and, in
-lockstep, its stamp equals the current state's stamp; otherwise the endpoint reports it on
+A command is applied only if it parses (every joint by name, finite efforts) and its
+stamp equals the current state's stamp; otherwise the endpoint reports it on
 ``/diagnostics`` (status ``hand_sim``, WARN) and does not step. As a hand driver does, it
 clips an applied command to the model's effort limits (the URDF's), and says so in a WARN
 ``hand_sim`` status stamped t_k (``effort.clipped``: the joints; ``effort.max_excess`` and
@@ -36,9 +36,9 @@ sim_diagnostic_keys.PlantEvents`): a WARN stamped t_k+1 when a contact is first 
 object drops, and the record so far (with the slip distance per contact) in it and in the
 end-of-run status.
 
-Without lockstep, :meth:`HandSimEndpoint.on_command` only stores the latest valid
-command and :meth:`HandSimEndpoint.advance` (called by a wall-clock timer) integrates one
-step with it, zero-order hold, whatever its stamp.
+This endpoint is the lockstep mode's (``lockstep: true``; the runner's, whatever the
+parameter says). With ``lockstep: false`` the node runs the hardware mode instead, a hand's
+driver and an object tracker on the wall clock (:mod:`hand_sim_node.hardware`).
 
 The ``hand_sim`` statuses themselves are built in :mod:`hand_sim_node.sim_status`.
 """
@@ -60,7 +60,6 @@ from grasp_safety_filter.io.messages import (
     joint_state_to_msg,
     MessageError,
     MessageNamespace,
-    nanoseconds_to_seconds,
     odometry_to_msg,
     seconds_to_nanoseconds,
 )
@@ -104,6 +103,22 @@ LIVE_FIELDS = (
 )
 
 
+def check_live_update(current: SimConfig, new: SimConfig, where: str) -> None:
+    """Refuse a new configuration that changes more than :data:`LIVE_FIELDS`.
+
+    Raises:
+        ValueError: Naming the read-only fields that differ (``where``: the caller).
+    """
+    changed = [
+        f.name
+        for f in dataclasses.fields(SimConfig)
+        if f.name not in LIVE_FIELDS
+        and not np.array_equal(getattr(new, f.name), getattr(current, f.name))
+    ]
+    if changed:
+        raise ValueError(f'{where}: {changed} are read-only while the simulator runs')
+
+
 class HandSimEndpoint:
     """The hand–object simulator behind ``/hand/effort_command`` (module docstring).
 
@@ -144,8 +159,6 @@ class HandSimEndpoint:
         )
         self._joint_names = list(model.joint_names)
         self._applied_effort = np.zeros(model.n_joints)
-        self._latest_command: np.ndarray | None = None
-        self._latest_command_ns: int | None = None
         self._started = False
         self._reported_end = False
         self._waiting_since: float | None = None
@@ -165,11 +178,6 @@ class HandSimEndpoint:
     def command_timeout(self) -> float:
         """Lockstep wait for a command before a diagnostic, s (wall time)."""
         return self.config.command_timeout
-
-    @property
-    def lockstep(self) -> bool:
-        """Whether a step waits for the command stamped with the current state's stamp."""
-        return bool(self.config.lockstep)
 
     @property
     def started(self) -> bool:
@@ -200,8 +208,8 @@ class HandSimEndpoint:
 
     @property
     def awaited_stamp_ns(self) -> int | None:
-        """Stamp of the command the lockstep simulator waits for, or None if it waits for none."""
-        if not (self._started and self.lockstep) or self.finished:
+        """Stamp of the command the simulator waits for, or None if it waits for none."""
+        if not self._started or self.finished:
             return None
         return self.stamp_ns
 
@@ -217,8 +225,6 @@ class HandSimEndpoint:
         if self._contact_events is not None:
             self._contact_events.reset()
         self._applied_effort = np.zeros(self.model.n_joints)
-        self._latest_command = None
-        self._latest_command_ns = None
         self._started = True
         self._reported_end = False
         self._waiting_since = float(now)
@@ -226,16 +232,15 @@ class HandSimEndpoint:
         return [scenario, *self._state_messages()]
 
     def on_command(self, msg: Any, now: float = 0.0) -> list[Outgoing]:
-        """Handle a ``/hand/effort_command``; in lockstep, step when it is the awaited one.
+        """Handle a ``/hand/effort_command``; step when it is the awaited one.
 
         Args:
             msg: A ``sensor_msgs/JointState`` with one effort per joint, by name.
             now: Wall-clock time, s, for the lockstep timeout.
 
         Returns:
-            Lockstep, applied: ``/hand/contacts`` at t_k, then the state at t_k+1 (or the
-            end-of-run status). Rejected: one ``/diagnostics`` message. Not lockstep: the
-            command is stored (nothing is returned unless it is rejected).
+            Applied: ``/hand/contacts`` at t_k, then the state at t_k+1 (or the end-of-run
+            status). Rejected: one ``/diagnostics`` message.
 
         """
         if not self._started:
@@ -247,25 +252,6 @@ class HandSimEndpoint:
             stamp_ns = seconds_to_nanoseconds(command.t)
         except MessageError as error:
             return self._warn(f'command rejected: {error}', msg)
-        if not self.lockstep:
-            # A command answers a state already published: one stamped past the next state
-            # is not trusted, and never becomes the reference the next ones must follow.
-            ahead_ns = stamp_ns - (self.stamp_ns + seconds_to_nanoseconds(self.config.time_step))
-            if ahead_ns > 0:
-                return self._warn(
-                    f'command rejected: stamp {command.t:.9f} s is ahead of the simulation '
-                    f'clock ({self.t:.9f} s) by more than one time step',
-                    msg,
-                )
-            if self._latest_command_ns is not None and stamp_ns < self._latest_command_ns:
-                return self._warn(
-                    f'command rejected: stamp {command.t:.9f} s is older than the last '
-                    f'applied one ({nanoseconds_to_seconds(self._latest_command_ns):.9f} s)',
-                    msg,
-                )
-            self._latest_command = command.effort
-            self._latest_command_ns = stamp_ns
-            return []
         if stamp_ns != self.stamp_ns:
             when = 'late' if stamp_ns < self.stamp_ns else 'early'
             return self._warn(
@@ -275,19 +261,6 @@ class HandSimEndpoint:
             )
         self._waiting_since = float(now)
         return self._step(command.effort)
-
-    def advance(self) -> list[Outgoing]:
-        """Free-running mode: integrate one step with the latest command (none: wait).
-
-        Returns:
-            As an applied lockstep command; empty before the first command or after the end.
-
-        """
-        if self.lockstep:
-            raise RuntimeError('HandSimEndpoint.advance: the simulator runs in lockstep mode')
-        if not self._started or self.finished or self._latest_command is None:
-            return []
-        return self._step(self._latest_command)
 
     def timeout(self, now: float) -> list[Outgoing]:
         """Lockstep watchdog: report a missing command and publish the state again.
@@ -319,17 +292,7 @@ class HandSimEndpoint:
                 lockstep, publish_clock) differs from the one in force.
 
         """
-        current = self.plant.config
-        changed = [
-            f.name
-            for f in dataclasses.fields(SimConfig)
-            if f.name not in LIVE_FIELDS
-            and not np.array_equal(getattr(sim_config, f.name), getattr(current, f.name))
-        ]
-        if changed:
-            raise ValueError(
-                f'HandSimEndpoint.update_config: {changed} are read-only while the simulator runs'
-            )
+        check_live_update(self.plant.config, sim_config, 'HandSimEndpoint.update_config')
         self.plant.config = sim_config
 
     # ------------------------------------------------------------------------- internals

@@ -3,11 +3,22 @@
 Run: ``ros2 run grasp_safety_filter hand_sim_node --ros-args --params-file
 config/paper_scenario.yaml -p use_sim_time:=true``.
 
-Publishes ``/grasp/scenario`` (once, latched), ``/clock``, ``/hand/joint_states``,
-``/object/odom``, ``/hand/contacts`` and ``/diagnostics``; subscribes to
-``/hand/effort_command``. Everything else is :class:`hand_sim_node.endpoint.HandSimEndpoint`.
+Lockstep (``lockstep: true``, the default): publishes ``/grasp/scenario`` (once, latched),
+``/clock``, ``/hand/joint_states``, ``/object/odom``, ``/hand/contacts`` and ``/diagnostics``;
+subscribes to ``/hand/effort_command``. Everything else is
+:class:`hand_sim_node.endpoint.HandSimEndpoint`.
 
-Start-up: the initial grasp is checked (:mod:`grasp_safety_filter.model.grasp_check`:
+Hardware mode (``lockstep: false``): a hand's driver and an object tracker on the wall clock,
+:class:`hand_sim_node.hardware.HardwareEndpoint`. A steady-clock timer at ``hardware.rate``
+ticks it; messages are stamped with the node's clock (system time: ``use_sim_time`` must be
+false; no ``/clock``). It publishes ``/grasp/scenario``, ``/hand/joint_states``, the
+tracker's ``/object/odom`` or ``/object/pose``, ``/object/true_odom``, ``/hand/contacts``
+and ``/diagnostics``, and subscribes to ``/hand/effort_command`` or
+``/effort_controller/commands`` (``hardware.command_message``). It starts at once, as a
+driver does (with ``start.wait_for_recorder``, once the recorder is subscribed); the run
+ends ``duration`` s of simulated time after the first command.
+
+Start-up (lockstep): the initial grasp is checked (:mod:`grasp_safety_filter.model.grasp_check`:
 joint limits, every fingertip on its face within ``GAP_TOLERANCE``); a bad one stops the
 node with one line naming the joint or contact. The run starts (scenario and state at t_0
 published) once the controllers are connected
@@ -20,14 +31,13 @@ so for ``START_SETTLE`` s (``RECORDER_SETTLE`` s with a recorder). While it wait
 what it waits for every ``WAITING_LOG_PERIOD`` s. Then in lockstep (the default) each
 command stamped with the current state's stamp advances the simulation by one step, as fast
 as the controllers answer. A wall-clock watchdog reports a command missing for
-``command_timeout`` s and publishes the state again. Without lockstep, a wall-clock timer
-steps every ``time_step`` s with the latest command. The node exits one second after the run
-ends (so that a launch file with ``on_exit=Shutdown()`` ends the demo and a recorder closes
-its bag).
+``command_timeout`` s and publishes the state again. In either mode the node exits one
+second after the run ends (so that a launch file with ``on_exit=Shutdown()`` ends the demo
+and a recorder closes its bag).
 
 Live parameters: ``stop_on_slip``, ``stop_on_workspace_exit``,
-``stabilization.position_gain``, ``stabilization.velocity_gain`` and ``command_timeout``
-apply from the next step; the others are read-only (read at start-up).
+``stabilization.position_gain``, ``stabilization.velocity_gain`` and (lockstep)
+``command_timeout`` apply from the next step; the others are read-only (read at start-up).
 """
 
 from __future__ import annotations
@@ -39,15 +49,13 @@ from typing import Any
 import rclpy
 from rclpy.clock import Clock, ClockType
 
+from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.io.schemas import HAND_SIM_NODE
 from grasp_safety_filter.io.topics import (
-    CLOCK,
-    CONTACTS,
     DIAGNOSTICS,
     EFFORT_COMMAND,
     JOINT_STATES,
     OBJECT_ODOM,
-    SCENARIO,
     TOPICS,
 )
 from grasp_safety_filter.model.grasp_check import check_initial_grasp
@@ -55,8 +63,15 @@ from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
+from hand_sim_node.hardware import HardwareEndpoint
+from hand_sim_node.hardware_config import HardwareConfig
 from hand_sim_node.plant import PlantConfig
-from hand_sim_node.start_up import GraphSnapshot, load_step_kernels, start_blockers
+from hand_sim_node.start_up import (
+    GraphSnapshot,
+    load_step_kernels,
+    LOCKSTEP_TOPICS,
+    start_blockers,
+)
 
 #: Wall-clock period of the start-up and watchdog checks, s.
 CHECK_PERIOD = 0.05
@@ -86,40 +101,59 @@ class HandSimNode(EndpointNode):
     """The simulator node (module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__(
-            HAND_SIM_NODE,
-            publishes=(SCENARIO, CLOCK, JOINT_STATES, OBJECT_ODOM, CONTACTS, DIAGNOSTICS),
-            **kwargs,
-        )
+        super().__init__(HAND_SIM_NODE, publishes=(DIAGNOSTICS,), **kwargs)
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         check_initial_grasp(model, self.parameters)
-        self.endpoint = HandSimEndpoint(
-            model,
-            SimConfig.from_parameters(self.parameters),
-            self.msgs,
-            plant_config=PlantConfig.from_parameters(self.parameters),
-        )
+        sim_config = SimConfig.from_parameters(self.parameters)
+        plant_config = PlantConfig.from_parameters(self.parameters)
+        self.endpoint: HandSimEndpoint | HardwareEndpoint
+        if sim_config.lockstep:
+            self.endpoint = HandSimEndpoint(
+                model, sim_config, self.msgs, plant_config=plant_config
+            )
+            self.published = tuple(sorted(LOCKSTEP_TOPICS))
+            command_topic = EFFORT_COMMAND
+        else:
+            if self.get_parameter('use_sim_time').value:
+                raise ParameterError(
+                    "parameter 'use_sim_time': the hardware mode (lockstep false) stamps with "
+                    'the system clock and publishes no /clock; expected false, got true'
+                )
+            hardware = HardwareConfig.from_parameters(self.parameters)
+            self.endpoint = HardwareEndpoint(
+                model, sim_config, hardware, self.msgs, plant_config=plant_config
+            )
+            self.published = self.endpoint.topics
+            command_topic = hardware.command_topic
+        for topic in self.published:
+            if topic != DIAGNOSTICS:
+                self.add_publisher(topic)
         load_step_kernels(self.endpoint)  # before the check timer can start the run
-        self._command_subscription = self.subscribe(EFFORT_COMMAND, self._on_command)
+        self._command_subscription = self.subscribe(command_topic, self._on_command)
         # Timers on the steady clock: simulation time stands still while the simulator waits.
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
         self._check_timer = self.create_timer(CHECK_PERIOD, self._check, clock=self._steady_clock)
-        self._step_timer = None
-        if not self.endpoint.lockstep:
-            self._step_timer = self.create_timer(
-                self.endpoint.config.time_step, self._advance, clock=self._steady_clock
-            )
+        self._driver_timer = None
         self._exit_timer = None
         self._waiting_logged_at = time.monotonic()
         self._connected_since: float | None = None
         self.recorder = str(self.parameters[RECORDER_PARAMETER])
         recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
+        if isinstance(self.endpoint, HardwareEndpoint):
+            tracker = self.endpoint.hardware.tracker
+            mode = (
+                f'hardware mode: driver at {self.endpoint.hardware.rate:g} Hz '
+                f'({self.endpoint.substeps} steps per period), tracker on {tracker.topic} at '
+                f'{tracker.rate:g} Hz; commands on {command_topic}'
+            )
+            waiting = f'; waiting for recorder {self.recorder!r}' if self.recorder else ''
+        else:
+            mode = 'lockstep'
+            waiting = f'; waiting for a controller on {command_topic}{recorder}'
         self.get_logger().info(
             f'simulating {model.n_joints} joints, {model.n_contacts} contacts on the '
-            f'{self.endpoint.plant_config.kind} plant for '
-            f'{self.endpoint.config.duration} s in steps of {self.endpoint.config.time_step} s '
-            f'({"lockstep" if self.endpoint.lockstep else "free-running"}); waiting for a '
-            f'controller on {self._command_subscription.topic_name}{recorder}'
+            f'{plant_config.kind} plant for {sim_config.duration} s in steps of '
+            f'{sim_config.time_step} s ({mode}){waiting}'
         )
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
@@ -127,33 +161,71 @@ class HandSimNode(EndpointNode):
         self.endpoint.update_config(SimConfig.from_parameters(self.parameters))
 
     # ------------------------------------------------------------------------ callbacks
+    @property
+    def hardware(self) -> bool:
+        """Whether the node runs the hardware mode (``lockstep: false``)."""
+        return isinstance(self.endpoint, HardwareEndpoint)
+
     def _on_command(self, msg: Any) -> None:
-        self.publish(self.endpoint.on_command(msg, now=time.monotonic()))
+        if isinstance(self.endpoint, HardwareEndpoint):
+            now_ns = self._steady_clock.now().nanoseconds
+            stamp_ns = self.get_clock().now().nanoseconds
+            self.publish(self.endpoint.on_command(msg, now_ns, stamp_ns))
+        else:
+            self.publish(self.endpoint.on_command(msg, now=time.monotonic()))
         self._exit_if_finished()
 
-    def _advance(self) -> None:
-        self.publish(self.endpoint.advance())
+    def _tick(self) -> None:
+        now_ns = self._steady_clock.now().nanoseconds
+        self.publish(self.endpoint.tick(now_ns, self.get_clock().now().nanoseconds))
         self._exit_if_finished()
 
     def _check(self) -> None:
         now = time.monotonic()
         if self.endpoint.started:
-            self.publish(self.endpoint.timeout(now))
+            if not self.hardware:
+                self.publish(self.endpoint.timeout(now))
             return
-        blockers = start_blockers(self._graph_snapshot(), self.recorder)
+        blockers = start_blockers(
+            self._graph_snapshot(), self.recorder, self.published, controllers=not self.hardware
+        )
         if not blockers:
             if self._connected_since is None:
                 self._connected_since = now
-            if now - self._connected_since < (RECORDER_SETTLE if self.recorder else START_SETTLE):
+            settle = RECORDER_SETTLE if self.recorder else START_SETTLE
+            if self.hardware and not self.recorder:
+                settle = 0.0  # a driver waits for nobody
+            if now - self._connected_since < settle:
                 return
-            recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
-            self.get_logger().info(f'controllers{recorder} connected: starting the run')
-            self.publish(self.endpoint.start(now=now))
+            self._start(now)
             return
         self._connected_since = None
         if now - self._waiting_logged_at >= WAITING_LOG_PERIOD:
             self._waiting_logged_at = now
             self.get_logger().info(f'waiting to start the run for {"; ".join(blockers)}')
+
+    def _start(self, now: float) -> None:
+        recorder = f" and recorder '{self.recorder}'" if self.recorder else ''
+        if isinstance(self.endpoint, HardwareEndpoint):
+            self.get_logger().info(f'hardware mode{recorder}: starting the driver')
+            self._check_timer.cancel()
+            # The driver's periods start at now_ns; the timer, created just after, fires at
+            # them (never before), at exactly the period: rclpy truncates its float period
+            # to whole ns, so it is given half a nanosecond more.
+            now_ns = self._steady_clock.now().nanoseconds
+            period_ns = self.endpoint.period_ns
+            self._driver_timer = self.create_timer(
+                (period_ns + 0.5) / 1e9, self._tick, clock=self._steady_clock
+            )
+            if self._driver_timer.timer_period_ns != period_ns:
+                self.get_logger().warning(
+                    f'driver timer period {self._driver_timer.timer_period_ns} ns, expected '
+                    f'{period_ns} ns: periods will be counted late or early'
+                )
+            self.publish(self.endpoint.start(now_ns, self.get_clock().now().nanoseconds))
+            return
+        self.get_logger().info(f'controllers{recorder} connected: starting the run')
+        self.publish(self.endpoint.start(now=now))
 
     def _graph_snapshot(self) -> GraphSnapshot:
         """Return the topic table's publishers and subscribers as this node sees them."""
@@ -171,6 +243,7 @@ class HandSimNode(EndpointNode):
             matched={
                 topic: self.publisher(topic).get_subscription_count()
                 for topic in (JOINT_STATES, OBJECT_ODOM)
+                if topic in self.published
             },
         )
 
@@ -181,8 +254,8 @@ class HandSimNode(EndpointNode):
                 f'exiting in {EXIT_DELAY} s'
             )
             self._check_timer.cancel()
-            if self._step_timer is not None:
-                self._step_timer.cancel()
+            if self._driver_timer is not None:
+                self._driver_timer.cancel()
             self._exit_timer = self.create_timer(EXIT_DELAY, self._exit, clock=self._steady_clock)
 
     def _exit(self) -> None:

@@ -7,8 +7,9 @@ Before it subscribes, the node also steps a spare simulator once
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -20,7 +21,9 @@ from grasp_safety_filter.io.topics import (
     EFFORT_COMMAND,
     JOINT_STATES,
     OBJECT_ODOM,
+    OBJECT_POSE,
     OBJECT_REFERENCE,
+    OBJECT_TRUE_ODOM,
     SCENARIO,
     TOPICS,
 )
@@ -29,8 +32,13 @@ from hand_sim_node.endpoint import HandSimEndpoint
 #: What the graph API gives as a node's name until the node's own announcement arrives.
 UNKNOWN_NODE_NAME = '_NODE_NAME_UNKNOWN_'
 
-#: Topics the simulator publishes (it does not wait for other publishers of these).
-SIMULATOR_TOPICS = frozenset((SCENARIO, CLOCK, JOINT_STATES, OBJECT_ODOM, CONTACTS, DIAGNOSTICS))
+#: Topics the simulator publishes in lockstep mode.
+LOCKSTEP_TOPICS = frozenset((SCENARIO, CLOCK, JOINT_STATES, OBJECT_ODOM, CONTACTS, DIAGNOSTICS))
+
+#: Topics the simulator may publish, in either mode (it does not wait for other publishers of
+#: these): the hardware mode adds the tracker's ``/object/pose`` and ``/object/true_odom``
+#: (and has no ``/clock``).
+SIMULATOR_TOPICS = LOCKSTEP_TOPICS | {OBJECT_POSE, OBJECT_TRUE_ODOM}
 
 
 @dataclass(frozen=True)
@@ -71,17 +79,24 @@ def same_node(name: str, qualified: str) -> bool:
     return qualified.rsplit('/', 1)[-1] == name
 
 
-def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
+def start_blockers(
+    graph: GraphSnapshot,
+    recorder: str = '',
+    published: Collection[str] = LOCKSTEP_TOPICS,
+    controllers: bool = True,
+) -> list[str]:
     """Return what the simulator still waits for before it starts the run (empty: start).
 
-    - A controller: a node publishing ``/hand/effort_command``. That node and every node
+    - With ``controllers`` (lockstep; the hardware mode's driver waits for none): a
+      controller, a node publishing ``/hand/effort_command``. That node and every node
       whose topics it needs (the publishers of the table topics it subscribes to, other than
       the simulator's and the optional ``/object/reference``, recursively: the nominal
       controller behind the safety filter) must be subscribed to ``/hand/joint_states``,
       each such topic must have a publisher, and the simulator's state topics must have
       matched subscriptions. Otherwise the first state would reach only part of the graph.
     - With ``recorder`` (a node name): that node subscribed to every table topic that has a
-      publisher, the simulator's own included, so the bag holds the run from its first tick.
+      publisher, the simulator's own (``published``) included, so the bag holds the run from
+      its first tick.
 
     - Every endpoint's node name known: DDS discovers an endpoint before the name of its node,
       and until then two nodes are indistinguishable.
@@ -89,6 +104,8 @@ def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
     Args:
         graph: The graph as the simulator sees it.
         recorder: Node name of the recorder; empty: none to wait for.
+        published: The topics the simulator publishes.
+        controllers: Whether to wait for the controllers.
 
     """
     blockers: list[str] = []
@@ -98,7 +115,24 @@ def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
         if any(UNKNOWN_NODE_NAME in node for node in nodes)
     )
     if unknown:
-        blockers.append(f"the names of the nodes on {', '.join(dict.fromkeys(unknown))}")
+        blockers.append(f'the names of the nodes on {", ".join(dict.fromkeys(unknown))}')
+    if controllers:
+        blockers += _controller_blockers(graph)
+    if recorder:
+        missing = [
+            spec.name
+            for spec in TOPICS
+            if (spec.name in published or graph.published_by(spec.name))
+            and not any(same_node(recorder, n) for n in graph.subscribed_by(spec.name))
+        ]
+        if missing:
+            blockers.append(f"recorder '{recorder}' subscribed to {', '.join(missing)}")
+    return blockers
+
+
+def _controller_blockers(graph: GraphSnapshot) -> list[str]:
+    """Return what the controllers still lack (:func:`start_blockers`)."""
+    blockers: list[str] = []
     controllers = sorted(graph.published_by(EFFORT_COMMAND))
     if not controllers:
         blockers.append(f'a publisher on {EFFORT_COMMAND}')
@@ -120,20 +154,14 @@ def start_blockers(graph: GraphSnapshot, recorder: str = '') -> list[str]:
     for topic in (JOINT_STATES, OBJECT_ODOM):
         if graph.matched.get(topic, 0) == 0:
             blockers.append(f'a subscription on {topic}')
-    if recorder:
-        missing = [
-            spec.name
-            for spec in TOPICS
-            if (spec.name in SIMULATOR_TOPICS or graph.published_by(spec.name))
-            and not any(same_node(recorder, n) for n in graph.subscribed_by(spec.name))
-        ]
-        if missing:
-            blockers.append(f"recorder '{recorder}' subscribed to {', '.join(missing)}")
     return blockers
 
 
-def load_step_kernels(endpoint: HandSimEndpoint) -> None:
+def load_step_kernels(endpoint: Any) -> None:
     """Step a spare copy of ``endpoint``'s simulator once, with zero torque; drop it.
+
+    ``endpoint``: the lockstep or the hardware mode's (its model, configuration, message
+    classes, scenario and plant are copied).
 
     numba loads a cached kernel at its first call: the plant's first step takes about
     0.3 s of CPU, several seconds of wall time on a loaded machine, while the controllers'

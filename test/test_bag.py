@@ -53,6 +53,7 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
         (topics.JOINT_STATES, m.joint_state_to_msg(msgs, t, JOINTS, *rng.normal(size=(3, 9)))),
         (topics.OBJECT_ODOM, m.odometry_to_msg(msgs, t, np.ones(3), np.eye(3), np.ones(6))),
         (topics.OBJECT_POSE, m.pose_stamped_to_msg(msgs, t, np.ones(3), np.eye(3))),
+        (topics.OBJECT_TRUE_ODOM, m.odometry_to_msg(msgs, t, np.ones(3), np.eye(3), np.ones(6))),
         (topics.CONTACTS, m.contacts_to_msg(msgs, contacts, CONTACT_NAMES)),
         (topics.OBJECT_REFERENCE, m.reference_to_msg(msgs, t, [0.0], [reference])),
         (

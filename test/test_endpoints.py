@@ -312,36 +312,19 @@ def test_simulator_timeout_reports_and_republishes_the_same_state(params):
     assert sim.timeout(now=10.7) == []  # the wait started over
 
 
-def test_simulator_without_lockstep_holds_the_latest_command(params):
+def test_lockstep_endpoint_steps_in_lockstep_whatever_the_lockstep_parameter(params):
+    # lockstep false selects the node's hardware mode (hand_sim_node.hardware); the lockstep
+    # endpoint (the runner's) waits for the command of its state's stamp all the same.
     sim = make_sim(params, lockstep=False)
     sim.start()
-    assert sim.advance() == []  # no command yet: time does not advance
     names = sim.model.joint_names
-    assert sim.on_command(m.effort_to_msg(MSGS, 0.0, names, np.zeros(len(names)))) == []
-    outgoing = sim.advance()
+    early = sim.on_command(m.effort_to_msg(MSGS, 0.001, names, np.zeros(len(names))))
+    assert 'is early' in statuses(early, 'hand_sim')[0].message
+    assert sim.simulator.step_index == 0
+    outgoing = sim.on_command(m.effort_to_msg(MSGS, 0.0, names, np.zeros(len(names))))
     assert topics.JOINT_STATES in [o.topic for o in outgoing]
     assert sim.simulator.step_index == 1
-    assert sim.on_command(m.effort_to_msg(MSGS, sim.t, names, np.ones(len(names)))) == []
-    old = sim.on_command(m.effort_to_msg(MSGS, 0.0, names, np.zeros(len(names))))
-    assert 'older' in statuses(old, 'hand_sim')[0].message
-
-
-@pytest.mark.parametrize('ahead', [2.5e-3, 1.0, 123.0, 2.0**31 - 1])
-def test_free_running_simulator_refuses_a_future_command_and_is_not_locked_out_by_it(
-    params, ahead
-):
-    sim = make_sim(params, lockstep=False)
-    sim.start()
-    names = sim.model.joint_names
-    future = sim.on_command(m.effort_to_msg(MSGS, ahead, names, np.ones(len(names))))
-    (report,) = statuses(future, 'hand_sim')
-    assert report.level is DiagnosticLevel.WARN
-    assert 'ahead of the simulation clock' in report.message
-    assert sim.advance() == []  # the refused command is not applied
-    for _ in range(3):
-        assert sim.on_command(m.effort_to_msg(MSGS, sim.t, names, np.zeros(len(names)))) == []
-        assert topics.JOINT_STATES in [o.topic for o in sim.advance()]
-    assert sim.simulator.step_index == 3
+    assert sim.awaited_stamp_ns == sim.stamp_ns == 1_000_000
 
 
 def test_simulator_live_parameters_apply_and_read_only_ones_are_refused(params):

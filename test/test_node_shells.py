@@ -37,6 +37,7 @@ PURE_MODULES = (
     'grasp_safety_filter.nodes.nominal_controller',
     'grasp_safety_filter.nodes.safety_filter',
     'hand_sim_node.endpoint',
+    'hand_sim_node.hardware',
     'hand_sim_node.start_up',
 )
 

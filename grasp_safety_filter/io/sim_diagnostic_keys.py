@@ -41,6 +41,42 @@ class SimKey:
     """When the object dropped (no fingertip touching it), s."""
 
 
+class HardwareKey:
+    """Keys of the ``hand_sim`` status's values in hardware mode (units in the comments).
+
+    :mod:`hand_sim_node.hardware_status` writes them.
+    """
+
+    MODE = 'mode'
+    """``hardware``."""
+    T = 't'
+    """Simulated time since the release (the first command), s."""
+    RELEASED = 'released'
+    """Whether the first command has released the plant (before it, it stands still)."""
+    COMMANDS_RECEIVED = 'commands.received'
+    """Valid commands received."""
+    COMMANDS_REFUSED = 'commands.refused'
+    """Invalid commands refused."""
+    COMMAND_AGE = 'command.age'
+    """Wall-clock time since the last valid command, s (absent before the first)."""
+    COMMAND_TIMED_OUT = 'command.timed_out'
+    """Whether the plant gets the timeout torque now."""
+    TIMEOUT_TORQUE = 'command.timeout_torque'
+    """The torque applied while timed out: ``gravity_compensation`` or ``zero``."""
+    COMMAND_TIMEOUT = 'command.timeout'
+    """``hardware.command_timeout``, s."""
+    TIMEOUTS = 'command.timeouts'
+    """Times the commands timed out since the start."""
+    PERIODS = 'periods.published'
+    """Driver periods whose state was published."""
+    PERIODS_LATE = 'periods.late'
+    """Driver periods integrated late (caught up in a later timer call) since the start."""
+    PERIODS_SKIPPED = 'periods.skipped'
+    """Driver periods beyond the catch-up limit, never integrated (simulated time lost)."""
+    TRACKER_SAMPLES = 'tracker.samples'
+    """Tracker samples published."""
+
+
 @dataclass(frozen=True)
 class PlantEvents:
     """A plant's real contact events over a run (so far).

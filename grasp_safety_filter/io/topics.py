@@ -55,6 +55,7 @@ Durability = Literal['volatile', 'transient_local']
 JOINT_STATES = '/hand/joint_states'
 OBJECT_ODOM = '/object/odom'
 OBJECT_POSE = '/object/pose'
+OBJECT_TRUE_ODOM = '/object/true_odom'
 CONTACTS = '/hand/contacts'
 OBJECT_REFERENCE = '/object/reference'
 OBJECT_REFERENCE_SAMPLE = '/object/reference_sample'
@@ -179,7 +180,9 @@ TOPICS: tuple[TopicSpec, ...] = (
         'sensor_msgs/msg/JointState',
         (HAND_SIM_NODE,),
         STREAM_QOS,
-        'Hand joints by name: position (rad), velocity (rad/s), applied effort (N·m).',
+        'Hand joints by name: position (rad), velocity (rad/s), applied effort (N·m); in '
+        'hardware mode at hardware.rate, stamped with the wall clock, after '
+        'hardware.extra_joints arm joints.',
     ),
     TopicSpec(
         OBJECT_ODOM,
@@ -187,7 +190,8 @@ TOPICS: tuple[TopicSpec, ...] = (
         (HAND_SIM_NODE,),
         STREAM_QOS,
         'Object pose in the palm frame; twist in the object frame (REP 105). From the '
-        "simulator (lockstep: exact, on every tick) or a tracker (input.sync 'latest').",
+        "simulator (lockstep: exact, on every tick) or a tracker (input.sync 'latest'; the "
+        "simulator's hardware mode emulates one: tracker.message 'odometry').",
     ),
     TopicSpec(
         OBJECT_POSE,
@@ -195,7 +199,17 @@ TOPICS: tuple[TopicSpec, ...] = (
         (TRACKER, HAND_SIM_NODE),
         STREAM_QOS,
         'Object pose in the palm frame, stamped with its capture time, no twist: a tracker '
-        "read with input.object_message 'pose' (the simulator's hardware mode emulates one).",
+        "read with input.object_message 'pose' (the simulator's hardware mode emulates one: "
+        "tracker.message 'pose').",
+    ),
+    TopicSpec(
+        OBJECT_TRUE_ODOM,
+        'nav_msgs/msg/Odometry',
+        (HAND_SIM_NODE,),
+        STREAM_QOS,
+        "Hardware mode only: the plant's exact object pose in the palm frame and twist in the "
+        'object frame, stamped as each joint state: ground truth for bags and for the '
+        "controllers' object estimate (no node subscribes to it).",
     ),
     TopicSpec(
         CONTACTS,
@@ -251,7 +265,8 @@ TOPICS: tuple[TopicSpec, ...] = (
         (SAFETY_FILTER_NODE, HAND_SIM_NODE),
         DIAGNOSTICS_QOS,
         'QP status, solve time, relaxation, smallest margins, input hold mode; '
-        'simulator lockstep timeouts.',
+        'simulator lockstep timeouts; hardware mode: command timeouts, refused commands, '
+        'late driver periods.',
     ),
     TopicSpec(
         MARGINS,

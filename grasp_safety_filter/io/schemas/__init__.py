@@ -49,7 +49,12 @@ from grasp_safety_filter.io.schemas.docs import (  # noqa: F401
     parameter_table_markdown,
 )
 from grasp_safety_filter.io.schemas.hand_sim import (  # noqa: F401
+    driver_substeps,
+    GRAVITY_COMPENSATION,
     HAND_SIM_PARAMETERS,
+    hardware_parameter_errors,
+    TIMEOUT_TORQUES,
+    ZERO_TORQUE,
 )
 from grasp_safety_filter.io.schemas.inputs import (  # noqa: F401
     check_command_parameters,

@@ -1,8 +1,17 @@
-"""``HAND_SIM_PARAMETERS``: the simulator's own parameters (initial grasp, integration, run)."""
+"""``HAND_SIM_PARAMETERS``: the simulator's own parameters (initial grasp, integration, run).
+
+``hardware.*`` and ``tracker.*`` configure the hardware mode (``lockstep: false``): a hand's
+driver and an object tracker emulated on the wall clock (:mod:`hand_sim_node.hardware`).
+:func:`hardware_parameter_errors` checks them against each other and ``time_step``.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from grasp_safety_filter.io.parameters import (
+    ParameterError,
     ParameterSpec,
 )
 from grasp_safety_filter.io.plant_schema import PLANT_PARAMETERS
@@ -11,10 +20,30 @@ from grasp_safety_filter.io.schemas.common import (
     DOUBLE,
     DOUBLE_ARRAY,
     EXPECTED_OUTCOMES,
+    INTEGER,
     NO_OUTCOME,
     PAPER_FINGER_JOINT_POSITIONS,
     STRING,
+    STRING_ARRAY,
 )
+from grasp_safety_filter.io.schemas.inputs import (
+    COMMAND_MESSAGES,
+    JOINT_STATE_COMMAND,
+    MODEL_JOINT_ORDER,
+    OBJECT_MESSAGES,
+    ODOMETRY_MESSAGE,
+)
+
+#: ``hardware.timeout_torque`` values: g(q) of our model at the plant's q, or no torque.
+GRAVITY_COMPENSATION = 'gravity_compensation'
+ZERO_TORQUE = 'zero'
+TIMEOUT_TORQUES = (GRAVITY_COMPENSATION, ZERO_TORQUE)
+
+#: Relative tolerance on a driver period being a whole number of ``time_step``.
+PERIOD_TOLERANCE = 1e-9
+
+#: Most joints of an arm the hardware mode can put before the hand's.
+MAX_EXTRA_JOINTS = 1000
 
 HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
@@ -110,7 +139,9 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         'lockstep',
         BOOL,
         True,
-        'Integrate to t_k+1 only after the command stamped t_k arrives',
+        'True: integrate to t_k+1 only after the command stamped t_k arrives (simulation '
+        "time, /clock); false: hardware mode, free-running on the wall clock as a hand's "
+        'driver (hardware.*) and an object tracker (tracker.*) do, use_sim_time false',
         read_only=True,
     ),
     ParameterSpec(
@@ -137,4 +168,169 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         read_only=True,
     ),
     *PLANT_PARAMETERS,
+    ParameterSpec(
+        'hardware.rate',
+        DOUBLE,
+        1000.0,
+        "Hardware mode: the driver's rate; every 1/rate s of wall time the plant is integrated "
+        'by 1/rate s, a whole number of time_step, and its joint states published [Hz]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'hardware.command_timeout',
+        DOUBLE,
+        0.1,
+        'Hardware mode: wall-clock time without a valid command after which the plant gets '
+        'hardware.timeout_torque and /diagnostics an ERROR, until commands resume [s]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'hardware.timeout_torque',
+        STRING,
+        GRAVITY_COMPENSATION,
+        'Hardware mode: torque applied while commands are timed out: gravity_compensation '
+        "(g(q) of the model at the plant's q) or zero",
+        choices=TIMEOUT_TORQUES,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'hardware.command_message',
+        STRING,
+        JOINT_STATE_COMMAND,
+        'Hardware mode: command input, joint_state (sensor_msgs/JointState by joint name on '
+        '/hand/effort_command, any stamp) or float64_multi_array (std_msgs/Float64MultiArray '
+        'on /effort_controller/commands, in hardware.command_joints order)',
+        choices=COMMAND_MESSAGES,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'hardware.command_joints',
+        STRING_ARRAY,
+        [MODEL_JOINT_ORDER],
+        "Hardware mode, float64_multi_array: the effort controller's joints, every model joint "
+        "once, in its order ('model.joint_names': in that order)",
+        read_only=True,
+    ),
+    ParameterSpec(
+        'hardware.extra_joints',
+        INTEGER,
+        0,
+        'Hardware mode: joints of an arm, arm_joint_1..., published first in '
+        '/hand/joint_states at fixed positions, as a joint_state_broadcaster does [-]',
+        min_value=0,
+        max_value=MAX_EXTRA_JOINTS,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'tracker.rate',
+        DOUBLE,
+        100.0,
+        "Hardware mode: rate of the emulated object tracker's pose samples, at most "
+        'hardware.rate [Hz]',
+        min_value=0.0,
+        exclusive_min=True,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'tracker.latency',
+        DOUBLE,
+        0.01,
+        "Hardware mode: delay from a tracker sample's capture (its stamp) to its publication, "
+        'released at the first driver period at or after it [s]',
+        min_value=0.0,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'tracker.position_noise',
+        DOUBLE,
+        0.0005,
+        "Hardware mode: standard deviation of the tracker's position noise, per palm axis [m]",
+        min_value=0.0,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'tracker.orientation_noise',
+        DOUBLE,
+        0.005,
+        "Hardware mode: standard deviation of the tracker's orientation noise per axis, "
+        'applied as exp3(noise) R in the palm frame [rad]',
+        min_value=0.0,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'tracker.message',
+        STRING,
+        ODOMETRY_MESSAGE,
+        'Hardware mode: tracker output, odometry (nav_msgs/Odometry on /object/odom, with '
+        'the true twist) or pose (geometry_msgs/PoseStamped on /object/pose)',
+        choices=OBJECT_MESSAGES,
+        read_only=True,
+    ),
+    ParameterSpec(
+        'tracker.seed',
+        INTEGER,
+        0,
+        "Hardware mode: seed of the tracker's noise [-]",
+        min_value=0,
+        read_only=True,
+    ),
 )
+
+
+def driver_substeps(rate: float, time_step: float) -> int:
+    """Return the integration steps of ``time_step`` s in one driver period of ``rate`` Hz.
+
+    Raises:
+        ParameterError: ``1 / rate`` is not a whole number (>= 1) of ``time_step`` to
+            :data:`PERIOD_TOLERANCE`, naming both parameters.
+    """
+    steps = 1.0 / (rate * time_step)
+    whole = round(steps)
+    if whole < 1 or abs(steps - whole) > PERIOD_TOLERANCE * steps:
+        raise ParameterError(
+            f"parameters 'hardware.rate' and 'time_step': expected the driver period "
+            f'1/hardware.rate to be a whole number of time_step, got hardware.rate = {rate!r} '
+            f'Hz (period {1.0 / rate!r} s) and time_step = {time_step!r} s ({steps:.9g} '
+            'steps); e.g. hardware.rate = 1/(n time_step)'
+        )
+    return whole
+
+
+def hardware_parameter_errors(values: Mapping[str, Any]) -> list[str]:
+    """Return what is wrong with the hardware mode's parameters together (empty: nothing).
+
+    Checked only with ``lockstep`` false (the lockstep mode does not read them): the driver
+    period is a whole number of ``time_step`` (:func:`driver_substeps`), the tracker is not
+    faster than the driver, and ``hardware.command_joints`` names every model joint once.
+    """
+    if values['lockstep']:
+        return []
+    errors: list[str] = []
+    rate = values['hardware.rate']
+    try:
+        driver_substeps(rate, values['time_step'])
+    except ParameterError as error:
+        errors.append(str(error))
+    if values['tracker.rate'] > rate:
+        errors.append(
+            f"parameters 'tracker.rate' and 'hardware.rate': expected a tracker no faster than "
+            f"the driver (it samples the driver's states), got {values['tracker.rate']!r} Hz "
+            f'and {rate!r} Hz'
+        )
+    joints = list(values['hardware.command_joints'])
+    if joints != [MODEL_JOINT_ORDER]:
+        model = list(values['model.joint_names'])
+        unknown = [name for name in joints if name not in model]
+        missing = [name for name in model if name not in joints]
+        twice = sorted({name for name in joints if joints.count(name) > 1})
+        if unknown or missing or twice:
+            errors.append(
+                "parameter 'hardware.command_joints': expected every joint of "
+                f"'model.joint_names' once; not model joints: {unknown}, missing: {missing}, "
+                f'twice: {twice}'
+            )
+    return errors

@@ -16,7 +16,10 @@ from grasp_safety_filter.io.parameters import (
     resolve_relative_paths,
     validate_parameters,
 )
-from grasp_safety_filter.io.schemas.hand_sim import HAND_SIM_PARAMETERS
+from grasp_safety_filter.io.schemas.hand_sim import (
+    HAND_SIM_PARAMETERS,
+    hardware_parameter_errors,
+)
 from grasp_safety_filter.io.schemas.inputs import (
     check_command_parameters,
     check_stream_parameters,
@@ -126,7 +129,9 @@ def check_hand_sim_parameters(values: Mapping[str, Any], source: str = 'paramete
     """Check the simulator's initial state against the model section.
 
     - one initial joint angle per joint of ``model.joint_names``;
-    - the initial orientation is a unit quaternion (to 1e-6).
+    - the initial orientation is a unit quaternion (to 1e-6);
+    - with ``lockstep`` false, the hardware mode's parameters together
+      (:func:`~grasp_safety_filter.io.schemas.hand_sim.hardware_parameter_errors`).
 
     Raises:
         ParameterError: Listing every violation.
@@ -145,6 +150,7 @@ def check_hand_sim_parameters(values: Mapping[str, Any], source: str = 'paramete
             "parameter 'initial.object_orientation': expected a unit quaternion (norm 1 to "
             f'1e-6), got norm {norm!r}'
         )
+    errors += hardware_parameter_errors(values)
     raise_parameter_errors(source, errors, 'inconsistent')
 
 
