@@ -192,6 +192,27 @@ def test_a_tick_waits_for_the_u_nom_stamped_as_its_state_and_drops_a_late_one():
     assert safety_filter.inputs.late_nominal == 1
 
 
+def test_after_a_stall_a_stale_u_nom_is_dropped_and_the_queued_states_are_answered():
+    """A node that stalled 60 ms: its queued u_nom is stale; the states after it still tick."""
+    safety_filter = make_filter(**LATEST)
+    model, joints0, odometry = static_messages(0)
+    safety_filter.on_odom(odometry, now=now_of(0))
+    safety_filter.on_joint_states(joints0, now=now_of(0))
+    assert command_stamps(
+        safety_filter.on_effort_nominal(nominal_msg(model, EPOCH_NS), now=now_of(0))
+    ) == [EPOCH_NS]
+    _, joints1, _ = static_messages(1)
+    assert safety_filter.on_joint_states(joints1, now=now_of(1)) == []
+    late = nominal_msg(model, EPOCH_NS + 1_000_000)
+    assert safety_filter.on_effort_nominal(late, now=now_of(61)) == []
+    assert safety_filter.late_nominal == 1
+    _, joints2, _ = static_messages(62)
+    stamp2 = EPOCH_NS + 62_000_000
+    assert safety_filter.on_joint_states(joints2, now=now_of(62)) == []
+    out = safety_filter.on_effort_nominal(nominal_msg(model, stamp2), now=now_of(62))
+    assert command_stamps(out) == [stamp2]
+
+
 def test_a_u_nom_that_arrives_before_its_state_is_paired_with_it():
     safety_filter = make_filter(**LATEST)
     model, joints0, odometry = static_messages(0)

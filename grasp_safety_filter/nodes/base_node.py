@@ -161,7 +161,12 @@ class EndpointNode(Node):
         return share_directory() / 'config'
 
     def subscribe(
-        self, topic: str, callback: Callable[[Any], None], *, sensor: bool = False
+        self,
+        topic: str,
+        callback: Callable[[Any], None],
+        *,
+        sensor: bool = False,
+        newest_only: bool = False,
     ) -> Any:
         """Subscribe to a topic of the table with its type and QoS.
 
@@ -169,13 +174,19 @@ class EndpointNode(Node):
         subscription to a hand driver's or a tracker's stream should be: it matches reliable
         and best-effort publishers alike (many trackers publish best effort, as rclcpp's
         ``SensorDataQoS``), where a reliable one matches reliable publishers only.
+        ``newest_only``: that, and a history of one: a node that falls behind a driver's
+        stream takes its newest state next, not the states queued before it.
 
         The callback is wrapped by :func:`guarded_callback`: an exception it raises is
         logged (ERROR, throttled) and reported on ``/diagnostics`` (when this node
         publishes them) instead of ending ``rclpy.spin``.
         """
         spec = topic_spec(topic)
-        qos = dataclasses.replace(spec.qos, reliability='best_effort') if sensor else spec.qos
+        qos = spec.qos
+        if sensor or newest_only:
+            qos = dataclasses.replace(qos, reliability='best_effort')
+        if newest_only:
+            qos = dataclasses.replace(qos, depth=1)
         guarded = guarded_callback(topic, callback, self._report_callback_error, self.context.ok)
         return self.create_subscription(
             rclpy_message_class(spec.msgtype), topic, guarded, qos.to_rclpy()

@@ -209,6 +209,8 @@ class LatestTickAssembler(TickAssembler):
 
     def close(self, stamp: int) -> None:
         """Mark the tick of ``stamp`` as answered: drop the older states waiting."""
+        if self.last_tick_ns is not None and stamp < self.last_tick_ns:
+            return  # the ticks' stamps only go forward
         self.last_tick_ns = stamp
         for old in [s for s in self._waiting if s <= stamp]:
             del self._waiting[old]

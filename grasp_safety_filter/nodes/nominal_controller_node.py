@@ -82,7 +82,7 @@ class NominalControllerNode(EndpointNode):
             lambda msg: self.answer(
                 endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
             ),
-            sensor=stream.latest,
+            newest_only=stream.latest,
         )
         self.subscribe(
             stream.object_topic,

@@ -133,6 +133,8 @@ class SafetyFilterEndpoint:
         enabled: Whether u* is filtered (True) or u_nom passed through (False); change it
             with :meth:`switch`.
         last_result: The last tick's :class:`FilterResult` (None when disabled or before).
+        late_nominal: With ``input.sync: latest``, u_nom dropped as stale or out of order
+            (late answers to states already answered or gone).
         held: The hold policy's commands and statuses; input_watchdog: its wall clocks.
 
     """
@@ -190,6 +192,7 @@ class SafetyFilterEndpoint:
             INPUTS, self.topic_names, hints={EFFORT_NOMINAL: NOMINAL_HINT}
         )
         self.ticked = False
+        self.late_nominal = 0
         self._last_rejection: str | None = None
         self._wall_clock = wall_clock
         self._switched_at: float | None = None
@@ -455,15 +458,21 @@ class SafetyFilterEndpoint:
         ``close``: the tick of the command's stamp is closed (not when ``now`` is no clock:
         a garbled first stamp must not close ticks that have not happened). Before the first
         tick, and for a tracker sample with ``input.sync: latest``, no command: a status.
+        With ``latest`` a tick is closed only at a message's own stamp, never at the clock's
+        (the states queued behind a stall are still to be answered), and a stale or
+        out-of-order u_nom is the late answer to a state already gone: dropped.
         """
-        if stamp is None and not isinstance(
-            error, StaleInputError | OutOfOrderError | FutureStampError
-        ):
+        stale = isinstance(error, StaleInputError | OutOfOrderError | FutureStampError)
+        name = self.topic_names.get(topic, topic)
+        if self.stream.latest and topic == EFFORT_NOMINAL and stale and stamp is None:
+            self.late_nominal += 1
+            return []
+        if stamp is None and not stale:
             stamp = self.inputs.current_stamp(msg, now)
         if stamp is None:
             # The message's own stamp is unusable: stamp the command with the clock.
             stamp = self.inputs.clock_stamp(now)
-        name = self.topic_names.get(topic, topic)
+            close = close and not self.stream.latest
         self._last_rejection = str(error)
         if self.stream.latest and topic == OBJECT_ODOM:
             return self.held.ignored(name, error, stamp)  # the ticks go on with the estimate

@@ -119,7 +119,7 @@ class SafetyFilterNode(EndpointNode):
             lambda msg: self.answer(
                 endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
             ),
-            sensor=sensor,
+            newest_only=sensor,
         )
         self.subscribe(
             stream.object_topic,
