@@ -38,7 +38,9 @@ TIMEOUT = 120.0
 
 
 def hardware_graph(tmp_path: Path, enabled: bool, duration: float):
-    nodes = real_hand(CONFIG, simulate=True, enabled=enabled, command_message='float64_multi_array')
+    nodes = real_hand(
+        CONFIG, simulate=True, enabled=enabled, command_message='float64_multi_array'
+    )
     sim, *controllers = nodes
     nodes = [with_overrides(sim, **HARDWARE, duration=duration), *controllers]
     run = run_graph(tmp_path / 'graph', nodes, TIMEOUT, recorder='grasp_recorder')
@@ -58,7 +60,7 @@ def stop_reason(bag) -> str:
 
 
 def test_the_filtered_run_holds_on_a_hands_streams(tmp_path):
-    run, bag = hardware_graph(tmp_path, enabled=True, duration=3.0)
+    _, bag = hardware_graph(tmp_path, enabled=True, duration=3.0)
     assert stop_reason(bag) == 'duration'
     states = [m.header_stamp_ns(msg) for _, msg in bag[topics.JOINT_STATES]]
     assert list(bag[topics.JOINT_STATES][0][1].name[:2]) == ['arm_joint_1', 'arm_joint_2']
