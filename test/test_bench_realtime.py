@@ -146,6 +146,10 @@ FIGURE_CASES = {
         {'relay': []},
         {'median_over_relay': None, 'late_periods': 0, 'relay_ms.count': 0},
     ),
+    'a run that starts at its first answer (a plant released by it)': (
+        {'start_ns': state(3), 'commands': answers(missing=(0, 1, 2))},
+        {'periods': 5, 'computed': 5, 'unanswered': 0},
+    ),
     'no driver records in graph mode': (
         {'driver_lateness': None},
         {'driver_late_periods': None},

@@ -3,8 +3,10 @@
 Pure arithmetic on the records (:class:`RunRecords`), so that it is tested on synthetic
 ones. Every stamp and receipt is ``time.time_ns()`` of the same machine: a state's stamp
 is the driver's clock when it published it, a receipt the monitor's clock when the message
-came in. The first ``warm_up_ns`` after the first state are left out of every figure
-(start-up: the tracker's first samples, the first ticks, DDS settling).
+came in. The first ``warm_up_ns`` of the run are left out of every figure (start-up: the
+tracker's first samples, the first ticks, DDS settling); the run starts with the first state
+or, for a plant that stands still until its first command (the simulator's hardware mode),
+with the first state answered (``start_ns``).
 
 - **Periods**: the states published in the measured window.
 - **Computed**: periods answered by a command stamped as their state that is not a hold or
@@ -75,6 +77,7 @@ class RunRecords:
         driver_lateness: Per state, how late the driver published it after its due time,
             ns (None: the driver records none, e.g. the simulator's hardware mode).
         cpu_samples: ``(time.time_ns(), {process: CPU s so far})`` readings, in order.
+        start_ns: Where the run starts, ns (None: at the first state).
     """
 
     period_ns: int
@@ -85,6 +88,7 @@ class RunRecords:
     statuses: Sequence[FilterStatusRecord] = ()
     driver_lateness: Sequence[int] | None = None
     cpu_samples: Sequence[tuple[int, Mapping[str, float]]] = field(default_factory=list)
+    start_ns: int | None = None
 
 
 def first_receipts(received: Sequence[tuple[int, int]]) -> dict[int, int]:
@@ -104,7 +108,8 @@ def window(records: RunRecords) -> tuple[int, int]:
     """
     if not records.states:
         raise ValueError('no state was published: nothing to measure')
-    return records.states[0] + records.warm_up_ns, records.states[-1]
+    start = records.states[0] if records.start_ns is None else records.start_ns
+    return start + records.warm_up_ns, records.states[-1]
 
 
 def _ms(values_ns: Sequence[int]) -> dict[str, float | None]:

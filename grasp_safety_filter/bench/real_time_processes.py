@@ -359,14 +359,18 @@ def run_graph_case(
     states = sorted({stamp for stamp, _ in _pairs(monitor, JOINT_STATES)})
     if not states:
         raise RuntimeError(f'hand_sim_node published no state (exit code {code}):\n{log}')
+    commands = _pairs(monitor, EFFORT_COMMAND)
+    # The plant stands still until its first command (the release): the run starts there.
+    answered = set(states).intersection(stamp for stamp, _ in commands)
     records = RunRecords(
         period_ns=case.period_ns,
         warm_up_ns=round(warm_up * 1e9),
         states=states,
-        commands=_pairs(monitor, EFFORT_COMMAND),
+        commands=commands,
         relay=_pairs(monitor, RELAY_TOPIC),
         statuses=_statuses(monitor),
         cpu_samples=samples,
+        start_ns=min(answered) if answered else None,
     )
     outcome = {
         'exit_code': code,
