@@ -78,6 +78,7 @@ setup(
             'grasp-analyze = grasp_safety_filter.console:analyze',
             'grasp-bench = grasp_safety_filter.bench:bench_main',
             'grasp-bench-ros = grasp_safety_filter.bench_ros:bench_ros_main',
+            'grasp-bench-realtime = grasp_safety_filter.bench.real_time:main',
             'grasp-record = grasp_safety_filter.console:record',
             'grasp-model-report = grasp_safety_filter.cli:model_report_main',
             'hand_sim_node = grasp_safety_filter.nodes.entry_points:hand_sim_node',

@@ -70,8 +70,8 @@ def _ignore(_: Any) -> None:
     """Take a message and drop it."""
 
 
-def _cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a process so far, s."""
+def cpu_seconds(pid: int) -> float:
+    """Return the user + system CPU time of a process so far (``/proc/<pid>/stat``), s."""
     fields = Path(f'/proc/{pid}/stat').read_text(encoding='ascii').rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
@@ -238,7 +238,7 @@ def graph_run(
                     sampled = time.monotonic()
                     for name, process in processes.items():
                         if process.poll() is None:
-                            cpu[name] = _cpu_seconds(process.pid)
+                            cpu[name] = cpu_seconds(process.pid)
                             cpu_start.setdefault(name, cpu[name])
             if simulator.poll() is None:
                 raise RuntimeError(f'the graph did not finish {duration} s within {timeout} s')

@@ -38,6 +38,10 @@ Modules: :mod:`.recorded_run` (1, 4), :mod:`.replay` (2), :mod:`.external_solver
 same run, ``--compare-config``), :mod:`.machine` (machine facts and noise floor),
 :mod:`.node_callbacks` (4),
 :mod:`.report` (the document and its table), :mod:`.command_line`.
+
+``grasp-bench-realtime`` (:mod:`.real_time`) measures the filter node in real time over
+DDS instead, on a driver's and a tracker's streams; its modules (``real_time_*``) are not
+imported here.
 """
 
 from __future__ import annotations
