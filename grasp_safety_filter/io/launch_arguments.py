@@ -213,17 +213,7 @@ def safety_filter_alone(
         ValueError: An unknown remapping argument.
 
     """
-    remaps = dict(remaps or {})
-    unknown = sorted(set(remaps) - set(REMAPPED_TOPICS))
-    if unknown:
-        raise ValueError(
-            f'remappings: unknown arguments {unknown}; known: {sorted(REMAPPED_TOPICS)}'
-        )
-    remappings = tuple(
-        (topic, remaps[name])
-        for name, topic in REMAPPED_TOPICS.items()
-        if remaps.get(name, topic) != topic
-    )
+    remappings = _remappings(remaps, REMAPPED_TOPICS)
     return NodeLaunch(
         SAFETY_FILTER_NODE,
         SAFETY_FILTER_NODE,
@@ -280,17 +270,7 @@ def real_hand(
         ValueError: An unknown remapping argument.
 
     """
-    remaps = dict(remaps or {})
-    unknown = sorted(set(remaps) - set(REAL_HAND_TOPICS))
-    if unknown:
-        raise ValueError(
-            f'remappings: unknown arguments {unknown}; known: {sorted(REAL_HAND_TOPICS)}'
-        )
-    remappings = tuple(
-        (topic, remaps[name])
-        for name, topic in REAL_HAND_TOPICS.items()
-        if remaps.get(name, topic) != topic
-    )
+    remappings = _remappings(remaps, REAL_HAND_TOPICS)
     files = (str(config),)
     streams = {
         'use_sim_time': False,
@@ -318,6 +298,24 @@ def real_hand(
         NodeLaunch(SAFETY_FILTER_NODE, SAFETY_FILTER_NODE, files, filter_overrides, remappings)
     )
     return nodes
+
+
+def _remappings(
+    remaps: Mapping[str, str] | None, table: Mapping[str, str]
+) -> tuple[tuple[str, str], ...]:
+    """Return ``(topic, target)`` for each launch argument of ``table`` remapped elsewhere.
+
+    Raises:
+        ValueError: An argument ``table`` does not have.
+
+    """
+    remaps = dict(remaps or {})
+    unknown = sorted(set(remaps) - set(table))
+    if unknown:
+        raise ValueError(f'remappings: unknown arguments {unknown}; known: {sorted(table)}')
+    return tuple(
+        (topic, remaps[name]) for name, topic in table.items() if remaps.get(name, topic) != topic
+    )
 
 
 def recorder_command(
