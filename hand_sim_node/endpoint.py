@@ -88,6 +88,8 @@ from hand_sim_node.sim_status import (
     DIAGNOSTIC_NAME,
     DURATION,
     end_of_run_report,
+    run_finished,
+    run_stop_reason,
 )
 from hand_sim_node.simulator import Simulator
 
@@ -187,14 +189,12 @@ class HandSimEndpoint:
     @property
     def finished(self) -> bool:
         """Whether the run is over (duration reached or stopped on an event)."""
-        return self.plant.stop_reason is not None or self.plant.step_index >= self.config.n_steps
+        return run_finished(self.plant)
 
     @property
     def stop_reason(self) -> str | None:
         """``"duration"``, the plant's stop reason, or None while the run goes on."""
-        if self.plant.stop_reason is not None:
-            return self.plant.stop_reason
-        return DURATION if self.finished else None
+        return run_stop_reason(self.plant)
 
     @property
     def t(self) -> float:

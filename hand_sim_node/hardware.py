@@ -81,8 +81,9 @@ from hand_sim_node.plant import Plant, PlantConfig
 from hand_sim_node.sim_status import (
     clip_to_limits,
     contact_event_report,
-    DURATION,
     end_of_run_report,
+    run_finished,
+    run_stop_reason,
 )
 from hand_sim_node.tracker import TrackerEmulator
 
@@ -192,14 +193,12 @@ class HardwareEndpoint:
     @property
     def finished(self) -> bool:
         """Whether the run is over (``duration`` after the release, or a plant stop)."""
-        return self.plant.stop_reason is not None or self.plant.step_index >= self.config.n_steps
+        return run_finished(self.plant)
 
     @property
     def stop_reason(self) -> str | None:
         """``"duration"``, the plant's stop reason, or None while the run goes on."""
-        if self.plant.stop_reason is not None:
-            return self.plant.stop_reason
-        return DURATION if self.finished else None
+        return run_stop_reason(self.plant)
 
     @property
     def t(self) -> float:
