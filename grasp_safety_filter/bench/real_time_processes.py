@@ -274,7 +274,10 @@ def run_filter_case(
     driver_input = write_driver_input(directory / 'driver.npz', recording, plan, object_message)
     bin_dir = Path(sys.executable).parent
     with ProcessGroup(directory, env) as group:
-        group.start('monitor', _monitor_command(directory, False, [EFFORT_COMMAND, RELAY_TOPIC]))
+        # The filter subscribes once its kernels are loaded (a first start compiles them):
+        # its publishers alone would start the driver before it can answer.
+        ready = [EFFORT_COMMAND, RELAY_TOPIC, f'{EFFORT_NOMINAL}=1', f'{JOINT_STATES}=2']
+        group.start('monitor', _monitor_command(directory, False, ready))
         group.start('relay', module_command('real_time_nodes', 'relay'))
         node = filter_launch(config, case, object_message)
         group.start(SAFETY_FILTER_NODE, node.command(bin_dir))
