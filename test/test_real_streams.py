@@ -9,6 +9,7 @@ ros2_control's ``Float64MultiArray`` form, and reports that name the remapped to
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from hand_streams import EPOCH_NS, MSGS, run_streams, Streams, through_cdr
@@ -143,19 +144,23 @@ def test_the_papers_outcome_on_real_streams(enabled, stop):
 # Which u_nom a tick takes
 
 
-def static_messages(k: int, offset_ns: int = 0):
-    """Return the initial grasp at rest as sample k of a 1 kHz driver (joints, odometry)."""
+@functools.cache
+def _initial_grasp() -> tuple[GraspModel, np.ndarray, np.ndarray, np.ndarray]:
+    """Return the paper's model, and its initial q (rad), object position (m) and R."""
     values = node_values('hand_sim_node')
-    model = GraspModel.from_parameters(values)
     config = SimConfig.from_parameters(values)
-    stamp = EPOCH_NS + k * 1_000_000 + offset_ns
-    q = np.asarray(config.initial_joint_positions)
-    joints = m.joint_state_to_msg(MSGS, stamp, model.joint_names, q, np.zeros_like(q), None)
     x, y, z, w = config.initial_object_orientation
     R = m.matrix_from_quaternion_xyzw(np.array([x, y, z, w]))
-    odometry = m.odometry_to_msg(
-        MSGS, stamp, np.asarray(config.initial_object_position), R, np.zeros(6)
-    )
+    q = np.asarray(config.initial_joint_positions)
+    return GraspModel.from_parameters(values), q, np.asarray(config.initial_object_position), R
+
+
+def static_messages(k: int, offset_ns: int = 0):
+    """Return the initial grasp at rest as sample k of a 1 kHz driver (joints, odometry)."""
+    model, q, p, R = _initial_grasp()
+    stamp = EPOCH_NS + k * 1_000_000 + offset_ns
+    joints = m.joint_state_to_msg(MSGS, stamp, model.joint_names, q, np.zeros_like(q), None)
+    odometry = m.odometry_to_msg(MSGS, stamp, p, R, np.zeros(6))
     return model, through_cdr(joints), through_cdr(odometry)
 
 
