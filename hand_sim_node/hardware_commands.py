@@ -23,12 +23,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from grasp_safety_filter.io.messages import (
-    array_field,
-    effort_array_from_msg,
-    joint_order,
-    match_names,
-)
+from grasp_safety_filter.io.messages import effort_array_from_msg, effort_values, joint_order
 from grasp_safety_filter.io.schemas import FLOAT64_MULTI_ARRAY_COMMAND, ZERO_TORQUE
 from grasp_safety_filter.model.grasp_model import GraspModel
 from hand_sim_node.hardware_config import HardwareConfig
@@ -65,12 +60,7 @@ class CommandReader:
         """
         if self._order is not None:
             return effort_array_from_msg(msg, self._order, self.topic)
-        order = match_names(self.topic, msg.name, self.model_joints, 'joint')
-        names = msg.name
-        effort = array_field(self.topic, msg.effort, 'effort', names, required=True)
-        for field_name in ('position', 'velocity'):
-            array_field(self.topic, getattr(msg, field_name), field_name, names, required=False)
-        return np.array(effort[order])
+        return effort_values(msg, self.model_joints, self.topic)
 
 
 class SafeTorque:

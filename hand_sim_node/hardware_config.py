@@ -20,6 +20,7 @@ from grasp_safety_filter.io.schemas import (
     HAND_SIM_PARAMETERS,
     hardware_parameter_errors,
     MODEL_JOINT_ORDER,
+    model_joint_order,
     ODOMETRY_MESSAGE,
 )
 from grasp_safety_filter.io.topics import (
@@ -124,9 +125,7 @@ class HardwareConfig:
 
     def joint_order(self, model_joints: list[str]) -> list[str]:
         """Return the Float64MultiArray's joints (the sentinel resolved to ``model_joints``)."""
-        if list(self.command_joints) == [MODEL_JOINT_ORDER]:
-            return list(model_joints)
-        return list(self.command_joints)
+        return model_joint_order(self.command_joints, model_joints)
 
     def extra_joint_names(self) -> list[str]:
         """Return ``arm_joint_1`` ... ``arm_joint_<extra_joints>``."""

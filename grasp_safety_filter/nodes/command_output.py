@@ -30,6 +30,7 @@ from grasp_safety_filter.io.schemas import (
     FLOAT64_MULTI_ARRAY_COMMAND,
     JOINT_STATE_COMMAND,
     MODEL_JOINT_ORDER,
+    model_joint_order,
 )
 from grasp_safety_filter.io.topics import EFFORT_COMMAND, EFFORT_CONTROLLER_COMMANDS
 from grasp_safety_filter.nodes.outgoing import Outgoing
@@ -41,21 +42,20 @@ class CommandConfig:
 
     Attributes:
         message: ``joint_state`` or ``float64_multi_array``.
-        joints: The effort controller's joint order; empty: the model's.
+        joints: The effort controller's joint order (``[MODEL_JOINT_ORDER]``: the model's).
 
     """
 
     message: str = JOINT_STATE_COMMAND
-    joints: tuple[str, ...] = ()
+    joints: tuple[str, ...] = (MODEL_JOINT_ORDER,)
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> CommandConfig:
         """Build from the filter node's ``command.*`` parameters."""
         flat = flatten_parameters(params)
-        joints = tuple(flat.get('command.joints', (MODEL_JOINT_ORDER,)))
         return cls(
             str(flat.get('command.message', JOINT_STATE_COMMAND)),
-            () if joints == (MODEL_JOINT_ORDER,) else joints,
+            tuple(flat.get('command.joints', (MODEL_JOINT_ORDER,))),
         )
 
 
@@ -85,7 +85,8 @@ class CommandOutput:
         if config.message == FLOAT64_MULTI_ARRAY_COMMAND:
             try:
                 self._order = joint_order(
-                    "parameter 'command.joints'", config.joints or self._joint_names,
+                    "parameter 'command.joints'",
+                    model_joint_order(config.joints, self._joint_names),
                     self._joint_names,
                 )
             except MessageError as error:

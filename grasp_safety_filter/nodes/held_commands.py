@@ -35,10 +35,7 @@ from grasp_safety_filter.nodes.command_output import CommandOutput
 from grasp_safety_filter.nodes.grasp_watch import findings_text, GraspWatch
 from grasp_safety_filter.nodes.input_watchdog import Silence
 from grasp_safety_filter.nodes.outgoing import Outgoing
-from grasp_safety_filter.nodes.publication_rate import PublicationRate
-
-#: Least stamp interval between two reports of ignored input, ns.
-IGNORED_REPORT_PERIOD_NS = 1_000_000_000
+from grasp_safety_filter.nodes.publication_rate import PublicationRate, ReportThrottle
 
 #: Builds the ``safety_filter`` status: stamp (integer ns, or s), level, summary, values.
 StatusBuilder = Callable[[Stamp, DiagnosticLevel, str, dict[str, Any]], Outgoing]
@@ -79,8 +76,7 @@ class HeldCommands:
         self.status = status
         self.last_positions: np.ndarray | None = None
         self.ignored_count = 0
-        self._ignored_since: dict[str, int] = {}
-        self._ignored_reported_ns: dict[str, int] = {}
+        self._reports = ReportThrottle()
         self._joint_names = list(model.joint_names)
 
     def gravity(self) -> tuple[np.ndarray | None, str]:
@@ -109,25 +105,22 @@ class HeldCommands:
         Before the filter's first tick (a driver that holds its position until commanded must
         not get a torque from a filter that has not computed one yet) and for a tracker
         sample (the ticks go on with the object's estimate). A stream rejected at the
-        driver's rate is reported once per :data:`IGNORED_REPORT_PERIOD_NS` of stamps per
-        topic, with the count since the last report.
+        driver's rate is reported once a second of stamps per topic, with the count since the
+        last report (:class:`~grasp_safety_filter.nodes.publication_rate.ReportThrottle`).
         """
         self.ignored_count += 1
-        self._ignored_since[topic] = self._ignored_since.get(topic, 0) + 1
-        last = self._ignored_reported_ns.get(topic)
-        if last is not None and 0 <= stamp - last < IGNORED_REPORT_PERIOD_NS:
+        since = self._reports.due(topic, stamp)
+        if since is None:
             return []
-        self._ignored_reported_ns[topic] = stamp
         values: dict[str, Any] = {
             Key.STATUS: TickStatus.INPUT_IGNORED.value,
             Key.INPUT_TOPIC: topic,
             Key.INPUT_IGNORED: self.ignored_count,
         }
         text = bounded_text(
-            f'input rejected, no command sent ({self._ignored_since[topic]} on {topic} since '
-            f'the last report): {error}'
+            f'input rejected, no command sent ({since} on {topic} since the last report): '
+            f'{error}'
         )
-        self._ignored_since[topic] = 0
         return [self.status(stamp, DiagnosticLevel.WARN, text, values)]
 
     def rejected(self, topic: str, error: Exception, stamp: int, now: float) -> list[Outgoing]:

@@ -74,7 +74,7 @@ from grasp_safety_filter.io.messages import (
     odometry_to_msg,
     reference_from_msg,
     ReferenceTrajectory,
-    Stamp,
+    seconds_to_nanoseconds,
 )
 from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
@@ -95,13 +95,11 @@ from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
 from grasp_safety_filter.nodes.nominal_inputs import NominalInputs, Rejection, Tick
 from grasp_safety_filter.nodes.object_stream import EXACT, StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.publication_rate import ReportThrottle
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 
 #: Name of the nominal controller's ``DiagnosticStatus``.
 DIAGNOSTIC_NAME = NOMINAL_DIAGNOSTIC
-
-#: Least interval between two reports of rejected input, s (node clock).
-REJECTION_REPORT_PERIOD = 1.0
 
 #: The inputs of a tick.
 INPUTS = (JOINT_STATES, OBJECT_ODOM)
@@ -157,8 +155,7 @@ class NominalControllerEndpoint:
         self.input_watchdog = InputWatchdog(INPUTS, self.topic_names)
         self.ticked = False
         self.rejected_count = 0
-        self._rejected_since = 0
-        self._rejection_reported: float | None = None
+        self._reports = ReportThrottle()
         self._last_rejection: str | None = None
         self._joint_names = list(model.joint_names)
         self._joint_name_tuple = tuple(self._joint_names)
@@ -394,27 +391,18 @@ class NominalControllerEndpoint:
         ``now`` (s), else the last tick's stamp.
         """
         self.rejected_count += 1
-        self._rejected_since += 1
         self._last_rejection = str(error)
-        if stamp is not None:
-            at: Stamp = stamp
-        elif now is not None:
-            at = max(now, 0.0)
-        else:
-            at = self._last_tick_ns or 0
-        seconds = at / 1e9 if isinstance(at, int) else at
-        last = self._rejection_reported
-        if last is not None and 0.0 <= seconds - last < REJECTION_REPORT_PERIOD:
+        if stamp is None and now is not None:
+            stamp = seconds_to_nanoseconds(max(now, 0.0))
+        elif stamp is None:
+            stamp = self._last_tick_ns or 0
+        since = self._reports.due('input', stamp)
+        if since is None:
             return []
-        self._rejection_reported = seconds
         report = DiagnosticReport.create(
             DIAGNOSTIC_NAME,
             DiagnosticLevel.WARN,
-            bounded_text(
-                f'input rejected, no command ({self._rejected_since} since the last '
-                f'report): {error}'
-            ),
+            bounded_text(f'input rejected, no command ({since} since the last report): {error}'),
             {'input.rejected': True, 'input.rejected_count': self.rejected_count},
         )
-        self._rejected_since = 0
-        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, at, report))]
+        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report))]

@@ -14,6 +14,11 @@ and ``/safety_filter/margins`` go out:
   analysis counts the run's ticks exactly.
 - ``margins.period`` (s, 0: every tick): the margins go out once per period.
 
+Input rejected where no command answers it (before a controller's first tick, a bad tracker
+sample) is reported at most once per :data:`REPORT_PERIOD_NS` of stamps per input, with the
+count since the last report (:class:`ReportThrottle`): a stream refused at 1 kHz must not
+cost a status message per sample.
+
 Decisions depend only on tick stamps, never on the wall clock, so the ROS graph and the
 lockstep runner publish the same messages.
 """
@@ -114,3 +119,27 @@ class PublicationRate:
 def _due(stamp: int, last: int | None, period: int) -> bool:
     """Whether a period has passed since ``last`` (ns; a stamp going back counts as due)."""
     return last is None or period <= 0 or not 0 <= stamp - last < period
+
+
+#: Least stamp interval between two reports of rejected input of one kind, ns.
+REPORT_PERIOD_NS = 1_000_000_000
+
+
+class ReportThrottle:
+    """At most one report per :data:`REPORT_PERIOD_NS` of stamps per key (module docstring)."""
+
+    def __init__(self) -> None:
+        self._since: Counter[str] = Counter()
+        self._reported_ns: dict[str, int] = {}
+
+    def due(self, key: str, stamp_ns: int) -> int | None:
+        """Count an event of ``key`` at ``stamp_ns`` (ns); return the count to report, or None.
+
+        The count is of the events since the last report, this one included; a stamp going
+        back counts as due.
+        """
+        self._since[key] += 1
+        if not _due(stamp_ns, self._reported_ns.get(key), REPORT_PERIOD_NS):
+            return None
+        self._reported_ns[key] = stamp_ns
+        return self._since.pop(key)

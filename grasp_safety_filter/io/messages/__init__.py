@@ -101,6 +101,7 @@ from grasp_safety_filter.io.messages.fields import (  # noqa: F401
 from grasp_safety_filter.io.messages.joint_states import (  # noqa: F401
     effort_from_msg,
     effort_to_msg,
+    effort_values,
     EffortData,
     joint_state_from_msg,
     joint_state_to_msg,

@@ -145,13 +145,14 @@ def effort_to_msg(
     return joint_state_to_msg(msgs, t, names, None, None, effort)
 
 
-def effort_from_msg(
+def effort_values(
     msg: Any, joint_names: Sequence[str], source: str = 'effort JointState'
-) -> EffortData:
-    """Parse an effort-only JointState of exactly ``joint_names``.
+) -> np.ndarray:
+    """Return the efforts of an effort-only JointState of exactly ``joint_names``, N·m.
 
     Position and velocity may be empty or have one entry per name (then ignored but still
-    checked to be finite, since a producer that sends them garbage is not trusted).
+    checked to be finite, since a producer that sends them garbage is not trusted). The
+    stamp is not read (a hand driver does not check it).
 
     Raises:
         MessageError: As :func:`joint_state_from_msg`.
@@ -162,5 +163,18 @@ def effort_from_msg(
     effort = array_field(source, msg.effort, 'effort', names, required=True)
     for f in ('position', 'velocity'):
         array_field(source, getattr(msg, f), f, names, required=False)
+    return effort[order]
+
+
+def effort_from_msg(
+    msg: Any, joint_names: Sequence[str], source: str = 'effort JointState'
+) -> EffortData:
+    """Parse an effort-only JointState of exactly ``joint_names``: its efforts and stamp.
+
+    Raises:
+        MessageError: As :func:`effort_values`, or a stamp that is no time.
+
+    """
+    effort = effort_values(msg, joint_names, source)
     stamp_ns = time_msg_to_nanoseconds(msg.header.stamp, f'{source}: header.stamp')
-    return EffortData(t=nanoseconds_to_seconds(stamp_ns), stamp_ns=stamp_ns, effort=effort[order])
+    return EffortData(t=nanoseconds_to_seconds(stamp_ns), stamp_ns=stamp_ns, effort=effort)

@@ -28,6 +28,7 @@ from grasp_safety_filter.io.schemas.common import (
 )
 from grasp_safety_filter.io.schemas.inputs import (
     COMMAND_MESSAGES,
+    joint_order_errors,
     JOINT_STATE_COMMAND,
     MODEL_JOINT_ORDER,
     OBJECT_MESSAGES,
@@ -321,16 +322,7 @@ def hardware_parameter_errors(values: Mapping[str, Any]) -> list[str]:
             f"the driver (it samples the driver's states), got {values['tracker.rate']!r} Hz "
             f'and {rate!r} Hz'
         )
-    joints = list(values['hardware.command_joints'])
-    if joints != [MODEL_JOINT_ORDER]:
-        model = list(values['model.joint_names'])
-        unknown = [name for name in joints if name not in model]
-        missing = [name for name in model if name not in joints]
-        twice = sorted({name for name in joints if joints.count(name) > 1})
-        if unknown or missing or twice:
-            errors.append(
-                "parameter 'hardware.command_joints': expected every joint of "
-                f"'model.joint_names' once; not model joints: {unknown}, missing: {missing}, "
-                f'twice: {twice}'
-            )
+    errors += joint_order_errors(
+        'hardware.command_joints', values['hardware.command_joints'], values['model.joint_names']
+    )
     return errors

@@ -15,7 +15,7 @@ they cannot go under ``/**``):
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from grasp_safety_filter.io.parameters import ParameterSpec, raise_parameter_errors
@@ -123,25 +123,44 @@ def check_stream_parameters(values: Mapping[str, Any], source: str = 'parameters
         )
 
 
+def model_joint_order(joints: Sequence[str], model_joints: Sequence[str]) -> list[str]:
+    """Return an effort controller's joint order: ``joints``, or the model's for the sentinel.
+
+    ``command.joints`` and ``hardware.command_joints`` default to
+    ``[`` :data:`MODEL_JOINT_ORDER` ``]``: the model's own order.
+    """
+    return list(model_joints) if list(joints) == [MODEL_JOINT_ORDER] else list(joints)
+
+
+def joint_order_errors(
+    parameter: str, joints: Sequence[str], model_joints: Sequence[str]
+) -> list[str]:
+    """Return why ``parameter`` (a joint order) does not name every model joint once, if so.
+
+    The sentinel :data:`MODEL_JOINT_ORDER` is always right.
+    """
+    joints = list(joints)
+    if joints == [MODEL_JOINT_ORDER]:
+        return []
+    model = list(model_joints)
+    unknown = [name for name in joints if name not in model]
+    missing = [name for name in model if name not in joints]
+    twice = sorted({name for name in joints if joints.count(name) > 1})
+    if not (unknown or missing or twice):
+        return []
+    return [
+        f"parameter '{parameter}': expected every joint of 'model.joint_names' once; not model "
+        f'joints: {unknown}, missing: {missing}, twice: {twice}'
+    ]
+
+
 def check_command_parameters(values: Mapping[str, Any], source: str = 'parameters') -> None:
-    """``command.joints``, when given, names every model joint exactly once.
+    """Refuse a ``command.joints`` that does not name every model joint exactly once.
 
     Raises:
         ParameterError: Naming the joints that are not the model's and those missing.
     """
-    joints = list(values['command.joints'])
-    if joints == [MODEL_JOINT_ORDER]:
-        return
-    model = list(values['model.joint_names'])
-    unknown = [name for name in joints if name not in model]
-    missing = [name for name in model if name not in joints]
-    twice = sorted({name for name in joints if joints.count(name) > 1})
-    if unknown or missing or twice:
-        raise_parameter_errors(
-            source,
-            [
-                "parameter 'command.joints': expected every joint of 'model.joint_names' "
-                f'once; not model joints: {unknown}, missing: {missing}, twice: {twice}'
-            ],
-            'inconsistent',
-        )
+    errors = joint_order_errors(
+        'command.joints', values['command.joints'], values['model.joint_names']
+    )
+    raise_parameter_errors(source, errors, 'inconsistent')
