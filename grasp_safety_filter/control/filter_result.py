@@ -16,12 +16,7 @@ class FilterStatus(str, Enum):
     NOMINAL = 'nominal'
     """u_nom satisfies every row and the box: ``u* = u_nom``, no QP solved."""
     SOLVED = 'solved'
-    """The hard QP's optimum as the backend found it: daqp's, or with OSQP its certified
-    answer or the optimum on a guessed active set (the previous tick's, with no OSQP call
-    and ``iterations == 0``, or OSQP's) satisfying the KKT conditions."""
-    SOLVED_ACTIVE_SET = 'solved_active_set'
-    """The hard QP's optimum, reached by an exact active-set refinement that added or
-    dropped rows of the backend's guess (OSQP)."""
+    """The hard QP's optimum, as the backend found and checked it."""
     RELAXED = 'relaxed'
     """The hard QP is infeasible: the relaxed QP's solution."""
     FALLBACK_LAST_GOOD = 'fallback_last_good'
@@ -38,7 +33,7 @@ class FilterResult:
         u: The filtered torque u*, shape (m,), N·m: finite, inside the actuator box.
         status: How it was obtained (:class:`FilterStatus`; compares equal to its string).
         relaxed: True when u* is not certified to satisfy every row (status ``relaxed`` or
-            a fallback); False for ``nominal``, ``solved`` and ``solved_active_set``.
+            a fallback); False for ``nominal`` and ``solved``.
         relaxed_families: Families with a row violated at u* by more than
             ``FEASIBILITY_TOLERANCE`` (:mod:`~grasp_safety_filter.control.qp_solvers`), in
             stack order.
@@ -49,13 +44,9 @@ class FilterResult:
             included) and of the actuator bounds u* touches. ``margins`` and ``active``
             are properties, computed the first time they are read, then kept.
         solve_time: Wall time spent in the QP backend (the hard problem, the relaxed one
-            when needed), s; 0 when no QP was solved. A tick solved on the previous
-            active set by the fused pass (:mod:`~grasp_safety_filter.control.fused_tick`):
-            that whole pass's time, the rows and checks included.
-        iterations: The backend's solver iterations (both QPs when relaxed); 0 when it was
-            not called (no QP solved; OSQP: the previous tick's active set certified).
-        active_set_steps: Add/drop steps of an exact active-set refinement after the
-            solver (OSQP's backend; 0 when its guess was optimal).
+            when needed), s; 0 when no QP was solved.
+        iterations: The backend's solver iterations (both QPs when relaxed); 0 when no
+            QP was solved.
         max_violation: ``max(0, max_r (lower_r - A_r u*))``, in the rows' own units.
         row_values: What gives ``margins`` and ``active`` (on first read, then kept).
     """
@@ -66,7 +57,6 @@ class FilterResult:
     relaxed_families: tuple[str, ...]
     solve_time: float
     iterations: int
-    active_set_steps: int
     max_violation: float
     row_values: RowValues = field(repr=False, compare=False)
 

@@ -15,11 +15,9 @@
 
 Every form of the QP reads the metric through one factor: the lower-triangular Cholesky
 factor R of ``W^-1 = M_h / c = R R^T``. With ``x = R^-1 u``, ``du^T W du = ||x - x_nom||^2``:
-the problem stays a least-distance problem in x with rows ``(A R) x >= lower`` (the
-actuator box becomes the rows ``u_min <= R x <= u_max``, held exactly as any other row), so
-the exact active-set method (:mod:`~grasp_safety_filter.control.least_distance`) applies
-unchanged; solvers that take a general cost (OSQP, daqp) get ``W = (R R^T)^-1`` and keep the
-box as bounds on u.
+the problem stays a least-distance problem in x with rows ``(A R) x >= lower``. The solvers
+(OSQP, daqp) take a general cost: they get ``W = (R R^T)^-1`` and keep the box as bounds
+on u; the relaxed problem's slacks are normalised by the rows' dual norms ``||R^T A_r||``.
 """
 
 from __future__ import annotations

@@ -90,22 +90,13 @@ class ResultAssembler:
         rows: tuple[np.ndarray, np.ndarray],
         solve_time: float,
         iterations: int,
-        active_set_steps: int = 0,
-        computed: tuple[np.ndarray, float] | None = None,
     ) -> FilterResult:
-        """Return the result for u* (made read-only) on this tick's rows ``(A, lower)``.
-
-        ``computed``: ``(slack, smallest)`` as :func:`residuals` gives them (``slack`` of
-        :attr:`names`' length), when a compiled pass already computed them at u*.
-        """
+        """Return the result for u* (made read-only) on this tick's rows ``(A, lower)``."""
         u.setflags(write=False)
         k = len(self.row_names)
         # Residuals then (when read) box margins, side by side, for the active-row test.
-        if computed is None:
-            slack = np.empty(len(self.names))
-            smallest = residuals(*rows, u, slack)  # slack[:k] = A u - lower
-        else:
-            slack, smallest = computed
+        slack = np.empty(len(self.names))
+        smallest = residuals(*rows, u, slack)  # slack[:k] = A u - lower
         relaxed_families: tuple[str, ...] = ()
         worst = 0.0
         # The minimum is NaN when a row is: NaN rows count as violated, as in the test below.
@@ -130,7 +121,6 @@ class ResultAssembler:
             relaxed_families=relaxed_families,
             solve_time=solve_time,
             iterations=iterations,
-            active_set_steps=active_set_steps,
             max_violation=worst if worst == worst else float('inf'),  # NaN rows: unknown
             row_values=RowValues(
                 self.names,

@@ -20,9 +20,9 @@ instead, :mod:`~grasp_safety_filter.control.qp_metric`; the tick's M_h gives W.)
    (it is the optimum; no solver call). Status ``nominal``.
 3. **Problem and solve.** The hard :class:`~grasp_safety_filter.control.qp_solvers.Problem`
    (``g = -u_nom``, the rows, the box) goes to the backend chosen by ``qp.solver``
-   (:mod:`~grasp_safety_filter.control.qp_solvers`: OSQP, certified or refined exactly, or
-   daqp), warm-started from its previous tick. An optimal answer is status ``solved``, or
-   ``solved_active_set`` when an exact active-set refinement had to add or drop rows.
+   (:mod:`~grasp_safety_filter.control.qp_solvers`: OSQP, its answer KKT-checked and
+   finished by daqp when the check fails; or daqp), warm-started from its previous tick.
+   An optimal answer is status ``solved``.
 4. **Relaxed if infeasible.** Otherwise (the paper's Assumption 5 fails) the relaxed
    problem (one slack per barrier row, normalised to N·m and weighted per family; the
    actuator box stays hard) goes to the same backend. Status ``relaxed``; the families
@@ -76,7 +76,6 @@ from grasp_safety_filter.control.filter_inputs import (
     raise_if_measured_not_finite,
 )
 from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
-from grasp_safety_filter.control.fused_tick import FusedOutcome, FusedTick
 from grasp_safety_filter.control.margins import Margins
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_metric import INVERSE_INERTIA, write_inertia_factor
@@ -103,7 +102,6 @@ __all__ = [
 ]
 
 _FALLBACK = frozenset((FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL))
-_RELAXED_USABLE = (SolutionStatus.OPTIMAL, SolutionStatus.INACCURATE)
 _NO_CONTEXT = nullcontext()
 
 
@@ -197,7 +195,6 @@ class SafetyFilter:
         self._row_writers = tuple(zip(row_writers(self.families), starts, strict=True))
         self._rows_compiled = rows_compiled(self.families)
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
-        self._fused = FusedTick.of(self, starts, len(self._results.names))
         self._last_good_u: np.ndarray | None = None
 
     @classmethod
@@ -247,9 +244,8 @@ class SafetyFilter:
     def load_kernels(self) -> None:
         """Load the compiled steps of rarer ticks now (a node's start-up, after a spare tick).
 
-        The QP backend's and the result's row checks, run on the last tick's rows; then reset.
+        The result's row checks, run on the last tick's rows; then reset.
         """
-        self.backend.load_kernels(self.problem)
         self._results.load_kernels(self.problem.A, self.problem.lower)
         self.reset()
 
@@ -314,51 +310,32 @@ class SafetyFilter:
         return result
 
     def _solve_tick(self, state: GraspState, u_nom: np.ndarray) -> FilterResult:
-        """Run steps 1-6 of the module docstring for one tick (see :meth:`solve`).
-
-        Steps 1-3 of a usual tick: one compiled pass, the same answers (:mod:`.fused_tick`).
-        """
+        """Run steps 1-6 of the module docstring for one tick (see :meth:`solve`)."""
         problem = self.problem
-        fused = self._fused.run(state, u_nom) if self._fused is not None else None
-        if fused is None:
-            u_nom, rows_finite = self.assemble(state, u_nom)
-            if not rows_finite:
-                # A finite state whose rows overflowed (absurd magnitudes): no QP can help.
-                self.backend.warm_start(None)
-                return self._fallback(state, u_nom, 0.0, 0, 0)
-            # Rows first: u_nom violates one on almost every tick that reaches this test.
-            if inside(problem.A, problem.lower, u_nom, self._u_min, self._u_max):
-                self._last_good_u = u_nom
-                # u_nom is the optimum, with no active row (zero multipliers).
-                self.backend.warm_start(Solution(u_nom, SolutionStatus.OPTIMAL))
-                return self._result(state, u_nom, FilterStatus.NOMINAL, 0.0, 0)
-        elif fused.u is not None:  # nominal, or solved on the last active set
-            self._last_good_u = fused.u
-            return self._result(state, fused.u, fused.status, fused.solve_time, 0, 0, fused)
-        else:
-            u_nom = fused.u_nom
+        u_nom, rows_finite = self.assemble(state, u_nom)
+        if not rows_finite:
+            # A finite state whose rows overflowed (absurd magnitudes): no QP can help.
+            self.backend.warm_start(None)
+            return self._fallback(state, u_nom, 0.0, 0)
+        if inside(problem.A, problem.lower, u_nom, self._u_min, self._u_max):
+            self._last_good_u = u_nom
+            self.backend.warm_start(Solution(u_nom, SolutionStatus.OPTIMAL))
+            return self._result(state, u_nom, FilterStatus.NOMINAL, 0.0, 0)
 
         start = time.perf_counter()
         hard = self.backend.solve(problem)
         if hard.optimal:
-            solve_time = time.perf_counter() - start
             self._last_good_u = hard.u
-            status = (
-                FilterStatus.SOLVED_ACTIVE_SET if hard.refinement_steps else FilterStatus.SOLVED
-            )
             return self._result(
-                state, hard.u, status, solve_time, hard.iterations, hard.refinement_steps
+                state, hard.u, FilterStatus.SOLVED, time.perf_counter() - start, hard.iterations
             )
 
         relaxed = self.backend.solve(self.relaxed_problem)
         solve_time = time.perf_counter() - start
         iterations = hard.iterations + relaxed.iterations
-        steps = hard.refinement_steps + relaxed.refinement_steps
-        if relaxed.status in _RELAXED_USABLE:
-            return self._result(
-                state, relaxed.u, FilterStatus.RELAXED, solve_time, iterations, steps
-            )
-        return self._fallback(state, u_nom, solve_time, iterations, steps)
+        if relaxed.optimal:
+            return self._result(state, relaxed.u, FilterStatus.RELAXED, solve_time, iterations)
+        return self._fallback(state, u_nom, solve_time, iterations)
 
     # -- internals ---------------------------------------------------------------------
 
@@ -392,7 +369,6 @@ class SafetyFilter:
         u_nom: np.ndarray,
         solve_time: float,
         iterations: int,
-        active_set_steps: int,
     ) -> FilterResult:
         if self._last_good_u is not None:
             u = self.actuator_limits.clip(self._last_good_u)
@@ -400,7 +376,7 @@ class SafetyFilter:
         else:
             u = self.actuator_limits.clip(u_nom)
             status = FilterStatus.FALLBACK_NOMINAL
-        return self._result(state, u, status, solve_time, iterations, active_set_steps)
+        return self._result(state, u, status, solve_time, iterations)
 
     def _result(
         self,
@@ -409,12 +385,7 @@ class SafetyFilter:
         status: FilterStatus,
         solve_time: float,
         iterations: int,
-        active_set_steps: int = 0,
-        fused: FusedOutcome | None = None,
     ) -> FilterResult:
         """Return the result for u* on this tick's rows (margins and active rows when read)."""
         rows = (self.problem.A, self.problem.lower)
-        computed = fused.computed if fused is not None else None
-        return self._results.result(
-            state, u, status, rows, solve_time, iterations, active_set_steps, computed
-        )
+        return self._results.result(state, u, status, rows, solve_time, iterations)

@@ -35,7 +35,6 @@ class TickStatus(str, Enum):
 
     NOMINAL = FilterStatus.NOMINAL.value
     SOLVED = FilterStatus.SOLVED.value
-    SOLVED_ACTIVE_SET = FilterStatus.SOLVED_ACTIVE_SET.value
     RELAXED = FilterStatus.RELAXED.value
     FALLBACK_LAST_GOOD = FilterStatus.FALLBACK_LAST_GOOD.value
     FALLBACK_NOMINAL = FilterStatus.FALLBACK_NOMINAL.value
@@ -105,7 +104,7 @@ class Key:
     STATUS = 'status'
     """A :class:`TickStatus` value."""
     SOLVE_TIME_US = 'solve_time_us'
-    """The QP solve (OSQP and the active-set steps), µs."""
+    """The QP solve (hard and relaxed), µs."""
     STEP_TIME_US = 'step_time_us'
     """The whole filter step (``SafetyFilter.solve``: rows, QP, margins), µs."""
     TICK_TIME_US = 'tick_time_us'

@@ -6,11 +6,11 @@ per answered tick; this module turns a tick's outcome into it. ERROR when the QP
 usable answer, WARN when it was relaxed or the filter is off, OK otherwise.
 
 Values on every tick: ``filter.enabled``, ``filter.switched_at`` (after a switch),
-``status`` (a ``TickStatus``: ``nominal``, ``solved``, ``solved_active_set``, ``relaxed``,
+``status`` (a ``TickStatus``: ``nominal``, ``solved``, ``relaxed``,
 ``fallback_last_good``, ``fallback_nominal``, ``disabled``; ``input_held`` or
 ``input_fallback`` on a rejected input and on the watchdog's statuses; ``grasp_invalid``,
 ``grasp_held``, ``grasp_fallback`` on a state that is not a grasp, with the ``grasp.*``
-values), ``solve_time_us`` (the QP solve: OSQP and the active-set steps), ``step_time_us``
+values), ``solve_time_us`` (the QP solve, hard and relaxed), ``step_time_us``
 (the whole filter step, ``SafetyFilter.solve``: rows, QP, margins), ``tick_time_us`` (the
 whole tick: model terms, filter step, messages), ``iterations``, ``relaxed``,
 ``relaxed_families`` (comma-separated), ``max_violation``, ``active`` (comma-separated row
@@ -46,7 +46,6 @@ from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 _STATUS_TEXT: dict[TickStatus, str] = {
     TickStatus.NOMINAL: 'u* = u_nom: every constraint holds',
     TickStatus.SOLVED: 'QP solved',
-    TickStatus.SOLVED_ACTIVE_SET: 'QP solved (active-set steps)',
     TickStatus.RELAXED: 'QP infeasible, relaxed',
     TickStatus.FALLBACK_LAST_GOOD: 'no QP solution: last good u*',
     TickStatus.FALLBACK_NOMINAL: 'no QP solution: u_nom clipped to the actuator limits',

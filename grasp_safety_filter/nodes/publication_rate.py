@@ -38,7 +38,7 @@ PUBLICATION_RATE_PARAMETERS = (DIAGNOSTICS_PERIOD_PARAMETER, MARGINS_PERIOD_PARA
 
 #: Statuses whose repetitions are published once per ``diagnostics.period``.
 STEADY_STATUSES = frozenset(
-    {TickStatus.NOMINAL, TickStatus.SOLVED, TickStatus.SOLVED_ACTIVE_SET, TickStatus.DISABLED}
+    {TickStatus.NOMINAL, TickStatus.SOLVED, TickStatus.DISABLED}
 )
 
 

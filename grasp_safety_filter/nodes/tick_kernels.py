@@ -8,7 +8,7 @@ the same parameters, at a made-up state (:func:`made_up_messages`) parsed as its
 are, so the arrays have the types the kernels are compiled for. The spare filter then runs
 the steps of its rarer ticks on that tick's rows (:meth:`SafetyFilter.load_kernels
 <grasp_safety_filter.control.safety_filter.SafetyFilter.load_kernels>`), which the first
-active-set or relaxed tick would load otherwise.
+relaxed tick would load otherwise.
 
 The node's own model is not used: a model binds each contact to its object surface at its
 first state (:meth:`~grasp_safety_filter.model.grasp_model.GraspModel.bind_contacts`), which

@@ -6,9 +6,7 @@ Every backend is a class ``Backend(problem, slack_weights, settings)`` with:
   (``problem.with_slack(w)``) right after a hard solve that did not end optimal;
 - ``warm_start(solution | None)``: a tick settled without the backend (u_nom feasible: its
   solution; no answer at all: None, and the next solve starts cold);
-- ``reset()``: forget every warm start;
-- ``load_kernels(problem)``: run every step it compiles once on ``problem`` (a node's
-  start-up: no step then loads at the first tick that needs it), and reset.
+- ``reset()``: forget every warm start.
 
 A backend is warm-started from its own previous tick; the problem's arrays may be rewritten
 in place between calls. :data:`BACKENDS` maps the ``qp.solver`` parameter to the classes.
@@ -19,7 +17,6 @@ from grasp_safety_filter.control.qp_solvers.osqp_backend import OSQPBackend
 from grasp_safety_filter.control.qp_solvers.problem import (
     FEASIBILITY_TOLERANCE,
     Problem,
-    Residuals,
     Solution,
     SolutionStatus,
 )
@@ -36,7 +33,6 @@ __all__ = [
     'DAQPBackend',
     'OSQPBackend',
     'Problem',
-    'Residuals',
     'Solution',
     'SolutionStatus',
 ]

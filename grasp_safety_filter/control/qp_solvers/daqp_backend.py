@@ -17,10 +17,6 @@ the inverse-inertia metric the torque block of H is the tick's ``W`` and ``f = -
 stays simple bounds on u, held exactly. daqp's
 soft constraints would add a slack of their own per row with its own weight convention;
 explicit slacks keep the relaxed problem the one every backend solves.
-
-daqp's multipliers (``lam``: < 0 at a lower bound, > 0 at an upper bound, ``H x + f +
-[I; A]^T lam = 0``) are turned into the problem's row numbering and least-distance form
-(a slack bound's multiplier divided by ``sqrt(w_r)``, as ``s~ = sqrt(w) s``).
 """
 
 from __future__ import annotations
@@ -70,8 +66,8 @@ class _Model:
         self.model.settings = dict(settings)
         self.warm = False
 
-    def solve(self, new_cost: bool) -> tuple[np.ndarray, int, int, np.ndarray]:
-        """Hand over this tick's data (H too if ``new_cost``): ``(x, flag, iterations, lam)``."""
+    def solve(self, new_cost: bool) -> tuple[np.ndarray, int, int]:
+        """Hand over this tick's data (H too if ``new_cost``): ``(x, flag, iterations)``."""
         H = self.H if new_cost else None
         if self.warm:
             self.model.update(H=H, f=self.f, A=self.A, blower=self.lower)
@@ -79,7 +75,7 @@ class _Model:
             self.model.update(H=H, f=self.f, A=self.A, blower=self.lower, sense=self.cold)
         x, _, flag, info = self.model.solve()
         self.warm = flag == _OPTIMAL
-        return np.asarray(x, dtype=float), int(flag), int(info['iterations']), info['lam']
+        return np.asarray(x, dtype=float), int(flag), int(info['iterations'])
 
 
 class DAQPBackend:
@@ -130,9 +126,6 @@ class DAQPBackend:
         if solution is None:
             self.reset()
 
-    def load_kernels(self, problem: Problem) -> None:
-        """Nothing to load: daqp and this backend's own steps are not compiled at run time."""
-
     def solve(self, problem: Problem) -> Solution:
         """Solve the hard or the relaxed problem."""
         m = self._m
@@ -147,7 +140,7 @@ class DAQPBackend:
         model.lower[model.n_bounds :] = problem.lower
         if problem.relaxed:
             self._slack_diagonal[:] = problem.slack_scale()
-        x, flag, iterations, lam = model.solve(metric)
+        x, flag, iterations = model.solve(metric)
         if flag == _INFEASIBLE:
             u = self._clip(-problem.g)
             return Solution(u, SolutionStatus.INFEASIBLE, iterations=iterations)
@@ -155,38 +148,12 @@ class DAQPBackend:
         if flag != _OPTIMAL or not np.isfinite(x).all():
             self.reset()
             return Solution(self._clip(-problem.g), SolutionStatus.FAILED, iterations=iterations)
-        active, multipliers = self._rows(lam, problem.relaxed)
         slack = x[m:].copy() if problem.relaxed else None
-        solution = Solution(
-            self._clip(u), SolutionStatus.OPTIMAL, active, multipliers, slack, iterations
-        )
+        solution = Solution(self._clip(u), SolutionStatus.OPTIMAL, slack, iterations)
         if not problem.relaxed and not solution.row_violation(problem) <= FEASIBILITY_TOLERANCE:
             self.reset()
             return Solution(solution.u, SolutionStatus.FAILED, iterations=iterations)
         return solution
-
-    def _rows(self, lam: np.ndarray, relaxed: bool) -> tuple[tuple[int, ...], np.ndarray]:
-        """Turn daqp's nonzero multipliers into the problem's active rows and ``lambda >= 0``.
-
-        daqp's constraints: bounds on u (m), on s (k, relaxed), then the barrier rows (k).
-        """
-        m, k = self._m, self._k
-        n_bounds = m + k if relaxed else m
-        rows: list[int] = []
-        values: list[float] = []
-        for i in np.flatnonzero(lam).tolist():
-            value = float(lam[i])
-            if i < m:  # a torque bound: lower when lam < 0
-                rows.append(k + 2 * i + (1 if value > 0.0 else 0))
-                values.append(abs(value))
-            elif i < n_bounds:  # s_r >= 0, in the least-distance form's s~ = sqrt(w) s
-                r = i - m
-                rows.append(k + 2 * m + r)
-                values.append(-value / self._sqrt_weights[r])
-            else:
-                rows.append(i - n_bounds)
-                values.append(-value)
-        return tuple(rows), np.array(values)
 
     def _clip(self, u: np.ndarray) -> np.ndarray:
         return np.minimum(np.maximum(u, self._u_min), self._u_max)

@@ -235,13 +235,15 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'osqp.polish',
         BOOL,
         False,
-        'Polish the OSQP solution (active-set refinement; the filter refines it exactly anyway)',
+        'Polish the OSQP solution on the rows it finds active (an unpolished answer rarely passes '
+        'the KKT check, and daqp then finishes the tick)',
     ),
     ParameterSpec(
         'qp.solver',
         STRING,
         'osqp',
-        'QP backend: osqp (ADMM, certified or refined exactly) or daqp (dual active set)',
+        'QP backend: osqp (ADMM, its answer KKT-checked, finished by daqp when the check fails) '
+        'or daqp (dual active set)',
         choices=('osqp', 'daqp'),
     ),
     ParameterSpec(
