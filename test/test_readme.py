@@ -1,20 +1,28 @@
-"""The README's commands and generated tables stay true."""
+"""The README's commands, the docs' console scripts and the generated tables stay true."""
 
 from __future__ import annotations
 
 from pathlib import Path
 import re
 
-from grasp_safety_filter.io.readme_tables import render
+import pytest
+
+from grasp_safety_filter.io.readme_tables import FILES, render, tables
 
 REPO = Path(__file__).resolve().parent.parent
 README = (REPO / 'README.md').read_text()
 
 
-def test_generated_tables_are_current():
-    assert render(README) == README, (
-        'run: python -m grasp_safety_filter.io.readme_tables README.md'
-    )
+@pytest.mark.parametrize('name', FILES)
+def test_generated_tables_are_current(name):
+    text = (REPO / name).read_text()
+    assert any(f'<!-- {section}:begin -->' in text for section in tables()), name
+    assert render(text) == text, 'run: python -m grasp_safety_filter.io.readme_tables'
+
+
+def test_readme_keeps_the_topics_and_docs_parameters_keeps_the_parameters():
+    assert '<!-- topics:begin -->' in README
+    assert '<!-- parameters:begin -->' in (REPO / 'docs' / 'parameters.md').read_text()
 
 
 def test_readme_starts_with_the_two_commands_and_ci_runs_the_test_one():
