@@ -1,6 +1,6 @@
 r"""One closed-loop run's joint speeds, corrections and relaxed ticks, as one JSON line.
 
-The README's tables of the QP metric and of the class-K gains on the example hand come from
+The tables of docs/qp_metric.md and docs/class_k_gains.md (the example hand) come from
 this script: the runner's lockstep wiring of the three endpoints (as ``grasp-demo``), with
 no bag, and the filter's status of every tick::
 

@@ -465,7 +465,7 @@ def test_joint_and_workspace_rows_act_through_the_objects_six_dofs(model, config
     the hand moves with the object. So the torques that leave ``x_o_ddot`` unchanged (they
     only squeeze the object) change no joint and no contact-coordinate acceleration either:
     the thirty rows have rank 6 and vanish on that null space; the no-slip rows see it.
-    This is why too many nearly active barriers can leave no feasible torque (README).
+    This is why too many nearly active barriers can leave no feasible torque (docs/paper_runs.md).
     """
     config = SafetyFilterConfig()
     for c in configurations:
@@ -763,7 +763,7 @@ def test_a_relaxed_tick_falls_back_to_osqp_when_the_active_set_start_fails(model
 
 
 def test_the_paper_runs_first_relaxed_tick_is_a_conflict_of_joint_and_workspace_rows():
-    """Why the paper's scenario relaxes with alpha = h^3 (README), checked where it does.
+    """Why the paper's run relaxes with alpha = h^3 (docs/paper_runs.md), checked where it does.
 
     Run the filtered scenario to its first relaxed tick. There, independently of the
     filter: the joint-limit and workspace rows alone admit no torque (daqp), the joint

@@ -302,8 +302,8 @@ def test_repeats_are_explained_by_the_states_published_again():
 # ----------------------------------------------------------------------------------------
 # A planner over DDS
 
-#: Barrier gains that let the planner's motion through (README: the paper's cubic barriers
-#: are so flat below 1 rad that the filter pins the object's acceleration down).
+#: Barrier gains that let the planner's motion through (docs/paper_runs.md: the paper's cubic
+#: barriers are so flat below 1 rad that the filter pins the object's acceleration down).
 FEASIBLE_BARRIERS = {'barrier.alpha1.gain': 10.0, 'barrier.alpha2.gain': 10.0}
 RISE, YAW, MOVE_TIME, STOP_AFTER, HORIZON, PLAN_DURATION = 0.01, 0.1, 0.5, 0.55, 0.05, 1.2
 

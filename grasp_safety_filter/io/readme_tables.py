@@ -1,7 +1,10 @@
-"""The README's topic and parameter tables, generated from the topic table and the schemas.
+"""The topic and parameter tables of the documentation, generated from the topics and schemas.
 
-``python -m grasp_safety_filter.io.readme_tables README.md`` rewrites them in place; a test
-checks that the README's copy is current.
+A generated section is the text between ``<!-- NAME:begin -->`` and ``<!-- NAME:end -->``,
+NAME a key of :func:`tables`: ``topics`` in README.md, ``parameters`` in docs/parameters.md.
+``python -m grasp_safety_filter.io.readme_tables [FILE ...]`` rewrites every section of each
+FILE in place (default: :data:`FILES`, from the repository's root); a test checks that both
+files are current.
 """
 
 from __future__ import annotations
@@ -22,6 +25,9 @@ from grasp_safety_filter.io.schemas import (
 )
 from grasp_safety_filter.io.topics import topic_table_markdown
 
+#: The files with generated sections, relative to the repository's root.
+FILES = ('README.md', 'docs/parameters.md')
+
 
 def parameter_tables() -> str:
     """Return the parameter tables: the shared model section, then each node's own."""
@@ -36,7 +42,7 @@ def parameter_tables() -> str:
         ),
     )
     return '\n\n'.join(
-        f'### {title}\n\n{parameter_table_markdown(specs).strip()}' for title, specs in sections
+        f'## {title}\n\n{parameter_table_markdown(specs).strip()}' for title, specs in sections
     )
 
 
@@ -46,20 +52,22 @@ def tables() -> dict[str, str]:
 
 
 def render(text: str) -> str:
-    """Return ``text`` with every ``<!-- name:begin -->...<!-- name:end -->`` regenerated."""
+    """Return ``text`` with each of its generated sections regenerated (it must have one)."""
+    found = False
     for name, table in tables().items():
         pattern = re.compile(rf'(<!-- {name}:begin -->\n).*?(<!-- {name}:end -->)', re.DOTALL)
-        if not pattern.search(text):
-            raise ValueError(f'no <!-- {name}:begin --> ... <!-- {name}:end --> section')
+        found = found or bool(pattern.search(text))
         text = pattern.sub(lambda match, table=table: f'{match[1]}{table}\n{match[2]}', text)
+    if not found:
+        raise ValueError(f'no <!-- NAME:begin --> ... <!-- NAME:end -->, NAME in {list(tables())}')
     return text
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Rewrite the generated sections of the given markdown file in place."""
+    """Rewrite the generated sections of the given markdown files (default: FILES) in place."""
     args = sys.argv[1:] if argv is None else argv
-    path = Path(args[0] if args else 'README.md')
-    path.write_text(render(path.read_text()))
+    for path in map(Path, args or FILES):
+        path.write_text(render(path.read_text()))
     return 0
 
 

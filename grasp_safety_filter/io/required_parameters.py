@@ -9,7 +9,7 @@ node, with a message naming the section.
 Every other parameter keeps its documented default when no file section gives it: the
 nominal controller's gains and the safety filter's settings are the paper's and do not
 depend on the hand's geometry, and a filter run on a real hand with only the shared
-``/**`` section (README, "The filter on your own hand") is the intended use.
+``/**`` section (README, "Using your own hand") is the intended use.
 
 The ``model.*`` parameters that describe the hand and the object
 (:data:`grasp_safety_filter.io.schemas.REQUIRED_MODEL_PARAMETERS`, and the object's

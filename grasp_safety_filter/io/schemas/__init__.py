@@ -19,7 +19,7 @@ controllers, ``COMMAND_PARAMETERS`` to the safety filter.
 
 Modules: :mod:`.common`, :mod:`.model`, :mod:`.hand_sim`, :mod:`.nominal`,
 :mod:`.safety_filter`, :mod:`.inputs`, :mod:`.nodes` (schemas, cross-parameter checks, loading) and
-:mod:`.docs` (README tables); this package re-exports their public names.
+:mod:`.docs` (the tables of docs/parameters.md); this package re-exports their public names.
 """
 
 from __future__ import annotations

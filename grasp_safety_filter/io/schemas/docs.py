@@ -1,4 +1,4 @@
-"""The parameter tables of the README, from the schemas."""
+"""The parameter tables of docs/parameters.md, from the schemas."""
 
 from __future__ import annotations
 
