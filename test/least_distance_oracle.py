@@ -1,22 +1,48 @@
-"""The exact least-distance QP in numpy: the compiled solver's oracle.
+"""An exact least-distance QP solver in numpy (Goldfarb-Idnani): a reference for the tests.
 
-:mod:`grasp_safety_filter.control.least_distance` as it was before it was compiled, kept to
-check that the compiled solver gives the same results bit for bit.
+``min 1/2 ||u - u0||^2 s.t. C u >= b``, solved by a primal-dual active-set method written
+from its documentation, independently of the solvers the filter uses (OSQP, daqp): the
+tests hold the filter's answers against it and against daqp's one-shot solve
+(:mod:`qp_reference`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
+from enum import Enum
 import functools
 
 import numpy as np
 import scipy.linalg
 import scipy.linalg.lapack
 
-from grasp_safety_filter.control.least_distance import (
-    LeastDistanceSolution,
-    LeastDistanceStatus,
-)
+
+class LeastDistanceStatus(str, Enum):
+    """Outcome of :func:`solve_least_distance`."""
+
+    OPTIMAL = 'optimal'
+    INFEASIBLE = 'infeasible'
+    ITERATION_LIMIT = 'iteration_limit'
+
+
+@dataclass(frozen=True)
+class LeastDistanceSolution:
+    """Result of :func:`solve_least_distance`.
+
+    Attributes:
+        u: The last primal iterate, shape (m,) (the optimum when OPTIMAL).
+        status: Optimal, infeasible or iteration limit.
+        active: Indices of the working (active) rows at u.
+        multipliers: Their Lagrange multipliers (>= 0), same order as ``active``.
+        iterations: Number of add/drop steps after the start (0: the start was optimal).
+    """
+
+    u: np.ndarray
+    status: LeastDistanceStatus
+    active: tuple[int, ...]
+    multipliers: np.ndarray
+    iterations: int
 
 #: A row whose normal has a component below this fraction of its norm outside the span of
 #: the working rows' normals is treated as linearly dependent on them.

@@ -1,8 +1,8 @@
 """Exact reference optima of the filter's QPs, written out from their documentation.
 
 Two independent exact solvers answer each problem: daqp's one-shot ``daqp.solve`` (cold,
-dense, its own dual active-set code) and the package's Goldfarb-Idnani method
-(:func:`solve_least_distance`, cold). They must agree with each other, so a backend built
+dense, its own dual active-set code) and a Goldfarb-Idnani method in numpy
+(:mod:`least_distance_oracle`, cold). They must agree with each other, so a backend built
 on either one is still checked against the other.
 
 A cost metric W (symmetric positive definite, ``1/2 (u - u_nom)^T W (u - u_nom)``; None: the
@@ -12,10 +12,9 @@ the cost ``1/2 ||y - y_nom||^2``.
 """
 
 import daqp
+from least_distance_oracle import LeastDistanceStatus, solve_least_distance
 import numpy as np
 from scipy.optimize import linprog
-
-from grasp_safety_filter.control.least_distance import LeastDistanceStatus, solve_least_distance
 
 #: How far the two references may differ (N·m) before the case counts as ill-posed.
 REFERENCE_AGREEMENT = 1e-6

@@ -5,7 +5,7 @@ far from the limits), with u_nom drawn around the centre of the largest ball ins
 feasible set (an LP) so that a third of the hard problems are feasible with u_nom inside,
 a third feasible with rows active and the rest infeasible. Each backend answers them in one
 warm-started sequence and cold (a fresh backend per problem); the answers are compared with
-two independent exact solvers (:mod:`qp_reference`) and their KKT residuals measured by the
+two independent exact solvers (:mod:`qp_reference`), and their rows measured by the
 :class:`Solution` itself. Every table is solved with both cost metrics (``qp.metric``): the
 identity, and the inverse inertia, whose reference cost ``W = (tr(M_h)/m) M_h^-1`` is
 formed here from the state's M_h with numpy's inverse; and the tables include grasps of the
@@ -155,9 +155,8 @@ def check(backend, table):
             counts['feasible'] += 1
             assert hard.status is SolutionStatus.OPTIMAL, (i, hard.status)
             assert np.abs(hard.u - u_hard).max() <= scale, (i, hard.u - u_hard)
-            assert max(hard.residuals(problem)) <= scale, (i, hard.residuals(problem))
             assert hard.row_violation(problem) <= 1e-6, i
-            counts['active'] += bool(hard.active)
+            counts['active'] += bool((A_i @ u_hard - lower_i).min() <= 1e-6)
             continue
         counts['infeasible'] += 1
         assert hard.status is SolutionStatus.INFEASIBLE, (i, hard.status)
@@ -167,7 +166,6 @@ def check(backend, table):
         assert np.isfinite(solution.u).all() and np.isfinite(solution.slack).all(), i
         assert np.abs(solution.u - u_ref).max() <= scale, (i, solution.u - u_ref)
         assert np.abs(solution.slack - s_ref).max() <= scale, i
-        assert max(solution.residuals(relaxed)) <= scale, (i, solution.residuals(relaxed))
         assert solution.row_violation(relaxed) <= 1e-6, i
     return counts
 
@@ -286,7 +284,7 @@ def test_the_filter_on_the_example_hand_gives_the_reference_optimum(name, metric
         W_expected = np.eye(m) if W is None else W
         np.testing.assert_allclose(P[:m, :m], W_expected, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(q[:m], -W_expected @ u_nom, rtol=1e-9, atol=1e-12)
-    assert statuses['solved'] + statuses['solved_active_set'] >= 20, statuses
+    assert statuses['solved'] >= 20, statuses
 
 
 def test_the_metric_changes_the_optimum_where_rows_are_active():

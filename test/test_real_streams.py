@@ -40,7 +40,6 @@ LATEST = {'input.sync': 'latest'}
 COMPUTED = {
     TickStatus.NOMINAL.value,
     TickStatus.SOLVED.value,
-    TickStatus.SOLVED_ACTIVE_SET.value,
     TickStatus.RELAXED.value,
     TickStatus.DISABLED.value,
 }

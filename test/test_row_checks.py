@@ -8,8 +8,6 @@ import pytest
 from grasp_safety_filter.control.row_checks import (
     all_finite,
     box_margins,
-    clip_if_finite,
-    column_major_row_norms,
     inside,
     residuals,
     violations,
@@ -88,36 +86,3 @@ def test_violations_flag_the_groups_numpy_finds_and_the_worst_row(seed):
     flags = np.zeros(4, dtype=np.bool_)
     assert np.isnan(violations(residual, group, tolerance, flags))
     assert flags[0]
-
-
-@pytest.mark.parametrize('seed', range(4))
-def test_clip_if_finite_is_the_numpy_clip_bit_for_bit(seed):
-    rng = np.random.default_rng(seed)
-    m = 9
-    u_max = rng.uniform(0.5, 2.0, m)
-    x = 2.0 * rng.normal(size=m + 4)  # only the first m entries are torques
-    x[0] = -u_max[0]  # on a bound
-    x[-1] = np.nan  # beyond m: ignored
-    out = np.full(m, 7.0)
-    assert clip_if_finite(x, -u_max, u_max, out)
-    expected = np.minimum(np.maximum(x[:m], -u_max), u_max)
-    assert out.tobytes() == expected.tobytes()
-    for bad in (np.inf, -np.inf, np.nan):
-        x[m - 1] = bad
-        assert not clip_if_finite(x, -u_max, u_max, out)
-
-
-@pytest.mark.parametrize('seed', range(4))
-def test_column_major_row_norms_are_numpys_bit_for_bit(seed):
-    rng = np.random.default_rng(seed)
-    k, m = 54, 9
-    # As SafetyQP lays its rows out: the transpose of a row-major (m, k + 1) block.
-    A = np.empty((m, k + 1))[:, :k].T
-    A[:] = rng.normal(size=(k, m)) * 10.0 ** rng.uniform(-4, 4, size=(k, 1))
-    A[3] = 0.0  # below the floor: 1
-    out = np.full(k, 7.0)
-    column_major_row_norms(A, 1e-9, out)
-    norms = np.sqrt(np.einsum('ij,ij->i', A, A))
-    expected = np.where(norms < 1e-9, 1.0, norms)
-    assert out[3] == 1.0
-    assert out.tobytes() == expected.tobytes()

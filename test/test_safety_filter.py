@@ -32,7 +32,7 @@ from grasp_safety_filter.model.affine import AffineMap
 
 HAND = SyntheticHand()
 M = HAND.n_joints
-CERTIFIED = {FilterStatus.NOMINAL, FilterStatus.SOLVED, FilterStatus.SOLVED_ACTIVE_SET}
+CERTIFIED = {FilterStatus.NOMINAL, FilterStatus.SOLVED}
 SOLVERS = sorted(BACKENDS)
 
 CONFIGS = {

@@ -33,7 +33,7 @@ COMPONENTS: dict[str, str] = {
 CPU_COMPONENTS: tuple[str, ...] = ('model_state', 'filter_step', 'node_tick')
 
 #: Statuses whose u* solves the hard QP (the others are answers to an infeasible one).
-CERTIFIED = frozenset((FilterStatus.NOMINAL, FilterStatus.SOLVED, FilterStatus.SOLVED_ACTIVE_SET))
+CERTIFIED = frozenset((FilterStatus.NOMINAL, FilterStatus.SOLVED))
 
 
 # --------------------------------------------------------------------------------------------
@@ -65,11 +65,10 @@ class Replay:
         status: The filter's status per tick.
         osqp_iterations: Iterations of the stand-alone OSQP solve per tick.
         osqp_status: Its status per tick.
-        filter_iterations: OSQP iterations inside the filter per tick (0 when none ran).
-        active_set_steps: Add/drop steps of the filter's active-set method per tick.
+        filter_iterations: The QP solvers' iterations inside the filter per tick (0 when
+            none ran).
         filter_qp_solve_time: The filter's own solve time per tick (``FilterResult.solve_time``:
-            OSQP and the active-set step; 0 on ``nominal`` ticks; on a tick the fused pass
-            settles, that pass with the rows and checks), s.
+            hard and relaxed QP; 0 on ``nominal`` ticks), s.
         qps: The hard QP of the ticks in ``qp_ticks``.
         qp_ticks: Indices (into the replayed ticks) of :attr:`qps`.
         max_replay_deviation: ``max |u*_replay - u*_recorded|``, N·m (0 when the replay
@@ -83,7 +82,6 @@ class Replay:
     osqp_iterations: np.ndarray
     osqp_status: list[str]
     filter_iterations: np.ndarray
-    active_set_steps: np.ndarray
     filter_qp_solve_time: np.ndarray
     qps: list[DenseQP]
     qp_ticks: np.ndarray
@@ -127,7 +125,6 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
     osqp_iterations = np.zeros(n, dtype=int)
     osqp_status: list[str] = []
     filter_iterations = np.zeros(n, dtype=int)
-    active_set_steps = np.zeros(n, dtype=int)
     qps: list[DenseQP] = []
     kept: list[int] = []
     for i, tick in enumerate(ticks):
@@ -166,7 +163,6 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
         osqp_iterations[i] = solution.info.iter
         osqp_status.append(str(solution.info.status))
         filter_iterations[i] = result.iterations
-        active_set_steps[i] = result.active_set_steps
         if i in wanted:
             qps.append(DenseQP(*hard.dense()))
             kept.append(i)
@@ -181,7 +177,6 @@ def replay(scenario: Scenario, ticks: Sequence[Tick], qp_ticks: Sequence[int] = 
         osqp_iterations=osqp_iterations,
         osqp_status=osqp_status,
         filter_iterations=filter_iterations,
-        active_set_steps=active_set_steps,
         filter_qp_solve_time=qp_solve_times,
         qps=qps,
         qp_ticks=np.array(kept, dtype=int),

@@ -205,7 +205,6 @@ def benchmark(
             'osqp_iterations': _counts(measured.osqp_iterations),
             'osqp_statuses': dict(Counter(measured.osqp_status)),
             'filter_osqp_iterations': _counts(measured.filter_iterations),
-            'filter_active_set_steps': _counts(measured.active_set_steps),
             'filter_step_us_by_status': step_by_status,
             'node_tick_cpu_us_by_status': node_tick_cpu_by_status,
         },
@@ -266,8 +265,7 @@ def format_report(document: dict[str, Any]) -> str:
         f'replay: {replayed["ticks"]} ticks after {replayed["warmup_ticks"]} warm-up ticks; '
         f'filter status: {statuses}',
         f'  OSQP iterations (stand-alone) median {replayed["osqp_iterations"]["median"]:g}, '
-        f'p99 {replayed["osqp_iterations"]["p99"]:g}, max {replayed["osqp_iterations"]["max"]}; '
-        f'active-set steps max {replayed["filter_active_set_steps"]["max"]}',
+        f'p99 {replayed["osqp_iterations"]["p99"]:g}, max {replayed["osqp_iterations"]["max"]}',
         '  filter step by status (wall, median / p99 µs): '
         + ', '.join(
             f'{status} {_us(s["median"])} / {_us(s["p99"])}'

@@ -106,8 +106,8 @@ class SafetyFilterConfig:
     eps_abs: float = 1e-4
     eps_rel: float = 1e-4
     max_iter: int = 50
-    polish: bool = False
-    solver: str = 'osqp'
+    polish: bool = True
+    solver: str = 'daqp'
     metric: str = 'identity'
 
     def __post_init__(self) -> None:
@@ -178,7 +178,7 @@ class SafetyFilterConfig:
             'polishing': self.polish,
             'warm_starting': True,
             # Check convergence every 5 iterations instead of OSQP's 25: the warm-started
-            # problems converge in a few, and the exact step finishes those that do not.
+            # problems converge in a few, and daqp finishes those that do not.
             'check_termination': 5,
         }
 

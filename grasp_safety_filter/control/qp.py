@@ -43,7 +43,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from grasp_safety_filter.control.qp_metric import metric_matrix, metric_row_norms
-from grasp_safety_filter.control.row_checks import column_major_row_norms
 
 #: Threshold below which a row is treated as independent of u when normalising its slack.
 ROW_NORM_FLOOR = 1e-9
@@ -212,10 +211,7 @@ class SafetyQP:
 
         Relaxed problem only; call after the rows and the metric factor are written.
         """
-        if self.relaxed and self.metric_factor is None:
-            # A_rows is a column-major view: the compiled norms sum as numpy's einsum does.
-            column_major_row_norms(self.A_rows, ROW_NORM_FLOOR, self._slack_scale)
-        elif self.relaxed:
+        if self.relaxed:
             norms = metric_row_norms(self.A_rows, self.metric_factor)
             self._slack_scale[:] = np.where(norms < ROW_NORM_FLOOR, 1.0, norms)
 

@@ -115,39 +115,3 @@ def violations(
         elif -value > worst:
             worst = -value
     return math.nan if not_a_number else worst
-
-
-@kernel
-def clip_if_finite(x: np.ndarray, u_min: np.ndarray, u_max: np.ndarray, out: np.ndarray) -> bool:
-    """Write x's first m entries clipped to the box into ``out``; False if one is not finite.
-
-    ``np.minimum(np.maximum(x[:m], u_min), u_max)`` after ``np.isfinite(x[:m]).all()``,
-    entry by entry (each is one of its operands, so the values are the same).
-
-    Args:
-        x: At least m entries, N·m.
-        u_min: Lower bounds, (m,), N·m.
-        u_max: Upper bounds, (m,), N·m.
-        out: Shape (m,); undefined when False is returned.
-    """
-    for j in range(out.shape[0]):
-        if not math.isfinite(x[j]):
-            return False
-        out[j] = min(max(x[j], u_min[j]), u_max[j])
-    return True
-
-
-@kernel
-def column_major_row_norms(A: np.ndarray, floor: float, out: np.ndarray) -> None:
-    """Write ``||A_r||`` into ``out``, 1 where below ``floor``, for a column-major A (k, m).
-
-    ``np.sqrt(np.einsum('ij,ij->i', A, A))`` then ``np.where(norms < floor, 1.0, norms)``
-    with the same sums: numpy's einsum runs along the contiguous rows axis, adding the
-    squares column by column, so each row's sum is taken in column order, as here.
-    """
-    for r in range(A.shape[0]):
-        total = 0.0
-        for c in range(A.shape[1]):
-            total = total + A[r, c] * A[r, c]
-        norm = math.sqrt(total)
-        out[r] = 1.0 if norm < floor else norm

@@ -234,16 +234,16 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
         'osqp.polish',
         BOOL,
-        False,
+        True,
         'Polish the OSQP solution on the rows it finds active (an unpolished answer rarely passes '
         'the KKT check, and daqp then finishes the tick)',
     ),
     ParameterSpec(
         'qp.solver',
         STRING,
-        'osqp',
-        'QP backend: osqp (ADMM, its answer KKT-checked, finished by daqp when the check fails) '
-        'or daqp (dual active set)',
+        'daqp',
+        'QP backend: daqp (dual active set, exact) or osqp (ADMM, its polished answer '
+        'KKT-checked, finished by daqp when the check fails)',
         choices=('osqp', 'daqp'),
     ),
     ParameterSpec(
