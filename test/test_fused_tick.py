@@ -14,13 +14,13 @@ import pinocchio as pin
 import pytest
 from random_hands import random_hand
 
-from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario
 from grasp_safety_filter.control import fused_tick
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilter
 from grasp_safety_filter.model.grasp_check import load_initial_grasp
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.quaternion import rotation_matrix
+from grasp_tools.bench.recorded_run import record_filtered_run, Scenario
 
 TICKS = 60
 
