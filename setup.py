@@ -7,7 +7,16 @@ package_name = 'grasp_safety_filter'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*']),
+    # The runtime (grasp_safety_filter, hand_sim_node: what the nodes import) and, apart,
+    # the benchmarks and studies in tools/, installed as grasp_tools: never imported by the
+    # runtime, run by their console scripts and ``python -m grasp_tools.<module>``.
+    packages=[
+        *find_packages(include=['grasp_safety_filter', 'grasp_safety_filter.*']),
+        *find_packages(include=['hand_sim_node', 'hand_sim_node.*']),
+        'grasp_tools',
+        *(f'grasp_tools.{name}' for name in find_packages('tools')),
+    ],
+    package_dir={'grasp_tools': 'tools'},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -76,9 +85,9 @@ setup(
         'console_scripts': [
             'grasp-demo = grasp_safety_filter.console:demo',
             'grasp-analyze = grasp_safety_filter.console:analyze',
-            'grasp-bench = grasp_safety_filter.bench:bench_main',
-            'grasp-bench-ros = grasp_safety_filter.bench_ros:bench_ros_main',
-            'grasp-bench-realtime = grasp_safety_filter.bench.real_time:main',
+            'grasp-bench = grasp_tools.bench:bench_main',
+            'grasp-bench-ros = grasp_tools.bench_ros:bench_ros_main',
+            'grasp-bench-realtime = grasp_tools.bench.real_time:main',
             'grasp-record = grasp_safety_filter.console:record',
             'grasp-model-report = grasp_safety_filter.cli:model_report_main',
             'hand_sim_node = grasp_safety_filter.nodes.entry_points:hand_sim_node',

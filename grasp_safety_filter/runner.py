@@ -219,8 +219,8 @@ def record_run(
         on_start: Called once the earlier bag and ``replaces`` are gone.
         wrap_filter_callback: Called once with each of the safety filter's subscriber
             callbacks; the loop calls what it returns instead, which must hand the message
-            to the callback and return its messages unchanged (e.g. a callback that times
-            it: :mod:`grasp_safety_filter.bench.node_callbacks`). None: the callbacks.
+            to the callback and return its messages unchanged (e.g. ``grasp-bench``'s, which
+            times it). None: the callbacks.
 
     """
     typestore = get_typestore(Stores.ROS2_JAZZY)

@@ -32,11 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench_ros import stop_process
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import read_bag
 from grasp_safety_filter.io.launch_arguments import NodeLaunch, RECORDER_NODE
 from grasp_safety_filter.io.messages import header_stamp_ns
+from grasp_tools.bench_ros import stop_process
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIG = REPO / 'config' / 'paper_scenario.yaml'

@@ -15,7 +15,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from grasp_safety_filter.bench import (
+from grasp_safety_filter.control.filter_result import FilterStatus
+from grasp_safety_filter.control.qp_solvers import BACKENDS
+from grasp_safety_filter.io.messages import MessageNamespace
+from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.runner import _subscribers, build_endpoints, RunOptions
+from grasp_tools.bench import (
     bench_main,
     CALLBACKS_LABEL,
     COMPONENTS,
@@ -34,11 +39,6 @@ from grasp_safety_filter.bench import (
     run_external,
     Scenario,
 )
-from grasp_safety_filter.control.filter_result import FilterStatus
-from grasp_safety_filter.control.qp_solvers import BACKENDS
-from grasp_safety_filter.io.messages import MessageNamespace
-from grasp_safety_filter.io.paths import config_path
-from grasp_safety_filter.runner import _subscribers, build_endpoints, RunOptions
 
 DURATION = 0.05  # s: 50 ticks of 1 ms
 TICKS = 40
@@ -213,7 +213,7 @@ def test_other_hands_are_timed_on_as_many_ticks_in_the_same_run(bench):
 
 def test_hands_take_turns_block_by_block(monkeypatch):
     """Blocks of each hand's ticks alternate, the first hand of a block rotating."""
-    import grasp_safety_filter.bench.hands as hands_module
+    import grasp_tools.bench.hands as hands_module
 
     calls = []
 

@@ -17,16 +17,16 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from grasp_safety_filter.bench.real_time import FILTER_CASES, GRAPH_CASES, main, select_cases
-from grasp_safety_filter.bench.real_time_driver import driver_plan, STATE, TRACKER
-from grasp_safety_filter.bench.real_time_figures import (
+from grasp_tools.bench.real_time import FILTER_CASES, GRAPH_CASES, main, select_cases
+from grasp_tools.bench.real_time_driver import driver_plan, STATE, TRACKER
+from grasp_tools.bench.real_time_figures import (
     cpu_per_tick,
     figures,
     FilterStatusRecord,
     RunRecords,
 )
-from grasp_safety_filter.bench.real_time_processes import filter_launch, graph_nodes
-from grasp_safety_filter.bench.real_time_recording import Recording
+from grasp_tools.bench.real_time_processes import filter_launch, graph_nodes
+from grasp_tools.bench.real_time_recording import Recording
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIG = REPO / 'config' / 'paper_scenario.yaml'

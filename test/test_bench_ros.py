@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from grasp_safety_filter.bench_ros import override_arguments, percentiles, report
+from grasp_tools.bench_ros import override_arguments, percentiles, report
 
 BENCH = Path(sys.executable).parent / 'grasp-bench-ros'
 

@@ -25,10 +25,10 @@ from grasp_states import (
 import numpy as np
 import pytest
 
-from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.hand import Branches, HandModel
 from grasp_safety_filter.model.staged_state import staged_state
+from grasp_tools.bench.recorded_run import record_filtered_run, Scenario
 
 AFFINE_TERMS = ('contact_force', 'joint_acceleration', 'object_acceleration', 'xi_cf_ddot')
 PLAIN_TERMS = ('J_h', 'G', 'Jh_dot_dq', 'G_dot_T_twist', 'B_ho')

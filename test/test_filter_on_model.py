@@ -30,7 +30,6 @@ import pytest
 from qp_reference import chebyshev_radius, hard_optimum, relaxed_optimum
 import scipy.linalg
 
-from grasp_safety_filter.bench import record_filtered_run, Scenario
 from grasp_safety_filter.control.class_k import ClassKFunction
 from grasp_safety_filter.control.constraints import (
     FingertipWorkspaceBarrier,
@@ -44,6 +43,7 @@ from grasp_safety_filter.control.safety_filter import (
     SafetyFilterConfig,
 )
 from grasp_safety_filter.io.paths import config_path
+from grasp_tools.bench import record_filtered_run, Scenario
 
 N_STATES = 20  # finite-difference checks
 N_RANDOM_STATES = 240  # optimality checks, per configuration

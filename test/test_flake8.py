@@ -7,7 +7,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parent.parent
 # Explicit paths: a checkout's .venv/ must not be linted.
-PATHS = ('grasp_safety_filter', 'hand_sim_node', 'launch', 'test', 'setup.py')
+PATHS = ('grasp_safety_filter', 'hand_sim_node', 'tools', 'launch', 'test', 'setup.py')
 
 
 @pytest.mark.flake8

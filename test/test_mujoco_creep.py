@@ -1,6 +1,6 @@
 """MuJoCo's friction creep follows the soft-constraint law; our model against MuJoCo.
 
-The creep law (``hand_sim_node/mujoco_creep.py``) is derived from MuJoCo's documented
+The creep law (``tools/mujoco_creep.py``) is derived from MuJoCo's documented
 constraint model, not fitted: on a held grasp the measured slip velocity must equal
 ``-R f_t / B`` (elliptic) or ``-(R_+ f_+ - R_- f_-) / (2 μ B)`` (pyramidal) read from MuJoCo's
 own rows, and the no-slip solver must stop it. The comparison machinery is checked by
@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.errors import EXIT_CONFIG_ERROR
-from hand_sim_node import mujoco_compare, mujoco_creep
-from hand_sim_node.closed_loop import run_closed_loop
+from grasp_tools import mujoco_compare, mujoco_creep
+from grasp_tools.bench.recorded_run import Scenario
+from grasp_tools.closed_loop import run_closed_loop
+from grasp_tools.mujoco_compare import compare
 from hand_sim_node.mjcf import MjcfOptions
-from hand_sim_node.mujoco_compare import compare
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'

@@ -14,12 +14,12 @@ import sys
 import numpy as np
 import pytest
 
-from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario
 from grasp_safety_filter.control.filter_result import FilterStatus
 from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.errors import EXIT_CONFIG_ERROR
-from hand_sim_node import mujoco_run
-from hand_sim_node.closed_loop import DURATION, run_closed_loop
+from grasp_tools import mujoco_run
+from grasp_tools.bench.recorded_run import record_filtered_run, Scenario
+from grasp_tools.closed_loop import DURATION, run_closed_loop
 from hand_sim_node.mjcf import mjcf_from_model, MjcfError, MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant, MuJoCoUnavailableError, OBJECT_DROPPED
 from hand_sim_node.plant import make_plant, Plant, RigidPlant
@@ -215,7 +215,7 @@ def test_filtered_paper_run_on_mujoco_keeps_every_contact(scenario):
 
 
 def test_measurement_command_writes_its_figures(tmp_path, capsys):
-    """``python -m hand_sim_node.mujoco_run``: both runs, the figures on stdout and in JSON."""
+    """``python -m grasp_tools.mujoco_run``: both runs, the figures on stdout and in JSON."""
     out = tmp_path / 'figures.json'
     argv = ['--config', str(CONFIG), '--mode', 'both', '--duration', '0.02', '--json', str(out)]
     assert mujoco_run.main(argv) == 0

@@ -18,7 +18,6 @@ from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.analysis.verdict import expected_verdict, run_verdict
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.io.messages import (
     diagnostics_from_msg,
@@ -32,6 +31,7 @@ from grasp_safety_filter.io.sim_diagnostic_keys import PlantEvents, SIM_DIAGNOST
 from grasp_safety_filter.io.topics import DIAGNOSTICS
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.runner import run, RunOptions
+from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
 from hand_sim_node.mjcf import MjcfError, MjcfOptions

@@ -396,7 +396,7 @@ def test_the_safety_filter_node_loads_the_kernels_of_its_rarer_ticks_before_its_
     process, and fed to a fresh node as DDS delivers messages: its active-set ticks (the
     first at 3 ms) and relaxed ticks took up to 23 ms when their steps loaded then.
     """
-    from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario
+    from grasp_tools.bench.recorded_run import record_filtered_run, Scenario
 
     ticks, *_ = record_filtered_run(Scenario.load(CONFIG), 2.265)
     recorded = tmp_path / 'ticks.npz'

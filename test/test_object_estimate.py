@@ -20,13 +20,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.estimation.object_state import (
     ObjectEstimateConfig,
     ObjectStateEstimator,
     TrackerSample,
 )
 from grasp_safety_filter.model.grasp_check import GAP_TOLERANCE
+from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 from hand_sim_node.plant import RigidPlant

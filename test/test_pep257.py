@@ -6,7 +6,7 @@ from ament_pep257.main import main
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
-PATHS = ('grasp_safety_filter', 'hand_sim_node', 'launch', 'test', 'setup.py')
+PATHS = ('grasp_safety_filter', 'hand_sim_node', 'tools', 'launch', 'test', 'setup.py')
 
 # The package writes Google-style docstrings ("Args:" sections, summary on the first line):
 # the google convention instead of ament's default list, which checks numpy-style section

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.model.contact_stack import ContactStack
 from grasp_safety_filter.model.quaternion import quaternion_derivative, rotation_matrix
+from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.simulator import SimState, Simulator
 from hand_sim_node.stage import _rotation_matrix, PlantRate
 

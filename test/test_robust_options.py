@@ -16,8 +16,6 @@ from scipy.optimize import nnls
 from synthetic_state import synthetic_state, SyntheticHand
 from test_safety_filter import independent_rows
 
-from grasp_safety_filter.bench.command_line import bench_main, bench_parser
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.control.constraints import FrictionPyramid, TorqueRateBound
 from grasp_safety_filter.control.constraints.friction_cone import DIAMOND, INSCRIBED
 from grasp_safety_filter.control.filter_result import FilterStatus
@@ -25,8 +23,10 @@ from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
 from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.model.affine import AffineMap
-from hand_sim_node import mujoco_compare, mujoco_run
-from hand_sim_node.closed_loop import DURATION, run_closed_loop
+from grasp_tools import mujoco_compare, mujoco_run
+from grasp_tools.bench.command_line import bench_main, bench_parser
+from grasp_tools.bench.recorded_run import Scenario
+from grasp_tools.closed_loop import DURATION, run_closed_loop
 from hand_sim_node.plant import RigidPlant
 
 HAND = SyntheticHand()

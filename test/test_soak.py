@@ -8,9 +8,9 @@ import json
 
 import pytest
 
-from grasp_safety_filter.bench import bench_main
 from grasp_safety_filter.io import topics
-from grasp_safety_filter.soak import growth_per_tick, RssSample
+from grasp_tools.bench import bench_main
+from grasp_tools.soak import growth_per_tick, RssSample
 
 SECONDS = 0.2
 TIME_STEP = 0.001

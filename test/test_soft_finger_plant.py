@@ -26,9 +26,9 @@ import numpy as np
 import pytest
 from test_simulator import hand_kinetic_energy, unactuated_run
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.model.arrays import skew
 from grasp_safety_filter.model.quaternion import from_rotation_matrix
+from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.simulator import SimState, Simulator
 from hand_sim_node.stage import PlantRate
 

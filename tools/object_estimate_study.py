@@ -11,32 +11,32 @@ error, orientation error and |penetration| of ``model.state`` at (a) the true po
 newest tracker sample held to the tick, (c) the estimate; then how far the kinematics alone
 drift.
 
-Usage (from the repository root): ``PYTHONPATH=. .venv/bin/python tools/object_estimate_study.py``
-(``--tau 0.05 0.1 0.2`` adds a table of the estimator at those correction times).
+Usage: ``python -m grasp_tools.object_estimate_study`` (``--tau 0.05 0.1 0.2`` adds a table of
+the estimator at those correction times).
 """
 
 from __future__ import annotations
 
 import argparse
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.estimation.object_state import (
     ObjectEstimateConfig,
     ObjectStateEstimator,
     TrackerSample,
 )
+from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.model.grasp_model import GraspModel
-from hand_sim_node.closed_loop import LoopRun
+from grasp_tools.bench.recorded_run import Scenario
+from grasp_tools.closed_loop import LoopRun
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 from hand_sim_node.plant import Observation, RigidPlant
 
-CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
+CONFIG = config_path()
 DURATION = 3.0
 WARM_UP = 1.0  # s excluded from the statistics (the first samples are being averaged)
 #: The plants: ours, MuJoCo with contacts that hold the grasp, MuJoCo's default contacts
@@ -228,7 +228,9 @@ def row(label: str, values: np.ndarray) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Print the tables."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        prog='python -m grasp_tools.object_estimate_study', description=__doc__.splitlines()[0]
+    )
     parser.add_argument(
         '--tau', type=float, nargs='*', default=[], help='correction times to compare (s)'
     )

@@ -9,11 +9,11 @@ from pathlib import Path
 import sys
 from typing import Any
 
-from grasp_safety_filter.bench.report import benchmark, format_report
 from grasp_safety_filter.cli import parse_override
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import MODEL_PARAMETERS
+from grasp_tools.bench.report import benchmark, format_report
 
 
 def bench_parser() -> argparse.ArgumentParser:
@@ -74,7 +74,7 @@ def bench_parser() -> argparse.ArgumentParser:
         type=float,
         metavar='SECONDS',
         help='instead: the soak benchmark, a recorded filtered run of SECONDS simulated s '
-        '(memory growth, bag size, analysis memory; grasp_safety_filter.soak)',
+        '(memory growth, bag size, analysis memory; grasp_tools.soak)',
     )
     parser.add_argument(
         '--soak-interval',
@@ -148,8 +148,8 @@ def bench_main(argv: list[str] | None = None) -> int:
 def _soak_main(
     args: argparse.Namespace, parser: argparse.ArgumentParser, log: Callable[[str], None]
 ) -> int:
-    """``grasp-bench --soak SECONDS``: see :mod:`grasp_safety_filter.soak`."""
-    from grasp_safety_filter.soak import format_soak, soak
+    """``grasp-bench --soak SECONDS``: see :mod:`grasp_tools.soak`."""
+    from grasp_tools.soak import format_soak, soak
 
     if args.soak <= 0 or args.soak_interval <= 0:
         parser.error('--soak and --soak-interval: expected > 0 s')

@@ -28,15 +28,6 @@ import time
 from typing import Any
 
 import grasp_safety_filter
-from grasp_safety_filter.bench.real_time_driver import (
-    driver_plan,
-    ORIENTATION_NOISE,
-    write_driver_input,
-)
-from grasp_safety_filter.bench.real_time_figures import FilterStatusRecord, RunRecords
-from grasp_safety_filter.bench.real_time_nodes import RELAY_TOPIC
-from grasp_safety_filter.bench.real_time_recording import Recording
-from grasp_safety_filter.bench_ros_graph import cpu_seconds, stop_process
 from grasp_safety_filter.io.launch_arguments import NodeLaunch, real_hand
 from grasp_safety_filter.io.schemas import HAND_SIM_NODE, SAFETY_FILTER_NODE
 from grasp_safety_filter.io.topics import (
@@ -45,6 +36,15 @@ from grasp_safety_filter.io.topics import (
     JOINT_STATES,
     OBJECT_ODOM,
 )
+from grasp_tools.bench.real_time_driver import (
+    driver_plan,
+    ORIENTATION_NOISE,
+    write_driver_input,
+)
+from grasp_tools.bench.real_time_figures import FilterStatusRecord, RunRecords
+from grasp_tools.bench.real_time_nodes import RELAY_TOPIC
+from grasp_tools.bench.real_time_recording import Recording
+from grasp_tools.bench_ros_graph import cpu_seconds, stop_process
 
 #: Wall-clock period of the CPU readings, s.
 CPU_SAMPLE_PERIOD = 0.1
@@ -111,8 +111,8 @@ class Case:
 def bench_environment(domain_id: int) -> dict[str, str]:
     """Return the processes' environment: their own ROS domain, discovery on this machine.
 
-    ``PYTHONPATH`` starts with this package's directory, so the helpers and the node
-    processes run the same code as this process.
+    ``PYTHONPATH`` starts with the directory of the runtime packages this process imported,
+    so the helpers and the node processes run the same code as this process.
     """
     env = dict(os.environ)
     env['ROS_DOMAIN_ID'] = str(domain_id)
@@ -126,8 +126,8 @@ def bench_environment(domain_id: int) -> dict[str, str]:
 
 
 def module_command(module: str, *arguments: Any) -> list[str]:
-    """Return the command running ``grasp_safety_filter.bench.<module>`` with ``arguments``."""
-    return [sys.executable, '-m', f'grasp_safety_filter.bench.{module}', *map(str, arguments)]
+    """Return the command running ``grasp_tools.bench.<module>`` with ``arguments``."""
+    return [sys.executable, '-m', f'grasp_tools.bench.{module}', *map(str, arguments)]
 
 
 class ProcessGroup:

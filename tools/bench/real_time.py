@@ -30,19 +30,19 @@ import sys
 import tempfile
 from typing import Any
 
-from grasp_safety_filter.bench.real_time_driver import ORIENTATION_NOISE
-from grasp_safety_filter.bench.real_time_figures import figures
-from grasp_safety_filter.bench.real_time_processes import (
+from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.io.schemas import load_node_parameters, SAFETY_FILTER_NODE
+from grasp_safety_filter.io.sim_diagnostic_keys import SimKey
+from grasp_tools.bench.real_time_driver import ORIENTATION_NOISE
+from grasp_tools.bench.real_time_figures import figures
+from grasp_tools.bench.real_time_processes import (
     bench_environment,
     Case,
     run_filter_case,
     run_graph_case,
 )
-from grasp_safety_filter.bench.real_time_recording import load_or_record
-from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
-from grasp_safety_filter.io.paths import config_path
-from grasp_safety_filter.io.schemas import load_node_parameters, SAFETY_FILTER_NODE
-from grasp_safety_filter.io.sim_diagnostic_keys import SimKey
+from grasp_tools.bench.real_time_recording import load_or_record
 
 PROGRAM = 'grasp-bench-realtime'
 
@@ -262,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as error:
         print(config_error_line(PROGRAM, error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
-    from grasp_safety_filter.bench.machine import machine_info
+    from grasp_tools.bench.machine import machine_info
 
     domain = default_domain() if args.domain_id is None else args.domain_id
     env = bench_environment(domain)

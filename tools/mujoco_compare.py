@@ -1,4 +1,4 @@
-r"""Our model against MuJoCo at the torques of a run: ``python -m hand_sim_node.mujoco_compare``.
+r"""Our model against MuJoCo at the torques of a run: ``python -m grasp_tools.mujoco_compare``.
 
 Runs the scenario's nominal or filtered closed loop on MuJoCo and, at every tick, compares
 what our rigid model predicts at MuJoCo's state under the torque applied there (the contact
@@ -17,13 +17,13 @@ grows as 1 / mu_t²: at 0.05 m it still creeps, at 5 m it holds).
 
 Example (the paper's filtered run, default contacts; then stiff ones)::
 
-    python -m hand_sim_node.mujoco_compare --mode filtered --figure /tmp/compare.png
-    python -m hand_sim_node.mujoco_compare --mode filtered --solref 0.004 1.0 \
+    python -m grasp_tools.mujoco_compare --mode filtered --figure /tmp/compare.png
+    python -m grasp_tools.mujoco_compare --mode filtered --solref 0.004 1.0 \
         --solimp 0.99 0.99 0.001 0.5 2 --cone elliptic --figure /tmp/compare-stiff.png
 
 Soft fingers on both sides (stiff contacts, no spin)::
 
-    python -m hand_sim_node.mujoco_compare --mode nominal \
+    python -m grasp_tools.mujoco_compare --mode nominal \
         --plant-set model.torsional_friction=0.05 --condim 4 --torsional-friction 5 \
         --cone elliptic --solref 0.004 1.0 --solimp 0.99 0.99 0.001 0.5 2
 """
@@ -39,9 +39,9 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.cli import parse_override
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.mjcf import CONDIMS, CONES, MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 
@@ -188,7 +188,7 @@ def draw(comparison: Comparison, contact_names: list[str], path: Path) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Compare, print the statistics as JSON, optionally draw the figure."""
     parser = argparse.ArgumentParser(
-        prog='python -m hand_sim_node.mujoco_compare', description=__doc__.splitlines()[0]
+        prog='python -m grasp_tools.mujoco_compare', description=__doc__.splitlines()[0]
     )
     defaults = MjcfOptions()
     parser.add_argument('--config', type=Path, default=Path('config/paper_scenario.yaml'))

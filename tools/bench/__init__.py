@@ -31,7 +31,7 @@ node. Nothing here asserts a time: the figures are for reading.
 
 ``grasp-bench --soak SECONDS`` runs the long-run benchmark instead (memory growth of the
 recording runner, bag size per simulated second, memory of the analysis):
-:mod:`grasp_safety_filter.soak`.
+:mod:`grasp_tools.soak`.
 
 Modules: :mod:`.recorded_run` (1, 4), :mod:`.replay` (2), :mod:`.external_solvers` (3),
 :mod:`.backends` (the QP backends on the same ticks), :mod:`.hands` (other hands in the
@@ -46,15 +46,15 @@ imported here.
 
 from __future__ import annotations
 
-from grasp_safety_filter.bench.backends import (  # noqa: F401
+from grasp_tools.bench.backends import (  # noqa: F401
     backend_table,
     BackendReplay,
     replay_backends,
 )
-from grasp_safety_filter.bench.command_line import (  # noqa: F401
+from grasp_tools.bench.command_line import (  # noqa: F401
     bench_main,
 )
-from grasp_safety_filter.bench.external_solvers import (  # noqa: F401
+from grasp_tools.bench.external_solvers import (  # noqa: F401
     CLARABEL_TIGHT,
     EXTERNAL_SOLVERS,
     external_solvers,
@@ -64,20 +64,20 @@ from grasp_safety_filter.bench.external_solvers import (  # noqa: F401
     run_external,
     SolverInput,
 )
-from grasp_safety_filter.bench.hands import (  # noqa: F401
+from grasp_tools.bench.hands import (  # noqa: F401
     format_hands,
     hand_table,
     HandTicks,
     replay_hands,
 )
-from grasp_safety_filter.bench.machine import (  # noqa: F401
+from grasp_tools.bench.machine import (  # noqa: F401
     fixed_work,
     machine_info,
     noise_floor,
     VERSIONED_PACKAGES,
 )
-from grasp_safety_filter.bench.node_callbacks import FilterCallbackTimes  # noqa: F401
-from grasp_safety_filter.bench.recorded_run import (  # noqa: F401
+from grasp_tools.bench.node_callbacks import FilterCallbackTimes  # noqa: F401
+from grasp_tools.bench.recorded_run import (  # noqa: F401
     LoopRate,
     nominal_loop_rate,
     record_filtered_run,
@@ -85,7 +85,7 @@ from grasp_safety_filter.bench.recorded_run import (  # noqa: F401
     Scenario,
     Tick,
 )
-from grasp_safety_filter.bench.replay import (  # noqa: F401
+from grasp_tools.bench.replay import (  # noqa: F401
     CERTIFIED,
     COMPONENTS,
     CPU_COMPONENTS,
@@ -94,7 +94,7 @@ from grasp_safety_filter.bench.replay import (  # noqa: F401
     replay,
     statistics,
 )
-from grasp_safety_filter.bench.report import (  # noqa: F401
+from grasp_tools.bench.report import (  # noqa: F401
     benchmark,
     CALLBACKS_LABEL,
     format_report,

@@ -1,12 +1,12 @@
 """``grasp-bench-realtime``'s relay and monitor processes (bare rclpy, no package node).
 
-``python -m grasp_safety_filter.bench.real_time_nodes relay``: subscribes to
+``python -m grasp_tools.bench.real_time_nodes relay``: subscribes to
 ``/hand/joint_states`` as the safety filter does with ``input.sync: latest`` (best effort,
 the table's depth) and publishes each message unchanged on :data:`RELAY_TOPIC` (the table's
 joint-state QoS, as the filter's command): one bare Python hop, the baseline of the filter's
 latency. It spins in the executor the package's nodes spin in.
 
-``python -m grasp_safety_filter.bench.real_time_nodes monitor --out OUT``: subscribes to
+``python -m grasp_tools.bench.real_time_nodes monitor --out OUT``: subscribes to
 ``/hand/effort_command``, :data:`RELAY_TOPIC` and ``/diagnostics`` (and ``/hand/joint_states``
 with ``--states``, when no driver of ours records them) and notes each message's header
 stamp and ``time.time_ns()`` at its receipt; of ``/diagnostics`` the ``safety_filter``

@@ -1,6 +1,6 @@
-r"""The scenario's runs on the MuJoCo plant, measured: ``python -m hand_sim_node.mujoco_run``.
+r"""The scenario's runs on the MuJoCo plant, measured: ``python -m grasp_tools.mujoco_run``.
 
-Runs the nominal and/or the filtered closed loop (:func:`~hand_sim_node.closed_loop.
+Runs the nominal and/or the filtered closed loop (:func:`~grasp_tools.closed_loop.
 run_closed_loop`) on :class:`~hand_sim_node.mujoco_plant.MuJoCoPlant` and prints, per run,
 what MuJoCo measured: when each contact was first lost and when the object dropped, the slip
 distance per contact, the largest slip speed, the deepest penetration, the joint limits
@@ -10,22 +10,22 @@ test: nothing is asserted.
 Example (the paper's two runs, MuJoCo's default contacts, then stiff ones, then without the
 creep of soft friction)::
 
-    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both
-    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
+    python -m grasp_tools.mujoco_run --config config/paper_scenario.yaml --mode both
+    python -m grasp_tools.mujoco_run --config config/paper_scenario.yaml --mode both \
         --solref 0.004 1.0
-    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode both \
+    python -m grasp_tools.mujoco_run --config config/paper_scenario.yaml --mode both \
         --noslip-iterations 10
-    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode filtered \
+    python -m grasp_tools.mujoco_run --config config/paper_scenario.yaml --mode filtered \
         --set torque_rate.enabled=true --set torque_rate.max_step=0.05
-    python -m hand_sim_node.mujoco_run --config config/paper_scenario.yaml --mode filtered \
+    python -m grasp_tools.mujoco_run --config config/paper_scenario.yaml --mode filtered \
         --noslip-iterations 10 --set no_slip.cone=diamond --set no_slip.friction_margin=0.3
 
 Soft fingers (``--plant-set`` overrides the simulator's parameters, the model's among them)
 on MuJoCo's torsional contacts, and on our rigid plant::
 
-    python -m hand_sim_node.mujoco_run --mode nominal --condim 4 \
+    python -m grasp_tools.mujoco_run --mode nominal --condim 4 \
         --plant-set model.torsional_friction=0.005
-    python -m hand_sim_node.mujoco_run --mode nominal --plant rigid \
+    python -m grasp_tools.mujoco_run --mode nominal --plant rigid \
         --plant-set model.torsional_friction=0.005
 """
 
@@ -40,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.cli import parse_override
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
-from hand_sim_node.closed_loop import LoopRun
+from grasp_tools.bench.recorded_run import Scenario
+from grasp_tools.closed_loop import LoopRun
 from hand_sim_node.mjcf import CONES, INTEGRATORS, MjcfOptions
 from hand_sim_node.mujoco_plant import ContactReport, MuJoCoPlant
 from hand_sim_node.plant import RigidPlant
@@ -156,7 +156,7 @@ def run_on_rigid(scenario: Scenario, mode: str, duration: float) -> dict[str, An
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     """Command line (see the module docstring)."""
     parser = argparse.ArgumentParser(
-        prog='python -m hand_sim_node.mujoco_run', description=__doc__.splitlines()[0]
+        prog='python -m grasp_tools.mujoco_run', description=__doc__.splitlines()[0]
     )
     parser.add_argument('--config', type=Path, default=Path('config/paper_scenario.yaml'))
     parser.add_argument('--mode', choices=sorted(MODES), default='both')

@@ -33,12 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench_ros_graph import percentiles
 from grasp_safety_filter.io.diagnostic_keys import (
     FAILED_STATUSES,
     GRASP_STATUSES,
     INPUT_STATUSES,
 )
+from grasp_tools.bench_ros_graph import percentiles
 
 #: Tick statuses whose command was not computed for its state: held or fallback commands
 #: of the hold policy (rejected or missing input, no grasp) and the filter's own fallback

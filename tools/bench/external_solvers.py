@@ -13,7 +13,7 @@ import warnings
 
 import numpy as np
 
-from grasp_safety_filter.bench.replay import DenseQP, statistics
+from grasp_tools.bench.replay import DenseQP, statistics
 
 
 class SolverInput(NamedTuple):

@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.node_callbacks import FilterCallbackTimes
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.reference import Pose, ReferenceSource
 from grasp_safety_filter.control.safety_filter import (
@@ -26,7 +25,8 @@ from grasp_safety_filter.io.schemas import (
     SAFETY_FILTER_NODE,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
-from hand_sim_node.closed_loop import LoopRun, run_closed_loop
+from grasp_tools.bench.node_callbacks import FilterCallbackTimes
+from grasp_tools.closed_loop import LoopRun, run_closed_loop
 from hand_sim_node.config import SimConfig
 from hand_sim_node.plant import Observation, Plant, RigidPlant
 from hand_sim_node.simulator import SimState, Simulator
@@ -107,7 +107,7 @@ class Scenario:
 
         The nominal controller, its reference started at the plant's pose, and a fresh
         filter when ``filtered`` (else u = u_nom); ``after_step`` as in
-        :func:`~hand_sim_node.closed_loop.run_closed_loop`.
+        :func:`~grasp_tools.closed_loop.run_closed_loop`.
         """
         return run_closed_loop(
             plant,
@@ -236,7 +236,7 @@ def record_filtered_run(
 def nominal_loop_rate(scenario: Scenario, duration: float) -> LoopRate:
     """Real-time factor of simulator + nominal controller (the paper's unfiltered run).
 
-    The closed loop of :func:`hand_sim_node.closed_loop.run_closed_loop` on the rigid plant.
+    The closed loop of :func:`grasp_tools.closed_loop.run_closed_loop` on the rigid plant.
     """
     plant = RigidPlant(scenario.model, scenario.sim_config)
     loop = scenario.run_on(plant, filtered=False, duration=duration)

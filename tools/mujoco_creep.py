@@ -1,6 +1,6 @@
 r"""Creep of MuJoCo's soft friction on a held grasp: its law, measured.
 
-``python -m hand_sim_node.mujoco_creep`` holds the scenario's grasp still (the nominal
+``python -m grasp_tools.mujoco_creep`` holds the scenario's grasp still (the nominal
 controller's reference frozen at the initial pose, through the safety filter) on MuJoCo
 under a table of contact settings and squeezes, and prints per setting and contact the
 normal and friction force, MuJoCo's impedance ``d``, the measured slip speed, the speed the
@@ -44,8 +44,8 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.recorded_run import Scenario
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
 
@@ -205,7 +205,7 @@ def measure_settings(config: Path, duration: float, window: float) -> list[dict[
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
-    """Return the rows as the README's table (per contact ``f1/f2/f3``)."""
+    """Return the rows as docs/mujoco.md's table (per contact ``f1/f2/f3``)."""
 
     def triple(values: list[float], digits: int) -> str:
         return '/'.join(f'{value:.{digits}f}' for value in values)
@@ -230,7 +230,7 @@ def markdown(rows: list[dict[str, Any]]) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Measure every setting; print the table (and write the figures with ``--json``)."""
     parser = argparse.ArgumentParser(
-        prog='python -m hand_sim_node.mujoco_creep', description=__doc__.splitlines()[0]
+        prog='python -m grasp_tools.mujoco_creep', description=__doc__.splitlines()[0]
     )
     parser.add_argument('--config', type=Path, default=Path('config/paper_scenario.yaml'))
     parser.add_argument('--duration', type=float, default=2.0, help='hold, s')

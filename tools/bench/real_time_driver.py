@@ -1,6 +1,6 @@
 """``grasp-bench-realtime``'s lean driver: a hand's driver and tracker, replaying a recording.
 
-Run as a process (``python -m grasp_safety_filter.bench.real_time_driver INPUT --out OUT``)
+Run as a process (``python -m grasp_tools.bench.real_time_driver INPUT --out OUT``)
 it stands in for a real hand's driver that is not Python: plain rclpy publishers, never
 spun, and a loop that sleeps to its next event on ``time.monotonic``. Everything it
 publishes is computed beforehand (:func:`driver_plan`, written by :func:`write_driver_input`)
@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.real_time_recording import Recording
+from grasp_tools.bench.real_time_recording import Recording
 
 #: Event kinds of the driver's loop; at equal times a state goes out before a tracker sample.
 STATE, TRACKER = 0, 1

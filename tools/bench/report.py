@@ -9,33 +9,29 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.backends import backend_table, replay_backends
-from grasp_safety_filter.bench.external_solvers import external_solvers, run_external
-from grasp_safety_filter.bench.hands import compare_hands, format_hands
-from grasp_safety_filter.bench.machine import machine_info, noise_floor
-from grasp_safety_filter.bench.node_callbacks import FilterCallbackTimes
-from grasp_safety_filter.bench.recorded_run import (
+from grasp_safety_filter.control.qp_solvers import BACKENDS
+from grasp_safety_filter.control.safety_filter import FilterStatus
+from grasp_tools.bench.backends import backend_table, replay_backends
+from grasp_tools.bench.external_solvers import external_solvers, run_external
+from grasp_tools.bench.hands import compare_hands, format_hands
+from grasp_tools.bench.machine import machine_info, noise_floor
+from grasp_tools.bench.node_callbacks import FilterCallbackTimes
+from grasp_tools.bench.recorded_run import (
     nominal_loop_rate,
     record_filtered_run,
     runner_loop_rate,
     Scenario,
 )
-from grasp_safety_filter.bench.replay import (
+from grasp_tools.bench.replay import (
     CERTIFIED,
     COMPONENTS,
     CPU_COMPONENTS,
     replay,
     statistics,
 )
-from grasp_safety_filter.control.qp_solvers import BACKENDS
-from grasp_safety_filter.control.safety_filter import FilterStatus
 
 #: The per-tick table's row of the runner's filter-node callbacks.
 CALLBACKS_LABEL = 'filter node callbacks (parse, model, filter step, messages)'
-
-
-# --------------------------------------------------------------------------------------------
-# Figures and report
 
 
 def _counts(values: np.ndarray) -> dict[str, float | int]:
@@ -87,12 +83,12 @@ def benchmark(
         filter_overrides: Safety-filter parameters replaced by dotted name
             (e.g. ``{"osqp.eps_abs": 1e-3}``).
         backends: QP backends (``qp.solver`` values) to compare on the replayed ticks
-            (:mod:`grasp_safety_filter.bench.backends`); none: not compared.
+            (:mod:`grasp_tools.bench.backends`); none: not compared.
         model_overrides: ``model.*`` parameters replaced by dotted name, for every part
             (e.g. ``{"model.torsional_friction": 0.005}``: soft fingers).
         log: Called with a line saying what is being measured.
         compare_configs: Other scenarios whose hands' node ticks are compared with this
-            one's in the same run (:mod:`grasp_safety_filter.bench.hands`; the same
+            one's in the same run (:mod:`grasp_tools.bench.hands`; the same
             overrides apply); none: not compared.
     """
     machine = machine_info()

@@ -1,7 +1,7 @@
 """The paper's recorded filtered run, as ``grasp-bench-realtime``'s driver replays it.
 
 :func:`record` runs the paper's scenario closed loop (simulator, nominal controller, safety
-filter; :func:`~grasp_safety_filter.bench.recorded_run.record_filtered_run`) and keeps every
+filter; :func:`~grasp_tools.bench.recorded_run.record_filtered_run`) and keeps every
 1 ms step: q, dq, object pose and twist, u_nom and the applied u*. It takes about as long
 as the run it records, so :func:`load_or_record` keeps it in an ``.npz`` file for later runs.
 """
@@ -93,7 +93,7 @@ def record(config: Path, duration: float) -> Recording:
     Raises:
         RuntimeError: The run stopped before ``duration`` (the scenario is not the paper's).
     """
-    from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario
+    from grasp_tools.bench.recorded_run import record_filtered_run, Scenario
 
     scenario = Scenario.load(Path(config))
     ticks, rate, _, _ = record_filtered_run(scenario, duration)

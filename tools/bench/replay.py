@@ -10,13 +10,13 @@ from typing import NamedTuple
 import numpy as np
 import osqp
 
-from grasp_safety_filter.bench.recorded_run import Scenario, Tick
 from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
 )
 from grasp_safety_filter.model.grasp_model import state_of
+from grasp_tools.bench.recorded_run import Scenario, Tick
 
 #: Timed pieces of a tick, in table order: JSON key and label.
 COMPONENTS: dict[str, str] = {

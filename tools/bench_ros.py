@@ -27,7 +27,7 @@ Goals (issue: the real ROS 2 graph): tick period <= 3 x the baseline round trip;
 latency <= 1 ms at p99 on an idle machine. The figures are printed (and written as JSON with
 ``--json``); nothing here asserts a time.
 
-The graph run and its monitor are in :mod:`grasp_safety_filter.bench_ros_graph`; its public
+The graph run and its monitor are in :mod:`grasp_tools.bench_ros_graph`; its public
 names are importable from here as well.
 """
 
@@ -42,7 +42,11 @@ import sys
 import time
 from typing import Any
 
-from grasp_safety_filter.bench_ros_graph import (
+from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
+from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.io.schemas import load_node_parameters
+from grasp_safety_filter.io.topics import JOINT_STATES, topic_spec
+from grasp_tools.bench_ros_graph import (
     CPU_SAMPLE_PERIOD,
     GRAPH_NODES,
     graph_run,
@@ -52,10 +56,6 @@ from grasp_safety_filter.bench_ros_graph import (
     scenario_file,
     stop_process,
 )
-from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
-from grasp_safety_filter.io.paths import config_path
-from grasp_safety_filter.io.schemas import load_node_parameters
-from grasp_safety_filter.io.topics import JOINT_STATES, topic_spec
 
 __all__ = [
     'CPU_SAMPLE_PERIOD',
@@ -121,7 +121,7 @@ def ping_pong(pings: int, warm_up: int = 100, timeout: float = 60.0) -> dict[str
     from sensor_msgs.msg import JointState
 
     echo = subprocess.Popen(
-        [sys.executable, '-m', 'grasp_safety_filter.bench_ros', '--echo'],
+        [sys.executable, '-m', 'grasp_tools.bench_ros', '--echo'],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )

@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.recorded_run import record_filtered_run, Scenario, Tick
-from grasp_safety_filter.bench.replay import statistics
 from grasp_safety_filter.model.grasp_model import state_of
+from grasp_tools.bench.recorded_run import record_filtered_run, Scenario, Tick
+from grasp_tools.bench.replay import statistics
 
 #: Ticks of one hand replayed one after the other before the next hand's block.
 BLOCK = 100

@@ -1,6 +1,6 @@
 """``grasp-bench-ros``'s graph run: the three nodes as processes over DDS, timed by a monitor.
 
-The measurement of item 2 of :mod:`grasp_safety_filter.bench_ros` (which runs it and prints
+The measurement of item 2 of :mod:`grasp_tools.bench_ros` (which runs it and prints
 its figures): the scenario file the nodes are started with, the node processes, the
 monitor node that notes each stamp's arrivals, and the figures drawn from them
 (:func:`percentiles`, shared with the baseline's round trips).

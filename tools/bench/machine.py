@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.replay import statistics
 from grasp_safety_filter.model.compiled import kernel
+from grasp_tools.bench.replay import statistics
 
 #: Distribution packages whose versions the report lists.
 VERSIONED_PACKAGES = ('numpy', 'numba', 'scipy', 'osqp', 'cvxpy', 'qpsolvers', 'daqp', 'clarabel')

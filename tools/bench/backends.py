@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.bench.recorded_run import Scenario, Tick
-from grasp_safety_filter.bench.replay import CERTIFIED, statistics
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import FilterStatus, SafetyFilter
 from grasp_safety_filter.model.grasp_model import state_of
+from grasp_tools.bench.recorded_run import Scenario, Tick
+from grasp_tools.bench.replay import CERTIFIED, statistics
 
 
 @dataclass(frozen=True, eq=False)
