@@ -44,6 +44,7 @@ class LeastDistanceSolution:
     multipliers: np.ndarray
     iterations: int
 
+
 #: A row whose normal has a component below this fraction of its norm outside the span of
 #: the working rows' normals is treated as linearly dependent on them.
 DEPENDENCE_TOLERANCE = 1e-8

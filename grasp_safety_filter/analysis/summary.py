@@ -85,6 +85,7 @@ import numpy as np
 from grasp_safety_filter.analysis.filter_statuses import TIME_KEYS
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.analysis.verdict import INTERRUPTED
+from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.diagnostic_keys import (
     FAILED_STATUSES,
     INPUT_STATUSES,
@@ -168,8 +169,9 @@ def tick_counts(run: RunData) -> dict[str, int]:
 
     A status carries the counts of every tick so far (``count.<status>``); the ticks
     answered after the last published one repeat its status (a steady run between two
-    ``diagnostics.period``). Statuses without counts (a bag of an older version): one tick
-    each.
+    ``diagnostics.period``; when the recording missed the first commands, those between the
+    last status and the first recorded command are counted on the time-step grid). Statuses
+    without counts (a bag of an older version): one tick each.
     """
     statuses = run.filter_statuses
     if statuses.counts is not None:
@@ -177,8 +179,13 @@ def tick_counts(run: RunData) -> dict[str, int]:
     else:
         counts = dict(Counter(statuses.status))
     if len(statuses):
-        last = statuses.status[-1]
-        later = int(np.count_nonzero(run.t_command > statuses.t[-1] + 0.5e-9))
+        last, t_last = statuses.status[-1], statuses.t[-1]
+        later = int(np.count_nonzero(run.t_command > t_last + 0.5e-9))
+        if later and topics.EFFORT_COMMAND in run.missed_start:
+            # The recording missed the commands of the ticks between the last status and
+            # its first command: one tick per time step (the lockstep grid).
+            step = float(run.scenario['time_step'])
+            later += max(0, round((float(run.t_command[0]) - t_last) / step) - 1)
         if later:
             counts[last] = counts.get(last, 0) + later
     return counts
