@@ -71,6 +71,12 @@ import numpy as np
 
 from grasp_safety_filter.control import nominal_kernel
 from grasp_safety_filter.control.nominal_config import NominalConfig
+from grasp_safety_filter.control.pose_error import (
+    acceleration_from_euler,
+    euler_from_matrix,
+    euler_pose_error,
+    euler_rates_from_twist,
+)
 from grasp_safety_filter.control.reference import ReferenceSample
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -165,10 +171,13 @@ class NominalController:
         about more than one axis.
         """
         _check_state(state)
-        return nominal_kernel.desired_acceleration(
-            state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
-            reference.r, reference.r_dot, reference.r_ddot, self.config.kp, self.config.kd,
-        )
+        phi_object = euler_from_matrix(state.R_object_to_palm)
+        r_object = np.concatenate((state.p_object_in_palm, phi_object))
+        r_object_dot = euler_rates_from_twist(phi_object, state.twist_object)
+        e = euler_pose_error(reference.r, r_object)
+        e_dot = reference.r_dot - r_object_dot
+        r_object_ddot = reference.r_ddot + self.config.kp * e + self.config.kd * e_dot
+        return acceleration_from_euler(phi_object, r_object_dot, r_object_ddot), e, e_dot
 
     def compute(self, state: GraspState, reference: ReferenceSample) -> NominalOutput:
         """Nominal joint torque for the current grasp state and reference sample.
@@ -209,10 +218,9 @@ class NominalController:
         # a_null = -k_null,p (q - q_posture) - k_null,d dq and
         # tau_null = N^T M_h a_null = M_h a_null - J_h^T Lambda J_h a_null.
         solution = np.linalg.solve(contact_inertia_inv, rhs)
-        u_m, tau_null, x_ddot_des, e, e_dot, G_G_T = nominal_kernel.object_wrench(
-            state.p_object_in_palm, state.R_object_to_palm, state.twist_object,
-            reference.r, reference.r_dot, reference.r_ddot, config.kp, config.kd,
-            state.M_o, state.C_o_twist, state.w_e, G, solution, M_h, J_h, a_null,
+        x_ddot_des, e, e_dot = self.desired_object_acceleration(state, reference)
+        u_m, tau_null, G_G_T = nominal_kernel.object_wrench(
+            x_ddot_des, state.M_o, state.C_o_twist, state.w_e, G, solution, M_h, J_h, a_null
         )
         # G has full row rank: its minimum-norm right inverse is G^+ = G^T (G G^T)^-1
         # (np.linalg.lstsq would take an SVD for the same 6 × 3n system).

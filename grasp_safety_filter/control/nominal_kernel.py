@@ -7,8 +7,8 @@ results can differ from numpy's in the last bit)::
     solve   M_h [X | M_h^-1 C_h dq] = [J_h^T | C_h dq]           (right-hand side: numpy)
     kernel  contact_space_terms: Lambda^-1 = J_h X, its rank check and the right-hand sides
     solve   Lambda^-1 S = [G^T | J_h M_h^-1 C_h dq + G_dot^T x_dot - J_h_dot dq | J_h a_null]
-    kernel  object_wrench: pose error, x_o_ddot_des, u_m = M_ho x_o_ddot_des + C_ho x_o_dot
-            - w_e, tau_null and G G^T
+    kernel  object_wrench: u_m = M_ho x_o_ddot_des + C_ho x_o_dot - w_e, tau_null and G G^T
+            (x_o_ddot_des from the pose error, :mod:`.pose_error`, outside)
     solve   (G G^T) y = u_m
     kernel  joint_torque: u_f and u = J_h^T (G^T y + u_f) + g + tau_null
 
@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from grasp_safety_filter.control import euler_kernel
 from grasp_safety_filter.model.compiled import kernel
 
 
@@ -86,46 +85,8 @@ def contact_space_terms(
 
 
 @kernel
-def desired_acceleration(
-    p_object_in_palm: np.ndarray,
-    R_object_to_palm: np.ndarray,
-    twist_object: np.ndarray,
-    r_reference: np.ndarray,
-    r_dot_reference: np.ndarray,
-    r_ddot_reference: np.ndarray,
-    kp: float,
-    kd: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``x_o_ddot_des = P r_o_ddot + P_dot r_o_dot``, e and e_dot, (6,) each.
-
-    With ``r_o_ddot = r_ddot + K_p e + K_d e_dot`` (arguments as in :func:`object_wrench`).
-    """
-    phi_object = np.empty(3)
-    euler_kernel.euler_angles(R_object_to_palm, phi_object)
-    r_object = np.empty(6)
-    r_object[:3] = p_object_in_palm
-    r_object[3:] = phi_object
-    r_object_dot = np.empty(6)
-    euler_kernel.euler_rates(phi_object, twist_object, r_object_dot)
-    e = np.empty(6)
-    euler_kernel.pose_error(r_reference, r_object, e)
-    e_dot = r_dot_reference - r_object_dot
-    r_object_ddot = r_ddot_reference + kp * e + kd * e_dot
-    x_ddot_des = np.empty(6)
-    euler_kernel.acceleration(phi_object, r_object_dot, r_object_ddot, x_ddot_des)
-    return x_ddot_des, e, e_dot
-
-
-@kernel
 def object_wrench(
-    p_object_in_palm: np.ndarray,
-    R_object_to_palm: np.ndarray,
-    twist_object: np.ndarray,
-    r_reference: np.ndarray,
-    r_dot_reference: np.ndarray,
-    r_ddot_reference: np.ndarray,
-    kp: float,
-    kd: float,
+    x_ddot_des: np.ndarray,
     M_o: np.ndarray,
     C_o_twist: np.ndarray,
     w_e: np.ndarray,
@@ -134,18 +95,11 @@ def object_wrench(
     M_h: np.ndarray,
     J_h: np.ndarray,
     a_null: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Return the object wrench u_m, the null-space torque, x_o_ddot_des, e, e_dot and G G^T.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the object wrench u_m, the null-space torque and G G^T.
 
     Args:
-        p_object_in_palm: Object centre of mass, (3,), m.
-        R_object_to_palm: Object orientation, (3, 3).
-        twist_object: ``x_o_dot = (v_o, w_o)``, palm coordinates, (6,).
-        r_reference: The reference pose r, Euler coordinates, (6,), m and rad.
-        r_dot_reference: Its rate r_dot, (6,).
-        r_ddot_reference: Its acceleration feed-forward r_ddot, (6,).
-        kp: K_p, 1/s².
-        kd: K_d, 1/s.
+        x_ddot_des: The desired object acceleration x_o_ddot_des, (6,), m/s² and rad/s².
         M_o: Object inertia, (6, 6).
         C_o_twist: ``C_o x_o_dot``, (6,).
         w_e: External wrench on the object, (6,), (N, N·m).
@@ -156,14 +110,8 @@ def object_wrench(
         a_null: The null-space joint acceleration, (m,), rad/s².
 
     Returns:
-        ``u_m`` (6,), ``tau_null`` (m,) N·m (zero for m = 3n), ``x_o_ddot_des`` (6,),
-        ``e`` (6,), ``e_dot`` (6,) and ``G G^T`` (6, 6).
-
+        ``u_m`` (6,), ``tau_null`` (m,) N·m (zero for m = 3n) and ``G G^T`` (6, 6).
     """
-    x_ddot_des, e, e_dot = desired_acceleration(
-        p_object_in_palm, R_object_to_palm, twist_object,
-        r_reference, r_dot_reference, r_ddot_reference, kp, kd,
-    )
     rows, m = J_h.shape
     M_ho = M_o + np.dot(G, np.ascontiguousarray(solution[:, :6]))
     C_ho_x_dot = C_o_twist + np.dot(G, np.ascontiguousarray(solution[:, 6]))
@@ -172,7 +120,7 @@ def object_wrench(
         tau_null = np.dot(M_h, a_null) - np.dot(J_h.T, np.ascontiguousarray(solution[:, 7]))
     else:
         tau_null = np.zeros(m)
-    return u_m, tau_null, x_ddot_des, e, e_dot, np.dot(G, G.T)
+    return u_m, tau_null, np.dot(G, G.T)
 
 
 @kernel

@@ -13,9 +13,7 @@ which is how :class:`~grasp_safety_filter.model.grasp_state.GraspState` expresse
 
 E is singular at pitch = ±pi/2 (gimbal lock); the controller is not defined there.
 
-The functions check their arguments' shapes and call the compiled
-:mod:`grasp_safety_filter.control.euler_kernel`, which reproduces Pinocchio's functions to
-the last bit (the controller's tick calls those kernels directly).
+The functions check their arguments' shapes and call Pinocchio's.
 """
 
 from __future__ import annotations
@@ -23,16 +21,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pinocchio as pin
 from pinocchio import rpy
-
-from grasp_safety_filter.control import euler_kernel
 
 
 def _array(function: str, name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """``value`` as a float array of ``shape``; ValueError naming it otherwise.
-
-    The compiled functions of :mod:`.euler_kernel` do not check bounds.
-    """
+    """``value`` as a float array of ``shape``; ValueError naming it otherwise."""
     array = np.asarray(value, dtype=float)
     if array.shape != shape:
         raise ValueError(f'{function}: {name}: expected shape {shape}, got {array.shape}')
@@ -52,9 +46,7 @@ def euler_from_matrix(R: np.ndarray) -> np.ndarray:
     ``R = R_z(yaw) R_y(pitch) R_x(roll)`` with roll, yaw in [-pi, pi], pitch in [-pi/2, pi/2]
     (Pinocchio's ``rpy.matrixToRpy``).
     """
-    phi = np.empty(3)
-    euler_kernel.euler_angles(_array('euler_from_matrix', 'R', R, (3, 3)), phi)
-    return phi
+    return np.asarray(rpy.matrixToRpy(_array('euler_from_matrix', 'R', R, (3, 3))), dtype=float)
 
 
 def matrix_from_euler(phi: np.ndarray) -> np.ndarray:
@@ -68,45 +60,35 @@ def euler_rate_jacobian(phi: np.ndarray) -> np.ndarray:
     ``w_palm = E(phi) phi_dot`` with
     ``E = [[cp cy, -sy, 0], [cp sy, cy, 0], [-sp, 0, 1]]`` (p = pitch, y = yaw).
     """
-    return euler_kernel.rate_jacobian(_array('euler_rate_jacobian', 'phi', phi, (3,)))
+    phi = _array('euler_rate_jacobian', 'phi', phi, (3,))
+    return np.asarray(rpy.computeRpyJacobian(phi, pin.WORLD))
 
 
 def euler_rate_jacobian_dot(phi: np.ndarray, phi_dot: np.ndarray) -> np.ndarray:
     """Time derivative ``dE/dt`` along ``phi_dot``, shape (3, 3), 1/s."""
-    return euler_kernel.rate_jacobian_dot(
-        _array('euler_rate_jacobian_dot', 'phi', phi, (3,)),
-        _array('euler_rate_jacobian_dot', 'phi_dot', phi_dot, (3,)),
-    )
+    phi = _array('euler_rate_jacobian_dot', 'phi', phi, (3,))
+    phi_dot = _array('euler_rate_jacobian_dot', 'phi_dot', phi_dot, (3,))
+    return np.asarray(rpy.computeRpyJacobianTimeDerivative(phi, phi_dot, pin.WORLD))
 
 
 def euler_rates_from_angular_velocity(phi: np.ndarray, w_palm: np.ndarray) -> np.ndarray:
     """``phi_dot = E(phi)^-1 w_palm``, rad/s (closed-form inverse; singular at gimbal lock)."""
-    E_inv = euler_kernel.rate_jacobian_inverse(
-        _array('euler_rates_from_angular_velocity', 'phi', phi, (3,))
-    )
-    return E_inv @ _array('euler_rates_from_angular_velocity', 'w_palm', w_palm, (3,))
+    name = 'euler_rates_from_angular_velocity'
+    phi = _array(name, 'phi', phi, (3,))
+    E_inv = np.asarray(rpy.computeRpyJacobianInverse(phi, pin.WORLD))
+    return E_inv @ _array(name, 'w_palm', w_palm, (3,))
 
 
 def twist_from_euler(phi: np.ndarray, r_dot: np.ndarray) -> np.ndarray:
     """Twist ``x_dot = P(phi) r_dot = (v, E(phi) phi_dot)``, shape (6,)."""
-    out = np.empty(6)
-    euler_kernel.twist(
-        _array('twist_from_euler', 'phi', phi, (3,)),
-        _array('twist_from_euler', 'r_dot', r_dot, (6,)),
-        out,
-    )
-    return out
+    r_dot = _array('twist_from_euler', 'r_dot', r_dot, (6,))
+    return np.concatenate((r_dot[:3], euler_rate_jacobian(phi) @ r_dot[3:]))
 
 
 def euler_rates_from_twist(phi: np.ndarray, twist: np.ndarray) -> np.ndarray:
     """Euler-coordinate rates ``r_dot = P(phi)^-1 x_dot = (v, E^-1 w)``, shape (6,)."""
-    out = np.empty(6)
-    euler_kernel.euler_rates(
-        _array('euler_rates_from_twist', 'phi', phi, (3,)),
-        _array('euler_rates_from_twist', 'twist', twist, (6,)),
-        out,
-    )
-    return out
+    twist = _array('euler_rates_from_twist', 'twist', twist, (6,))
+    return np.concatenate((twist[:3], euler_rates_from_angular_velocity(phi, twist[3:])))
 
 
 def acceleration_from_euler(phi: np.ndarray, r_dot: np.ndarray, r_ddot: np.ndarray) -> np.ndarray:
@@ -115,14 +97,12 @@ def acceleration_from_euler(phi: np.ndarray, r_dot: np.ndarray, r_ddot: np.ndarr
     ``a`` is the centre-of-mass acceleration and ``alpha = w_dot`` the angular acceleration,
     both in palm coordinates, shape (6,).
     """
-    out = np.empty(6)
-    euler_kernel.acceleration(
-        _array('acceleration_from_euler', 'phi', phi, (3,)),
-        _array('acceleration_from_euler', 'r_dot', r_dot, (6,)),
-        _array('acceleration_from_euler', 'r_ddot', r_ddot, (6,)),
-        out,
-    )
-    return out
+    name = 'acceleration_from_euler'
+    r_dot = _array(name, 'r_dot', r_dot, (6,))
+    r_ddot = _array(name, 'r_ddot', r_ddot, (6,))
+    alpha = euler_rate_jacobian(phi) @ r_ddot[3:]
+    alpha += euler_rate_jacobian_dot(phi, r_dot[3:]) @ r_dot[3:]
+    return np.concatenate((r_ddot[:3], alpha))
 
 
 def euler_accelerations_from_acceleration(
@@ -130,14 +110,10 @@ def euler_accelerations_from_acceleration(
 ) -> np.ndarray:
     """Inverse of :func:`acceleration_from_euler`: ``r_ddot = P^-1 (x_ddot - P_dot r_dot)``."""
     name = 'euler_accelerations_from_acceleration'
-    out = np.empty(6)
-    euler_kernel.euler_accelerations(
-        _array(name, 'phi', phi, (3,)),
-        _array(name, 'r_dot', r_dot, (6,)),
-        _array(name, 'acceleration', acceleration, (6,)),
-        out,
-    )
-    return out
+    r_dot = _array(name, 'r_dot', r_dot, (6,))
+    acceleration = _array(name, 'acceleration', acceleration, (6,))
+    alpha = acceleration[3:] - euler_rate_jacobian_dot(phi, r_dot[3:]) @ r_dot[3:]
+    return np.concatenate((acceleration[:3], euler_rates_from_angular_velocity(phi, alpha)))
 
 
 def euler_pose_error(r_reference: np.ndarray, r_object: np.ndarray) -> np.ndarray:
@@ -153,10 +129,8 @@ def euler_pose_error(r_reference: np.ndarray, r_object: np.ndarray) -> np.ndarra
     2 pi branch either is reported on. The error rate and the maps ``P``, ``P_dot`` depend
     only on pitch and yaw through sines and cosines, so they need no unwrapping.
     """
-    out = np.empty(6)
-    euler_kernel.pose_error(
-        _array('euler_pose_error', 'r_reference', r_reference, (6,)),
-        _array('euler_pose_error', 'r_object', r_object, (6,)),
-        out,
+    error = _array('euler_pose_error', 'r_reference', r_reference, (6,)) - _array(
+        'euler_pose_error', 'r_object', r_object, (6,)
     )
-    return out
+    error[3:] = wrap_angle(error[3:])
+    return error
