@@ -6,6 +6,7 @@ numpy operations on arrays with a leading contact axis (one expression per term)
 
 from __future__ import annotations
 
+from model_oracles import ContactStack
 import numpy as np
 
 from grasp_safety_filter.model.arrays import cross, matvec, skew
@@ -27,7 +28,7 @@ def numpy_model_terms(
     """
     n, m = model.n_contacts, model.n_joints
     model.bind_contacts(q, p_o, R_o)
-    stack = model._contact_stack
+    stack = ContactStack(model.contacts)
     v_o, w_o = twist_o[:3], twist_o[3:]
     hand = model.hand.terms(q, dq)
     p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip

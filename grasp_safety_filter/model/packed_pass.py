@@ -1,9 +1,10 @@
 """The one-pass grasp terms' shared stages: hand and object before the contacts, the rest after.
 
 Each one-pass kernel of :mod:`grasp_safety_filter.model.packed_terms` (one per kind of
-object surface) runs :func:`hand_and_object_terms`, its surface's contact kernel, and
+object surface) runs :func:`hand_and_object_terms`, its surface's contact kernel,
 :func:`write_grasp_terms`, which solves the contact dynamics and writes every term into the
-buffer in :func:`~grasp_safety_filter.model.packed_terms.packed_fields`' order. The two
+buffer in :func:`~grasp_safety_filter.model.packed_terms.packed_fields`' order, and
+:func:`write_object_coordinate_acceleration`, the last term. The
 stages are inlined into each kernel by numba (:data:`~grasp_safety_filter.model.compiled.
 inline_kernel`): as calls, handing over their two dozen arrays cost the paper hand's pass
 1.3 of its 10.5 µs. The pass stays one call from Python.
@@ -17,6 +18,7 @@ from grasp_safety_filter.model.compiled import inline_kernel, kernel
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.object_kernel import object_dynamics
+from grasp_safety_filter.model.rolling_kernels import object_coordinate_rate_terms
 from grasp_safety_filter.model.wrench_solve import wrench_solve
 
 #: The object's terms: ``M_o``, ``M_o^-1`` (6, 6) and ``C_o x_o_dot`` (6,), palm frame.
@@ -137,8 +139,8 @@ def write_grasp_terms(
 ) -> tuple[int, np.ndarray]:
     """Solve the contact dynamics and write the terms into ``out``, in ``packed_fields``' order.
 
-    The contact dynamics are :func:`~grasp_safety_filter.model.contact_dynamics.
-    contact_dynamics`' two passes around the solve of ``B_ho``. Every term but the last,
+    The contact dynamics are :mod:`~grasp_safety_filter.model.dynamics_kernel`'s two
+    passes around the solve of ``B_ho``. Every term but the last,
     ``xi_co_ddot_augmented``, is written: its closed form is the object surface's, which the
     caller writes from what this returns.
 
@@ -169,7 +171,7 @@ def write_grasp_terms(
     """
     M_o, M_o_inverse, C_o_twist = object_terms
     p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = hand_terms
-    # ---- Contact dynamics (contact_dynamics: two passes around the solve of B_ho).
+    # ---- Contact dynamics (dynamics_kernel: two passes around the solve of B_ho).
     (
         J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
         x_ddot_free, w_c, w_relative,
@@ -225,3 +227,48 @@ def write_grasp_terms(
     at = _put2(out, at, xi_ddot)
     at = _put2(out, at, M_o)
     return _put(out, at, C_o_twist), xi_ddot
+
+
+@inline_kernel
+def write_object_coordinate_acceleration(
+    out: np.ndarray,
+    at: int,
+    contacts: tuple[np.ndarray, ...],
+    xi_cf_ddot: np.ndarray,
+    radius: np.ndarray,
+    object_radius: np.ndarray,
+    flat: bool,
+) -> None:
+    """Write ``u ↦ xi_co_ddot``, ``[matrix | offset]`` (2n, m + 1), C order, at ``out[at:]``.
+
+    Per contact ``xi_co_ddot = A xi_cf_ddot + c``
+    (:func:`~grasp_safety_filter.model.rolling_kernels.object_coordinate_rate_terms`), with
+    ``xi_cf_ddot``'s rows ``[matrix | offset]``.
+
+    Args:
+        out: The packed buffer; entries ``at .. at + 2n (m + 1) - 1`` are written.
+        at: Where ``xi_co_ddot_augmented`` starts in it.
+        contacts: The contacts' 14 arrays (:func:`~grasp_safety_filter.model.rolling_kernels.
+            sphere_on_plane_contacts`).
+        xi_cf_ddot: ``u ↦ xi_cf_ddot``, ``[matrix | offset]`` (2n, m + 1).
+        radius: Each fingertip's radius, (n,), m.
+        object_radius: The object's radius per contact, (n,), m (not read when ``flat``).
+        flat: Whether the object surfaces are flat faces (else a sphere).
+    """
+    A, bias = object_coordinate_rate_terms(
+        contacts[0], contacts[1], contacts[2], contacts[7], contacts[8], contacts[9],
+        contacts[12], radius, object_radius, flat,
+    )
+    columns = xi_cf_ddot.shape[1]
+    m = columns - 1
+    for i in range(radius.shape[0]):
+        top, bottom = at + 2 * i * columns, at + (2 * i + 1) * columns
+        for k in range(columns):
+            out[top + k] = (
+                A[i, 0, 0] * xi_cf_ddot[2 * i, k] + A[i, 0, 1] * xi_cf_ddot[2 * i + 1, k]
+            )
+            out[bottom + k] = (
+                A[i, 1, 0] * xi_cf_ddot[2 * i, k] + A[i, 1, 1] * xi_cf_ddot[2 * i + 1, k]
+            )
+        out[top + m] += bias[i, 0]
+        out[bottom + m] += bias[i, 1]

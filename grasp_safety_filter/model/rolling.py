@@ -13,9 +13,9 @@ with ``K~_co = R_psi K_co R_psi`` and the reflection ``R_psi = [[cos, -sin], [-s
 this module has the corrected forms, checked against finite differences of the geometric
 coordinates in the tests.
 
-:class:`ContactPair` evaluates one contact;
-:class:`~grasp_safety_filter.model.contact_stack.ContactStack` evaluates all contacts of a
-grasp together, with the same formulas on arrays stacked along a leading contact axis.
+:class:`ContactPair` evaluates one contact. The per-tick model evaluates all contacts of a
+grasp in compiled closed forms (:mod:`~grasp_safety_filter.model.rolling_kernels`,
+:mod:`~grasp_safety_filter.model.sphere_object_kernels`).
 """
 
 from __future__ import annotations

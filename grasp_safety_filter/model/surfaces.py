@@ -15,8 +15,9 @@ parameters
 which drive the rolling equations (see :mod:`grasp_safety_filter.model.rolling`).
 Every surface here gives them in closed form, with their rates along ``xi_dot``.
 
-:mod:`grasp_safety_filter.model.surface_stacks` evaluates the same closed forms for k
-surfaces of one kind at once.
+The per-tick model evaluates the same closed forms for spherical fingertips on flat faces
+or on a sphere in compiled kernels (:mod:`~grasp_safety_filter.model.rolling_kernels`,
+:mod:`~grasp_safety_filter.model.sphere_object_kernels`).
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
-"""Surfaces evaluated together: k surfaces of one kind at stacked coordinates ``xi`` (k, 2).
+"""Oracle (tests only): k surfaces of one kind at stacked coordinates ``xi`` (k, 2), numpy.
 
 The closed forms of :mod:`grasp_safety_filter.model.surfaces`, one numpy call per term for
-all contacts: the per-tick model runs at 1 kHz, and one call per term for all contacts costs
-a fraction of one call per term and contact.
+all contacts, for any mix of surfaces (:class:`SurfaceList` through the per-surface
+interface): :mod:`model_oracles`' stacked contact kinematics.
 """
 
 from __future__ import annotations
