@@ -98,7 +98,7 @@ class PlantRate:
             numpy.linalg.LinAlgError: B_ho is singular.
 
         """
-        M_o_inv = self._object.inverse_inertia_matrix(state.R_object_to_palm)
+        M_o_inv = self._object.dynamics(state.R_object_to_palm, state.twist_object)[1]
         return stabilised_rate(
             state, effort, quaternion_xyzw, M_o_inv, position_gain, velocity_gain,
             self._model.soft_finger, self._model.torsional_compliance,

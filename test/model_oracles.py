@@ -270,6 +270,21 @@ class ContactStack:
         return R_psi * M_cf[:, None, :] / M_co[:, :, None], bias
 
 
+def object_terms(
+    rigid_object: Any, R_object_to_palm: np.ndarray, twist: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(M_o, M_o^-1, C_o x_o_dot)`` in palm coordinates, numpy products (the formulas of
+    :mod:`grasp_safety_filter.model.object_kernel`)."""
+    R = np.asarray(R_object_to_palm, dtype=float)
+    M_o, M_o_inverse = np.zeros((6, 6)), np.zeros((6, 6))
+    M_o[:3, :3] = rigid_object.mass * np.eye(3)
+    M_o_inverse[:3, :3] = np.eye(3) / rigid_object.mass
+    M_o[3:, 3:] = R @ rigid_object.inertia_in_body @ R.T
+    M_o_inverse[3:, 3:] = R @ np.linalg.inv(rigid_object.inertia_in_body) @ R.T
+    w = np.asarray(twist, dtype=float)[3:]
+    return M_o, M_o_inverse, np.concatenate((np.zeros(3), np.cross(w, M_o[3:, 3:] @ w)))
+
+
 def staged_state(
     model: Any,
     t: float,
@@ -284,7 +299,7 @@ def staged_state(
 
     Hand terms (Pinocchio, :meth:`HandModel.terms`), the contacts' geometry and rolling rates
     (:class:`ContactStack`, of ``model.contacts`` unless given), the object's terms
-    (:class:`RigidObject`'s methods), then the contact dynamics' two compiled passes around
+    (:func:`object_terms`), then the contact dynamics' two compiled passes around
     the solve of ``B_ho`` (:mod:`grasp_safety_filter.model.dynamics_kernel`, whose own
     oracle is :mod:`numpy_model_terms`).
     """
@@ -300,8 +315,7 @@ def staged_state(
     geometry, rates = contacts.kinematics(p_f, R_pf, hand.twist_fingertip, p_o, R_o, twist_o)
     R_pc = geometry.R_contact_to_palm
     rigid_object = model.object
-    M_o = rigid_object.inertia_matrix(R_o)
-    C_o_twist = rigid_object.bias_wrench(R_o, twist_o)
+    M_o, M_o_inverse, C_o_twist = object_terms(rigid_object, R_o, twist_o)
     w_e = rigid_object.external_wrench()
     spans = model.hand.branches
     (
@@ -309,7 +323,7 @@ def staged_state(
         x_ddot_free, w_c, w_relative,
     ) = velocity_terms(
         J_s, hand.twist_fingertip, hand.J_fingertip_dot_dq, p_f, hand.M_h_inverse,
-        hand.h_bias, p_o, twist_o, rigid_object.inverse_inertia_matrix(R_o), C_o_twist, w_e,
+        hand.h_bias, p_o, twist_o, M_o_inverse, C_o_twist, w_e,
         geometry.p_contact_in_palm, R_pc, rates.H_cf, rates.H_cf_dot_w,
         rates.sliding_velocity, rates.frame_angular_velocity, *spans, torsion,
     )

@@ -6,7 +6,7 @@ numpy operations on arrays with a leading contact axis (one expression per term)
 
 from __future__ import annotations
 
-from model_oracles import ContactStack
+from model_oracles import ContactStack, object_terms
 import numpy as np
 
 from grasp_safety_filter.model.arrays import cross, matvec, skew
@@ -56,8 +56,7 @@ def numpy_model_terms(
     G_dot_T_twist = matvec(
         R_cp, cross(w_o, p_c_dot - v_o) - matvec(skew_contact, v_co)
     ).reshape(3 * n)
-    M_o_inv = model.object.inverse_inertia_matrix(R_o)
-    bias = model.object.bias_wrench(R_o, twist_o)
+    _, M_o_inv, bias = object_terms(model.object, R_o, twist_o)
     x_ddot_free = M_o_inv @ (model.object.external_wrench() - bias)
     M_h_inv = np.linalg.inv(hand.M_h)
     torque = np.eye(m, m + 1)

@@ -27,6 +27,10 @@ from grasp_safety_filter.model.packed_state import PackedGraspState
 RTOL = 1e-11
 #: Penetrations are ~0 on the contact manifold: their scale is a length of the grasp, m.
 LENGTH_SCALE = 1e-3
+#: The scale of terms that are ~0 at some instants: penetrations (m) and an isotropic
+#: object's gyroscopic torque (exactly 0 in the model, rounding in numpy's cross product),
+#: N·m.
+FLOORS = {'penetration': LENGTH_SCALE, 'C_o_twist': 1e-6}
 SOFT = {'model.torsional_friction': 0.005}
 SPHERE = {'model.object.shape': 'sphere', 'model.object.size': 0.3}
 #: Per case: the model's overrides of the paper's, and whether its object surfaces are flat.
@@ -100,7 +104,7 @@ def _check_state(model, configuration, flat, label):
         else:
             assert not ours.flags.writeable, field.name
             ours, theirs = (ours,), (theirs,)
-        floor = LENGTH_SCALE if field.name == 'penetration' else 1e-300
+        floor = FLOORS.get(field.name, 1e-300)
         for a, b in zip(ours, theirs, strict=True):
             _assert_close(a, b, f'{label}: {field.name}', floor)
     # xi_co_ddot is a view of the buffer's xi_co_ddot_augmented (the pass's closed form).

@@ -25,6 +25,10 @@ from grasp_safety_filter.model.packed_state import PackedGraspState
 RTOL = 1e-11
 #: Penetrations are ~0 on the contact manifold: their scale is a length of the grasp, m.
 LENGTH_SCALE = 1e-3
+#: The scale of terms that are ~0 at some instants: penetrations (m) and an isotropic
+#: object's gyroscopic torque (exactly 0 in the model, rounding in numpy's cross product),
+#: N·m.
+FLOORS = {'penetration': LENGTH_SCALE, 'C_o_twist': 1e-6}
 
 BOXES = {
     'cube': {},
@@ -68,7 +72,7 @@ def _assert_same_fields(packed, staged):
             assert not ours.flags.writeable, field.name
             assert ours.shape == theirs.shape, field.name
             ours, theirs = (ours,), (theirs,)
-        floor = LENGTH_SCALE if field.name == 'penetration' else 1e-300
+        floor = FLOORS.get(field.name, 1e-300)
         for a, b in zip(ours, theirs, strict=True):
             _assert_close(a, b, field.name, floor)
     # xi_co_ddot is a view of the pass's closed form (M_co = I on a face).

@@ -89,24 +89,15 @@ def hand_and_object_terms(
     of the same names.
 
     Returns:
-        ``(M_o, M_o^-1, C_o x_o_dot)`` (RigidObject's ``inertia_matrix``,
-        ``inverse_inertia_matrix``, ``bias_wrench``) and :func:`~grasp_safety_filter.model.
+        ``(M_o, M_o^-1, C_o x_o_dot)`` (:func:`~grasp_safety_filter.model.object_kernel.
+        object_dynamics`) and :func:`~grasp_safety_filter.model.
         hand_kernel.hand_in_model_order`'s ``(p_f, R_f, J_f, twist_f, J_f_dot dq, M_h,
         M_h^-1, h_bias, g)`` (HandModel.terms).
     """
-    # ---- The object (RigidObject's inertia_matrix, bias_wrench, inverse_inertia_matrix).
-    if isotropic:
-        M_o = M_o_in_body[0].copy()
-        M_o_inverse = M_o_in_body[1].copy()
-        C_o_twist = np.zeros(6)
-    else:
-        inertia = (
-            np.ascontiguousarray(M_o_in_body[0, 3:, 3:]),
-            np.ascontiguousarray(M_o_in_body[1, 3:, 3:]),
-        )
-        M_o, M_o_inverse, C_o_twist = object_dynamics(
-            M_o_in_body[0, 0, 0], inertia, R_object_to_palm, twist_object
-        )
+    # ---- The object (RigidObject.dynamics).
+    M_o, M_o_inverse, C_o_twist = object_dynamics(
+        M_o_in_body, isotropic, R_object_to_palm, twist_object
+    )
     # ---- The hand, in the model's joint order (HandModel.terms).
     p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = (
         hand_in_model_order(
