@@ -1,4 +1,4 @@
-"""The oracle's stacked contact kinematics against the per-contact ContactPair formulas.
+"""The oracle's stacked contact kinematics against the per-contact formulas (oracle_rolling).
 
 Also the model's compiled object-coordinate rate terms against the oracle's, and which
 contact surfaces the model's compiled pass takes.
@@ -9,6 +9,7 @@ from __future__ import annotations
 from grasp_states import P_OBJECT_PAPER, paper_model, Q_PAPER, random_configuration
 from model_oracles import ContactStack
 import numpy as np
+from oracle_rolling import contact_geometry, H_cf_rate, rolling_rates
 from oracle_surfaces import SurfaceList
 import pinocchio as pin
 import pytest
@@ -71,7 +72,7 @@ def test_stacks_match_the_per_contact_formulas(shape):
             for term, reference in zip(ours, object_terms, strict=True):
                 np.testing.assert_allclose(term, reference, atol=1e-12, err_msg=name)
             for i, pair in enumerate(model.contacts):
-                expected = pair.geometry(p_f[i], R_f[i], c.p_object, c.R_object)
+                expected = contact_geometry(pair, p_f[i], R_f[i], c.p_object, c.R_object)
                 for field in (
                     'xi_cf',
                     'xi_co',
@@ -87,8 +88,8 @@ def test_stacks_match_the_per_contact_formulas(shape):
                         atol=1e-12,
                         err_msg=f'{name}: {field}[{i}]',
                     )
-                expected_rates = pair.rolling_rates(expected, w_in_contact[i])
-                H_dot = pair.H_cf_rate(expected, expected_rates)
+                expected_rates = rolling_rates(pair, expected, w_in_contact[i])
+                H_dot = H_cf_rate(pair, expected, expected_rates)
                 for field in ('xi_cf_dot', 'xi_co_dot', 'H_cf'):
                     np.testing.assert_allclose(
                         getattr(rates, field)[i],

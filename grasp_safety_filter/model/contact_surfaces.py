@@ -18,8 +18,12 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.packed_terms import sphere_on_plane_terms, sphere_on_sphere_terms
-from grasp_safety_filter.model.rolling import ContactPair
-from grasp_safety_filter.model.rolling_kernels import object_coordinate_rate_terms
+from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
+from grasp_safety_filter.model.rolling_kernels import (
+    object_coordinate_rate_terms,
+    sphere_on_plane_geometry,
+)
+from grasp_safety_filter.model.sphere_object_kernels import sphere_on_sphere_geometry
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
 
 
@@ -30,6 +34,9 @@ class CompiledContacts:
     Attributes:
         flat: True for flat faces, False for a sphere object.
         terms_kernel: The one-pass terms kernel of that kind.
+        geometry_kernel: Its contact geometry alone (:func:`~grasp_safety_filter.model.
+            rolling_kernels.sphere_on_plane_geometry` or :func:`~grasp_safety_filter.model.
+            sphere_object_kernels.sphere_on_sphere_geometry`).
         surface_arrays: Its surface arguments: each face's origin (n, 3), m, and
             ``[e1, e2, n]`` (n, 3, 3) in the object frame; or each contact's chart
             ``R_chart_to_object`` (n, 3, 3) and the object's radius (n,), m; then each
@@ -40,9 +47,44 @@ class CompiledContacts:
 
     flat: bool
     terms_kernel: Callable[..., None]
+    geometry_kernel: Callable[..., tuple[np.ndarray, ...]]
     surface_arrays: tuple[np.ndarray, ...]
     fingertip_radius: np.ndarray
     object_radius: np.ndarray
+
+    def geometry(
+        self,
+        p_fingertip_in_palm: np.ndarray,
+        R_fingertip_to_palm: np.ndarray,
+        p_object_in_palm: np.ndarray,
+        R_object_to_palm: np.ndarray,
+    ) -> list[ContactGeometry]:
+        """Each contact's geometry at a configuration.
+
+        Args:
+            p_fingertip_in_palm: Fingertip sphere centres, (n, 3), m.
+            R_fingertip_to_palm: Fingertip orientations, (n, 3, 3).
+            p_object_in_palm: Object centre of mass, (3,), m.
+            R_object_to_palm: Object orientation, (3, 3).
+
+        Raises:
+            ValueError: A fingertip centre is a sphere object's centre.
+        """
+        arrays = self.geometry_kernel(
+            np.ascontiguousarray(p_fingertip_in_palm, dtype=float),
+            np.ascontiguousarray(R_fingertip_to_palm, dtype=float),
+            np.ascontiguousarray(p_object_in_palm, dtype=float),
+            np.ascontiguousarray(R_object_to_palm, dtype=float),
+            *self.surface_arrays,
+        )
+        xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc = arrays
+        return [
+            ContactGeometry(
+                xi_cf[i], xi_co[i], float(psi[i]), float(penetration[i]), p_contact[i],
+                R_pc[i], R_fc[i],
+            )
+            for i in range(xi_cf.shape[0])
+        ]
 
     def object_rate_terms(
         self,
@@ -102,6 +144,7 @@ def compiled_contacts(contacts: Sequence[ContactPair]) -> CompiledContacts:
         return CompiledContacts(
             True,
             sphere_on_plane_terms,
+            sphere_on_plane_geometry,
             (
                 _array([surface.origin for surface in surfaces]),
                 _array(frames),
@@ -119,6 +162,7 @@ def compiled_contacts(contacts: Sequence[ContactPair]) -> CompiledContacts:
         return CompiledContacts(
             False,
             sphere_on_sphere_terms,
+            sphere_on_sphere_geometry,
             (_array(charts), object_radius, radius),
             radius,
             object_radius,

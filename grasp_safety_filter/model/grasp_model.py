@@ -284,13 +284,14 @@ class GraspModel:
     def contact_geometry(
         self, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
     ) -> list[ContactGeometry]:
-        """Contact coordinates and frames of every contact at a configuration."""
+        """Contact coordinates and frames of every contact at a configuration.
+
+        The compiled contact geometry of the per-tick terms
+        (:meth:`~grasp_safety_filter.model.contact_surfaces.CompiledContacts.geometry`).
+        """
         self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
         p_f, R_f, _ = self.hand.fingertip_placements(np.asarray(q, dtype=float))
-        return [
-            contact.geometry(p_f[i], R_f[i], p_object_in_palm, R_object_to_palm)
-            for i, contact in enumerate(self.contacts)
-        ]
+        return self._compiled_contacts.geometry(p_f, R_f, p_object_in_palm, R_object_to_palm)
 
     #: Smallest joint correction that makes every fingertip touch its surface exactly
     #: (:func:`~grasp_safety_filter.model.grasp_configuration.project_to_contact`).
