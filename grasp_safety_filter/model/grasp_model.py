@@ -341,8 +341,11 @@ class GraspModel:
         matrices ``[matrix | offset]`` acting on ``(u, 1)``, into one buffer whose views are
         the fields (:func:`~grasp_safety_filter.model.packed_state.packed_state`).
 
+        A state whose terms are not finite (an input that is not, or terms that overflow)
+        has NaN contact wrench and accelerations.
+
         Raises:
-            numpy.linalg.LinAlgError: ``B_ho`` is singular, or an input is not finite.
+            numpy.linalg.LinAlgError: ``B_ho`` is singular.
             ValueError: An input's shape is not the model's, or a fingertip centre is a
                 sphere object's centre.
         """

@@ -158,7 +158,8 @@ def write_grasp_terms(
         ``[matrix | offset]`` (2n, m + 1).
 
     Raises:
-        numpy.linalg.LinAlgError: B_ho is singular.
+        numpy.linalg.LinAlgError: B_ho is singular (a ``B_ho`` or right-hand side that is not
+            finite gives NaN wrench and accelerations instead).
     """
     M_o, M_o_inverse, C_o_twist = object_terms
     p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = hand_terms
@@ -171,7 +172,11 @@ def write_grasp_terms(
         twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
         contacts[11], contacts[12], contacts[13], joint_span, fingertip_span, torsion,
     )
-    if torsion:
+    if not (np.isfinite(B_ho).all() and np.isfinite(force_rhs).all()):
+        # Terms that overflowed (a huge but finite state): every term after the solve is
+        # NaN, which the consumers refuse, rather than an error from the solve.
+        force = np.full(force_rhs.shape, np.nan)
+    elif torsion:
         force = wrench_solve(B_ho, force_rhs, torsional_compliance)
     else:
         force = np.linalg.solve(B_ho, force_rhs)

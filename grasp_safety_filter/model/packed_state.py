@@ -187,9 +187,11 @@ def packed_state(
         layout: The buffer's layout for these contacts and joints.
         sample: ``(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)``.
 
+    Terms that overflow (a huge but finite input) or inputs that are not finite give
+    non-finite terms (NaN from the solve of ``B_ho`` on), which consumers refuse.
+
     Raises:
-        numpy.linalg.LinAlgError: ``B_ho`` is singular, or the solve's matrix or right-hand
-            side is not finite (an input is not finite).
+        numpy.linalg.LinAlgError: ``B_ho`` is singular.
         ValueError: A fingertip centre is a sphere object's centre, or an input's shape is
             not the model's: q and dq (m,), ``p_object_in_palm`` (3,), ``R_object_to_palm``
             (3, 3), ``twist_object`` (6,).
