@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from oracle_geometry import geometry_of
 
 from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
 
@@ -59,12 +60,13 @@ pair: ContactPair,
     normal; the fingertip contact point is where the fingertip's outward normal is the
     opposite of the object's (``xi_cf`` by the inverse Gauss map).
     """
+    tip, surface = geometry_of(pair.fingertip), geometry_of(pair.object_surface)
     p_centre_in_object = R_object_to_palm.T @ (p_fingertip_in_palm - p_object_in_palm)
-    xi_co, distance = pair.object_surface.closest_point(p_centre_in_object)
-    R_object_contact_to_palm = R_object_to_palm @ pair.object_surface.frame(xi_co)
+    xi_co, distance = surface.closest_point(p_centre_in_object)
+    R_object_contact_to_palm = R_object_to_palm @ surface.frame(xi_co)
     n_object_in_palm = R_object_contact_to_palm[:, 2]
-    xi_cf = pair.fingertip.coordinates_of_normal(-R_fingertip_to_palm.T @ n_object_in_palm)
-    R_contact_to_fingertip = pair.fingertip.frame(xi_cf)
+    xi_cf = tip.coordinates_of_normal(-R_fingertip_to_palm.T @ n_object_in_palm)
+    R_contact_to_fingertip = tip.frame(xi_cf)
     R_contact_to_palm = R_fingertip_to_palm @ R_contact_to_fingertip
     x_contact, x_object, y_object = (
         R_contact_to_palm[:, 0],
@@ -76,9 +78,9 @@ pair: ContactPair,
         xi_cf=xi_cf,
         xi_co=xi_co,
         psi=psi,
-        penetration=pair.fingertip.radius - distance,
+        penetration=tip.radius - distance,
         p_contact_in_palm=(
-            p_fingertip_in_palm + R_fingertip_to_palm @ pair.fingertip.point(xi_cf)
+            p_fingertip_in_palm + R_fingertip_to_palm @ tip.point(xi_cf)
         ),
         R_contact_to_palm=R_contact_to_palm,
         R_contact_to_fingertip=R_contact_to_fingertip,
@@ -89,11 +91,12 @@ def rolling_rates(
 pair: ContactPair, geometry: ContactGeometry, w_relative_in_contact: np.ndarray
 ) -> RollingRates:
     """Montana's rates for the relative rotation ``w = R_cp (w_f - w_o)``, rad/s."""
+    tip, surface = geometry_of(pair.fingertip), geometry_of(pair.object_surface)
     xi_cf, xi_co, psi = geometry.xi_cf, geometry.xi_co, geometry.psi
     R_psi = reflection(psi)
-    M_cf = pair.fingertip.metric(xi_cf)
-    M_co = pair.object_surface.metric(xi_co)
-    A = pair.fingertip.curvature(xi_cf) + R_psi @ pair.object_surface.curvature(xi_co) @ R_psi
+    M_cf = tip.metric(xi_cf)
+    M_co = surface.metric(xi_co)
+    A = tip.curvature(xi_cf) + R_psi @ surface.curvature(xi_co) @ R_psi
     A_inv = np.linalg.inv(A)
     M_cf_inv = np.diag(1.0 / np.diag(M_cf))
     rolled = A_inv @ (ROLL_SELECT @ w_relative_in_contact)
@@ -101,8 +104,8 @@ pair: ContactPair, geometry: ContactGeometry, w_relative_in_contact: np.ndarray
     xi_co_dot = np.linalg.solve(M_co, R_psi @ rolled)
     psi_dot = (
         w_relative_in_contact[2]
-        + pair.fingertip.torsion(xi_cf) @ M_cf @ xi_cf_dot
-        + pair.object_surface.torsion(xi_co) @ M_co @ xi_co_dot
+        + tip.torsion(xi_cf) @ M_cf @ xi_cf_dot
+        + surface.torsion(xi_co) @ M_co @ xi_co_dot
     )
     return RollingRates(
         xi_cf_dot=xi_cf_dot,
@@ -119,17 +122,18 @@ def H_cf_rate(pair: ContactPair, geometry: ContactGeometry, rates: RollingRates)
     d/dt M^-1 = -M^-1 M_dot M^-1,   d/dt A^-1 = -A^-1 A_dot A^-1,
     A_dot = K_cf_dot + R_psi_dot K_co R_psi + R_psi K_co_dot R_psi + R_psi K_co R_psi_dot
     """
+    tip, surface = geometry_of(pair.fingertip), geometry_of(pair.object_surface)
     xi_cf, xi_co, psi = geometry.xi_cf, geometry.xi_co, geometry.psi
     R_psi = reflection(psi)
     R_psi_dot = reflection_rate(psi, rates.psi_dot)
-    K_co = pair.object_surface.curvature(xi_co)
+    K_co = surface.curvature(xi_co)
     A_dot = (
-        pair.fingertip.curvature_rate(xi_cf, rates.xi_cf_dot)
+        tip.curvature_rate(xi_cf, rates.xi_cf_dot)
         + R_psi_dot @ K_co @ R_psi
-        + R_psi @ pair.object_surface.curvature_rate(xi_co, rates.xi_co_dot) @ R_psi
+        + R_psi @ surface.curvature_rate(xi_co, rates.xi_co_dot) @ R_psi
         + R_psi @ K_co @ R_psi_dot
     )
-    M_dot = pair.fingertip.metric_rate(xi_cf, rates.xi_cf_dot)
+    M_dot = tip.metric_rate(xi_cf, rates.xi_cf_dot)
     M_inv_dot = -rates.M_cf_inv @ M_dot @ rates.M_cf_inv
     A_inv_dot = -rates.A_inv @ A_dot @ rates.A_inv
     return (M_inv_dot @ rates.A_inv + rates.M_cf_inv @ A_inv_dot) @ ROLL_SELECT

@@ -11,6 +11,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
 import numpy as np
+from oracle_geometry import geometry_of
 
 from grasp_safety_filter.model.arrays import matvec, read_only
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface, Surface
@@ -147,7 +148,7 @@ class FlatStack(SurfaceStack):
 
     def __init__(self, planes: Sequence[FlatSurface]) -> None:
         self.origin = np.array([plane.origin for plane in planes])
-        self._frame = read_only(np.array([plane.frame(np.zeros(2)) for plane in planes]))
+        self._frame = read_only(np.array([plane.axes for plane in planes]))
         k = len(planes)
         self._ones = read_only(np.ones((k, 2)))
         self._zeros_2 = read_only(np.zeros((k, 2)))
@@ -188,7 +189,7 @@ class SurfaceList(SurfaceStack):
     """Any surfaces, evaluated one by one through the :class:`Surface` interface."""
 
     def __init__(self, surfaces: Sequence[Surface]) -> None:
-        self.surfaces = list(surfaces)
+        self.surfaces = [geometry_of(surface) for surface in surfaces]
 
     def _each(self, method: str, *args: np.ndarray) -> np.ndarray:
         return np.array(

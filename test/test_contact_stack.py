@@ -9,6 +9,7 @@ from __future__ import annotations
 from grasp_states import P_OBJECT_PAPER, paper_model, Q_PAPER, random_configuration
 from model_oracles import ContactStack
 import numpy as np
+from oracle_geometry import geometry_of
 from oracle_rolling import contact_geometry, H_cf_rate, rolling_rates
 from oracle_surfaces import SurfaceList
 import pinocchio as pin
@@ -37,7 +38,7 @@ class _Ball(SphereSurface):
 def _opaque(pair: ContactPair) -> ContactPair:
     surface = pair.object_surface
     if isinstance(surface, FlatSurface):
-        frame = surface.frame(np.zeros(2))
+        frame = surface.axes
         return ContactPair(pair.fingertip, _Plane(surface.origin, frame[:, 0], frame[:, 1]))
     return ContactPair(pair.fingertip, _Ball(surface.radius, surface.R_chart_to_body))
 
@@ -102,14 +103,15 @@ def test_stacks_match_the_per_contact_formulas(shape):
                     rates.H_cf_dot_w[i], H_dot @ w_in_contact[i], atol=1e-10
                 )
                 # The sliding velocity is c_xi xi_cf_dot in contact-frame components.
-                tangents = pair.fingertip.tangents(expected.xi_cf)
+                tangents = geometry_of(pair.fingertip).tangents(expected.xi_cf)
                 np.testing.assert_allclose(
                     expected.R_contact_to_fingertip[:, :2] @ rates.sliding_velocity[i],
                     tangents @ expected_rates.xi_cf_dot,
                     atol=1e-12,
                 )
                 # d/dt R_fc = R_fc (Omega×), against the surface's closed-form frame rate.
-                R_fc_dot = pair.fingertip.frame_rate(expected.xi_cf, expected_rates.xi_cf_dot)
+                tip = geometry_of(pair.fingertip)
+                R_fc_dot = tip.frame_rate(expected.xi_cf, expected_rates.xi_cf_dot)
                 np.testing.assert_allclose(
                     expected.R_contact_to_fingertip @ pin.skew(rates.frame_angular_velocity[i]),
                     R_fc_dot,

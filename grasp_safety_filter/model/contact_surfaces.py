@@ -140,7 +140,7 @@ def compiled_contacts(contacts: Sequence[ContactPair]) -> CompiledContacts:
     surfaces = [contact.object_surface for contact in contacts]
     kinds = {type(surface) for surface in surfaces}
     if kinds == {FlatSurface}:
-        frames = [surface.frame(np.zeros(2)) for surface in surfaces]
+        frames = [surface.axes for surface in surfaces]
         return CompiledContacts(
             True,
             sphere_on_plane_terms,
