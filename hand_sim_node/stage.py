@@ -21,43 +21,13 @@ state at the intermediate Runge–Kutta stages, from the configuration.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
 from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.model.quaternion import rotation_matrix
 from hand_sim_node.stabilisation import stabilised_rate
-
-
-def _rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
-    """``model.quaternion.rotation_matrix`` in floats, the same bits at half the cost, (3, 3).
-
-    The same steps: the norm from numpy's dot (as np.linalg.norm), then Eigen's
-    ``toRotationMatrix`` of the normalised quaternion written out (its numpy and Pinocchio
-    round trip costs ~5 µs a stage). The tests check the bits on random quaternions.
-
-    Raises:
-        ValueError: The quaternion is zero or not finite.
-
-    """
-    norm = math.sqrt(float(quaternion_xyzw.dot(quaternion_xyzw)))
-    if not (math.isfinite(norm) and norm >= 1e-12):
-        raise ValueError(
-            f'quaternion: expected a non-zero finite quaternion, got {quaternion_xyzw}'
-        )
-    x, y, z, w = (quaternion_xyzw / norm).tolist()
-    tx, ty, tz = 2.0 * x, 2.0 * y, 2.0 * z
-    twx, twy, twz = tx * w, ty * w, tz * w
-    txx, txy, txz = tx * x, ty * x, tz * x
-    tyy, tyz, tzz = ty * y, tz * y, tz * z
-    return np.array(
-        [
-            [1.0 - (tyy + tzz), txy - twz, txz + twy],
-            [txy + twz, 1.0 - (txx + tzz), tyz - twx],
-            [txz - twy, tyz + twx, 1.0 - (txx + tyy)],
-        ]
-    )
 
 
 class PlantRate:
@@ -121,7 +91,7 @@ class PlantRate:
         m = self._m
         quaternion = x[2 * m + 3 : 2 * m + 7]
         state = self._model.state(
-            0.0, x[:m], x[m : 2 * m], x[2 * m : 2 * m + 3], _rotation_matrix(quaternion),
+            0.0, x[:m], x[m : 2 * m], x[2 * m : 2 * m + 3], rotation_matrix(quaternion),
             x[2 * m + 7 :],
         )
         return self.from_state(state, effort, quaternion, position_gain, velocity_gain)[0]

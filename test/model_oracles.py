@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 from oracle_rolling import ROLL_SELECT
 from oracle_surfaces import SphereStack, stack_surfaces
+from stacked_arrays import matvec
 
 from grasp_safety_filter.model.affine import AffineMap
-from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.rolling import ContactPair

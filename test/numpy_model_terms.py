@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from model_oracles import ContactStack, object_terms
 import numpy as np
+from stacked_arrays import cross, matvec, skew
 
-from grasp_safety_filter.model.arrays import cross, matvec, skew
 from grasp_safety_filter.model.grasp_model import GraspModel
 
 

@@ -12,8 +12,9 @@ from collections.abc import Sequence
 
 import numpy as np
 from oracle_geometry import geometry_of
+from stacked_arrays import matvec
 
-from grasp_safety_filter.model.arrays import matvec, read_only
+from grasp_safety_filter.model.arrays import read_only
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface, Surface
 
 

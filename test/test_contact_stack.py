@@ -14,8 +14,8 @@ from oracle_rolling import contact_geometry, H_cf_rate, rolling_rates
 from oracle_surfaces import SurfaceList
 import pinocchio as pin
 import pytest
+from stacked_arrays import matvec
 
-from grasp_safety_filter.model.arrays import matvec
 from grasp_safety_filter.model.contact_surfaces import compiled_contacts
 from grasp_safety_filter.model.grasp_model import GraspConfigError
 from grasp_safety_filter.model.rolling import ContactPair
