@@ -187,4 +187,3 @@ def stabilised_rate(
     m = effort.shape[0]
     x_dot[2 * m + 3 : 2 * m + 7] = quaternion_derivative(quaternion_xyzw, state.twist_object[3:])
     return x_dot, f_c
-

@@ -274,8 +274,10 @@ class ContactStack:
 def object_terms(
     rigid_object: Any, R_object_to_palm: np.ndarray, twist: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(M_o, M_o^-1, C_o x_o_dot)`` in palm coordinates, numpy products (the formulas of
-    :mod:`grasp_safety_filter.model.object_kernel`)."""
+    """Return ``(M_o, M_o^-1, C_o x_o_dot)`` in palm coordinates, by numpy products.
+
+    The formulas of :mod:`grasp_safety_filter.model.object_kernel`.
+    """
     R = np.asarray(R_object_to_palm, dtype=float)
     M_o, M_o_inverse = np.zeros((6, 6)), np.zeros((6, 6))
     M_o[:3, :3] = rigid_object.mass * np.eye(3)

@@ -46,9 +46,8 @@ class RollingRates:
     M_cf_inv: np.ndarray
 
 
-
 def contact_geometry(
-pair: ContactPair,
+    pair: ContactPair,
     p_fingertip_in_palm: np.ndarray,
     R_fingertip_to_palm: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -88,7 +87,7 @@ pair: ContactPair,
 
 
 def rolling_rates(
-pair: ContactPair, geometry: ContactGeometry, w_relative_in_contact: np.ndarray
+    pair: ContactPair, geometry: ContactGeometry, w_relative_in_contact: np.ndarray
 ) -> RollingRates:
     """Montana's rates for the relative rotation ``w = R_cp (w_f - w_o)``, rad/s."""
     tip, surface = geometry_of(pair.fingertip), geometry_of(pair.object_surface)
@@ -115,6 +114,7 @@ pair: ContactPair, geometry: ContactGeometry, w_relative_in_contact: np.ndarray
         A_inv=A_inv,
         M_cf_inv=M_cf_inv,
     )
+
 
 def H_cf_rate(pair: ContactPair, geometry: ContactGeometry, rates: RollingRates) -> np.ndarray:
     """Time derivative of ``H_cf = M_cf^-1 (K_cf + R_psi K_co R_psi)^-1 ROLL_SELECT``.

@@ -217,4 +217,3 @@ def sphere_on_sphere_contacts(
         xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc,
         xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega,
     )
-
