@@ -70,11 +70,12 @@ class CompiledContacts:
         Raises:
             ValueError: A fingertip centre is a sphere object's centre.
         """
+        # New writable arrays: one specialisation of the kernel, whatever the caller's.
         arrays = self.geometry_kernel(
-            np.ascontiguousarray(p_fingertip_in_palm, dtype=float),
-            np.ascontiguousarray(R_fingertip_to_palm, dtype=float),
-            np.ascontiguousarray(p_object_in_palm, dtype=float),
-            np.ascontiguousarray(R_object_to_palm, dtype=float),
+            np.array(p_fingertip_in_palm, dtype=float),
+            np.array(R_fingertip_to_palm, dtype=float),
+            np.array(p_object_in_palm, dtype=float),
+            np.array(R_object_to_palm, dtype=float),
             *self.surface_arrays,
         )
         xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc = arrays
