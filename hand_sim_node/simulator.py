@@ -128,7 +128,8 @@ class StepReport:
     Attributes:
         start: State at the start of the step.
         state: State at the end of the step (``start`` if the run stopped at this step).
-        grasp_state: Model terms at ``start``.
+        grasp_state: Model terms at ``start``; None if the model refused that state (a
+            singular ``B_ho`` or terms that are not finite: ``"numerical_failure"``).
         effort: Joint torque applied over the step, shape (m,), N·m.
         contact_force: Contact forces at ``start`` under ``effort`` (with the constraint
             stabilisation), shape (k,) (3n, or 4n with soft fingers), contact frames, N (N·m).
@@ -141,7 +142,7 @@ class StepReport:
 
     start: SimState
     state: SimState
-    grasp_state: GraspState
+    grasp_state: GraspState | None
     effort: np.ndarray
     contact_force: np.ndarray
     margins: ConstraintMargins
@@ -315,12 +316,19 @@ class Simulator:
         x0 = start.to_vector()
         m = self._m
         quaternion = slice(2 * m + 3, 2 * m + 7)
-        state0 = self.grasp_state()
+        k1, f_c = None, np.full(self.model.wrench_size, np.nan)
         try:
-            k1, f_c = self.derivative(state0, u, x0[quaternion])
+            state0: GraspState | None = self.grasp_state()
         except np.linalg.LinAlgError:
-            k1, f_c = None, np.full(self.model.wrench_size, np.nan)
-        margins = self.monitor.margins(state0, f_c)
+            state0 = None  # not finite or B_ho singular: judged on the configuration alone
+            unknown = np.full((self.model.n_contacts, 2), np.nan)
+            margins = self.monitor.margins_at(start.t, start.q, unknown, f_c)
+        else:
+            try:
+                k1, f_c = self.derivative(state0, u, x0[quaternion])
+            except np.linalg.LinAlgError:
+                pass
+            margins = self.monitor.margins(state0, f_c)
         events = self.monitor.events(margins)
         self.log.record(margins, events)
 

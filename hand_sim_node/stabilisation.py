@@ -15,10 +15,9 @@ F^T B_ho c = F^T s``). Two compiled passes around LAPACK's solve of ``B_ho c = s
 the model's kernel; the quaternion's rate is :func:`~grasp_safety_filter.model.quaternion.
 quaternion_derivative`'s. Units: SI.
 
-:func:`stabilised_rate` reads the model's terms from a GraspState (or the stage's
-equivalent); :func:`sphere_on_plane_stage_rate` computes them at a Runge–Kutta stage of
-spherical fingertips on flat faces by calling the model's kernels from compiled code
-(numba's dispatch and boxing cost more than a kernel's arithmetic at these sizes).
+:func:`stabilised_rate` reads the model's terms from a GraspState, the one the controller
+read at a step's start or the one :class:`~hand_sim_node.stage.PlantRate` computes at a
+Runge–Kutta stage.
 """
 
 from __future__ import annotations
@@ -28,10 +27,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
-from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.quaternion import quaternion_derivative
-from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
 from grasp_safety_filter.model.wrench_solve import contact_wrench
 
 
@@ -139,11 +135,10 @@ def stabilised_rate(
     """``x_dot`` and the stabilised contact forces from the model's terms at one instant.
 
     Args:
-        state: The model's terms, read-only arrays: a
-            :class:`~grasp_safety_filter.model.grasp_state.GraspState` or a
-            :class:`~hand_sim_node.stage.StageTerms` (reads ``dq``, ``twist_object``,
-            ``J_h``, ``G``, ``B_ho``, ``penetration`` and the affine maps ``contact_force``,
-            ``joint_acceleration``, ``object_acceleration``).
+        state: The model's terms, a :class:`~grasp_safety_filter.model.grasp_state.GraspState`
+            (reads ``dq``, ``twist_object``, ``J_h``, ``G``, ``B_ho``, ``penetration`` and
+            the affine maps ``contact_force``, ``joint_acceleration``,
+            ``object_acceleration``).
         effort: Joint torque u, shape (m,), N·m.
         quaternion_xyzw: The state's orientation quaternion as integrated (possibly not
             unit inside a Runge–Kutta step).
@@ -192,219 +187,3 @@ def stabilised_rate(
     m = effort.shape[0]
     x_dot[2 * m + 3 : 2 * m + 7] = quaternion_derivative(quaternion_xyzw, state.twist_object[3:])
     return x_dot, f_c
-
-
-@kernel
-def _sphere_on_plane_stage_system(
-    frame_placements: np.ndarray,
-    joint_placements: np.ndarray,
-    joint_velocities: np.ndarray,
-    joint_accelerations: np.ndarray,
-    J_joints: np.ndarray,
-    M_upper: np.ndarray,
-    nle: np.ndarray,
-    g: np.ndarray,
-    M_inverse_pin: np.ndarray,
-    frame_index: np.ndarray,
-    parent_joint: np.ndarray,
-    offset_in_parent: np.ndarray,
-    support: np.ndarray,
-    joint_index: np.ndarray,
-    joint_span: np.ndarray,
-    fingertip_span: np.ndarray,
-    dq: np.ndarray,
-    p_object_in_palm: np.ndarray,
-    R_object_to_palm: np.ndarray,
-    twist_object: np.ndarray,
-    M_o_inverse: np.ndarray,
-    C_o_twist: np.ndarray,
-    w_e: np.ndarray,
-    plane_origin: np.ndarray,
-    plane_frame: np.ndarray,
-    radius: np.ndarray,
-    position_gain: float,
-    velocity_gain: float,
-    torsion: bool,
-) -> tuple[np.ndarray, ...]:
-    """Run the model's hand terms, contact kinematics and first dynamics pass, then ``s``.
-
-    Returns ``B_ho``, the right-hand sides of ``B_ho [F | f_0] = force_rhs`` and of
-    ``B_ho c = s``, and what the second pass reads.
-    """
-    (
-        p_fingertip_in_palm, R_fingertip_to_palm, J_fingertip, twist_fingertip,
-        J_fingertip_dot_dq, _, M_h_inverse, h_bias, _,
-    ) = hand_in_model_order(
-        frame_placements, joint_placements, joint_velocities, joint_accelerations, J_joints,
-        M_upper, nle, g, M_inverse_pin, frame_index, parent_joint, offset_in_parent, support,
-        joint_index, dq,
-    )
-    contacts = sphere_on_plane_contacts(
-        p_fingertip_in_palm,
-        R_fingertip_to_palm,
-        twist_fingertip,
-        p_object_in_palm,
-        R_object_to_palm,
-        twist_object,
-        plane_origin,
-        plane_frame,
-        radius,
-    )
-    penetration, p_contact, R_pc = contacts[3], contacts[4], contacts[5]
-    H_cf, H_cf_dot_w, sliding, Omega = contacts[10], contacts[11], contacts[12], contacts[13]
-    (
-        J_h, G, _, _, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
-        w_relative,
-    ) = velocity_terms(
-        J_fingertip,
-        twist_fingertip,
-        J_fingertip_dot_dq,
-        p_fingertip_in_palm,
-        M_h_inverse,
-        h_bias,
-        p_object_in_palm,
-        twist_object,
-        M_o_inverse,
-        C_o_twist,
-        w_e,
-        p_contact,
-        R_pc,
-        H_cf,
-        H_cf_dot_w,
-        sliding,
-        Omega,
-        joint_span,
-        fingertip_span,
-        torsion,
-    )
-    stabilisation = baumgarte_correction(
-        J_h, G, dq, twist_object, penetration, position_gain, velocity_gain
-    )
-    return (
-        B_ho, force_rhs, stabilisation, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
-        w_relative, R_pc, H_cf, H_cf_dot_w, J_fingertip, J_fingertip_dot_dq,
-    )
-
-
-@kernel
-def _sphere_on_plane_stage_rate(
-    force: np.ndarray,
-    stabilisation: np.ndarray,
-    correction: np.ndarray,
-    G: np.ndarray,
-    ddq: np.ndarray,
-    M_h_inv_J_hT: np.ndarray,
-    M_o_inv_G: np.ndarray,
-    x_ddot_free: np.ndarray,
-    w_c: np.ndarray,
-    w_relative: np.ndarray,
-    J_fingertip: np.ndarray,
-    J_fingertip_dot_dq: np.ndarray,
-    R_contact_to_palm: np.ndarray,
-    H_cf: np.ndarray,
-    H_cf_dot_w: np.ndarray,
-    M_o_inverse: np.ndarray,
-    effort: np.ndarray,
-    dq: np.ndarray,
-    twist_object: np.ndarray,
-    quaternion_xyzw: np.ndarray,
-    joint_span: np.ndarray,
-    fingertip_span: np.ndarray,
-) -> np.ndarray:
-    """From ``[F | f_0]`` and ``c``: the model's second pass, then the module's formulas."""
-    m = ddq.shape[0]
-    joints, body, _ = acceleration_terms(
-        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative,
-        J_fingertip, J_fingertip_dot_dq, R_contact_to_palm, H_cf, H_cf_dot_w, joint_span,
-        fingertip_span,
-    )
-    x_dot, _ = _stabilised_rates(
-        force[:, :m], force[:, m], joints[:, :m], joints[:, m], body[:, :m], body[:, m],
-        effort, stabilisation, correction, M_o_inverse, G, dq, twist_object,
-    )
-    x_dot[2 * m + 3 : 2 * m + 7] = quaternion_derivative(quaternion_xyzw, twist_object[3:])
-    return x_dot
-
-
-def sphere_on_plane_stage_rate(
-    hand: Any,
-    q: np.ndarray,
-    surface_arrays: tuple[np.ndarray, np.ndarray, np.ndarray],
-    dq: np.ndarray,
-    p_object_in_palm: np.ndarray,
-    R_object_to_palm: np.ndarray,
-    twist_object: np.ndarray,
-    quaternion_xyzw: np.ndarray,
-    M_o_inverse: np.ndarray,
-    C_o_twist: np.ndarray,
-    w_e: np.ndarray,
-    effort: np.ndarray,
-    position_gain: float,
-    velocity_gain: float,
-    torsion: bool = False,
-    torsional_compliance: float = 0.0,
-) -> np.ndarray:
-    """``x_dot`` of spherical fingertips on flat faces, from the hand's terms at a stage.
-
-    The kernels :meth:`GraspModel.state` runs (the contacts' closed forms, both passes of
-    :func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`) and
-    :func:`stabilised_rate`'s formulas, in two compiled calls around one LAPACK solve of
-    ``B_ho`` (for ``[F | f_0]``, as the model's, and for ``c``): the same arithmetic, bit
-    for bit, without a Python round trip per kernel. The hand's terms are formed in the
-    first call from Pinocchio's (:func:`~grasp_safety_filter.model.hand_kernel.
-    hand_in_model_order`, as :meth:`HandModel.terms` forms them).
-
-    Args:
-        hand: The hand (a :class:`~grasp_safety_filter.model.hand.HandModel`).
-        q: Joint angles (m,), rad.
-        surface_arrays: The faces' origins, frames and the fingertip radii
-            (``SphereOnPlaneStack.surface_arrays``).
-        dq: Joint velocities (m,), rad/s.
-        p_object_in_palm: Object centre of mass (3,), m.
-        R_object_to_palm: Object orientation (3, 3).
-        twist_object: Object twist (6,), palm coordinates.
-        quaternion_xyzw: The orientation quaternion as integrated (4,).
-        M_o_inverse: ``M_o^-1`` (6, 6), read-only.
-        C_o_twist: ``C_o x_o_dot`` (6,), read-only.
-        w_e: External wrench on the object (6,), read-only.
-        effort: Joint torque u, shape (m,), N·m.
-        position_gain: ``K_p`` of the stabilisation, 1/s².
-        velocity_gain: ``K_v`` of the stabilisation, 1/s.
-        torsion: Soft-finger contacts (the model's ``soft_finger``).
-        torsional_compliance: Their relative torsional compliance (the model's).
-
-    Raises:
-        numpy.linalg.LinAlgError: B_ho is singular.
-    """
-    plane_origin, plane_frame, radius = surface_arrays
-    (
-        B_ho, force_rhs, stabilisation, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
-        w_relative, R_pc, H_cf, H_cf_dot_w, J_fingertip, J_fingertip_dot_dq,
-    ) = _sphere_on_plane_stage_system(
-        *hand.raw_terms(q, dq),
-        *hand.fingertip_frames,
-        hand.pinocchio_index,
-        *hand.branches,
-        dq,
-        p_object_in_palm,
-        R_object_to_palm,
-        twist_object,
-        M_o_inverse,
-        C_o_twist,
-        w_e,
-        plane_origin,
-        plane_frame,
-        radius,
-        position_gain,
-        velocity_gain,
-        torsion,
-    )
-    # Two solves, not one of [force_rhs | s]: LAPACK's bits depend on the number of columns.
-    force = contact_wrench(B_ho, force_rhs, torsion, torsional_compliance)
-    correction = contact_wrench(B_ho, stabilisation, torsion, torsional_compliance)
-    x_dot = _sphere_on_plane_stage_rate(
-        force, stabilisation, correction, G, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c,
-        w_relative, J_fingertip, J_fingertip_dot_dq, R_pc, H_cf, H_cf_dot_w, M_o_inverse,
-        effort, dq, twist_object, quaternion_xyzw, *hand.branches,
-    )
-    return x_dot

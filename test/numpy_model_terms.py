@@ -6,9 +6,10 @@ numpy operations on arrays with a leading contact axis (one expression per term)
 
 from __future__ import annotations
 
+from model_oracles import ContactStack, object_terms
 import numpy as np
+from stacked_arrays import cross, matvec, skew
 
-from grasp_safety_filter.model.arrays import cross, matvec, skew
 from grasp_safety_filter.model.grasp_model import GraspModel
 
 
@@ -27,7 +28,7 @@ def numpy_model_terms(
     """
     n, m = model.n_contacts, model.n_joints
     model.bind_contacts(q, p_o, R_o)
-    stack = model._contact_stack
+    stack = ContactStack(model.contacts)
     v_o, w_o = twist_o[:3], twist_o[3:]
     hand = model.hand.terms(q, dq)
     p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
@@ -55,8 +56,7 @@ def numpy_model_terms(
     G_dot_T_twist = matvec(
         R_cp, cross(w_o, p_c_dot - v_o) - matvec(skew_contact, v_co)
     ).reshape(3 * n)
-    M_o_inv = model.object.inverse_inertia_matrix(R_o)
-    bias = model.object.bias_wrench(R_o, twist_o)
+    _, M_o_inv, bias = object_terms(model.object, R_o, twist_o)
     x_ddot_free = M_o_inv @ (model.object.external_wrench() - bias)
     M_h_inv = np.linalg.inv(hand.M_h)
     torque = np.eye(m, m + 1)

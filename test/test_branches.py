@@ -5,8 +5,8 @@ Jacobians can be non-zero. Checked against what Pinocchio computes on hands we d
 design: the paper's hand, the four-finger hand, random hands whose joints are listed out
 of Pinocchio's order (a branch's joints then need not be consecutive) and the paper's hand
 on a wrist (one branch). The dynamics kernels sum over the spans only; with every span the
-whole hand (the full sums) every term is the same to the bit, on both the one-pass kernel
-and the staged one, point and soft-finger contacts.
+whole hand (the full sums) every term is the same to rounding, in the model's one-pass
+kernel and in the staged oracle (model_oracles), point and soft-finger contacts.
 """
 
 from __future__ import annotations
@@ -22,12 +22,12 @@ from grasp_states import (
     random_configuration,
     random_hand_grasps,
 )
+from model_oracles import staged_state
 import numpy as np
 import pytest
 
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.hand import Branches, HandModel
-from grasp_safety_filter.model.staged_state import staged_state
 from grasp_tools.bench.recorded_run import record_filtered_run, Scenario
 
 AFFINE_TERMS = ('contact_force', 'joint_acceleration', 'object_acceleration', 'xi_cf_ddot')
@@ -133,7 +133,7 @@ def _terms(state) -> dict[str, np.ndarray]:
 @pytest.mark.parametrize(
     'case', ['paper', 'paper soft fingers', 'four_finger', 'random 0', 'random 3', 'random 5']
 )
-def test_the_sums_over_spans_are_the_full_sums_to_the_bit(case, tmp_path, monkeypatch):
+def test_the_sums_over_spans_are_the_full_sums(case, tmp_path, monkeypatch):
     if case.startswith('random'):
         model, configurations = random_hand_grasps(int(case.split()[1]), tmp_path)
     elif case == 'four_finger':
@@ -148,13 +148,14 @@ def test_the_sums_over_spans_are_the_full_sums_to_the_bit(case, tmp_path, monkey
         for c in configurations:
             args = (c.q, c.dq, c.p_object, c.R_object, c.twist_object)
             yield model.state(0.0, *args)
-            yield staged_state(
-                model.hand, model.object, model._contact_stack, 0.0, *args,
-                torsion=model.soft_finger, torsional_compliance=model.torsional_compliance,
-            )
+            yield staged_state(model, 0.0, *args)
 
     over_spans = [_terms(state) for state in states()]
     monkeypatch.setattr(model.hand, 'branches', _whole_hand(model.hand))
     for spans, full in zip(over_spans, (_terms(state) for state in states()), strict=True):
         for name, value in full.items():
-            np.testing.assert_array_equal(spans[name], value, err_msg=f'{case}: {name}')
+            # The terms outside the spans are exact zeros: only the summation order differs.
+            scale = max(float(np.max(np.abs(value))), 1e-300)
+            np.testing.assert_allclose(
+                spans[name], value, rtol=0, atol=1e-13 * scale, err_msg=f'{case}: {name}'
+            )

@@ -1,12 +1,11 @@
-"""The closed-form contact stacks and one-pass terms against the general numpy evaluation.
+"""The model's one-pass terms against the general numpy evaluation (model_oracles).
 
-Spherical fingertips on flat faces (``SphereOnPlaneStack``) and on a sphere object
-(``SphereOnSphereStack``) are evaluated by compiled closed forms, and ``GraspModel.state``
-computes every term of them in one pass (``PackedGraspState``). The staged computation with
-the general ``ContactStack`` (Montana's formulas as stacked numpy calls, any surfaces) is the
-oracle: every field must agree to rounding. Cases per surface type: the paper's hand on its
-cube and on a sphere, point contacts and soft fingers, the four-finger examples on their box
-and sphere and random hands holding spheres.
+Spherical fingertips on flat faces and on a sphere object are evaluated by compiled closed
+forms: ``GraspModel.state`` computes every term of them in one pass (``PackedGraspState``).
+The staged computation with the oracle ``ContactStack`` (Montana's formulas as stacked numpy
+calls, any surfaces) must agree with every field to rounding. Cases per surface type: the
+paper's hand on its cube and on a sphere, point contacts and soft fingers, the four-finger
+examples on their box and sphere and random hands holding spheres.
 """
 
 from __future__ import annotations
@@ -14,34 +13,32 @@ from __future__ import annotations
 import dataclasses
 
 from grasp_states import CONFIG_DIR, paper_model, random_configuration, rolling_motion
+from model_oracles import ContactStack, staged_state
 import numpy as np
 import pytest
 from random_hands import random_hand
 
 from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
-from grasp_safety_filter.model.closed_form_stacks import (
-    contact_stack,
-    SphereOnPlaneStack,
-    SphereOnSphereStack,
-)
-from grasp_safety_filter.model.contact_stack import ContactStack
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.packed_state import PackedGraspState
-from grasp_safety_filter.model.staged_state import staged_state
 
 #: Largest difference allowed, relative to the term's largest entry: rounding only.
 RTOL = 1e-11
 #: Penetrations are ~0 on the contact manifold: their scale is a length of the grasp, m.
 LENGTH_SCALE = 1e-3
+#: The scale of terms that are ~0 at some instants: penetrations (m) and an isotropic
+#: object's gyroscopic torque (exactly 0 in the model, rounding in numpy's cross product),
+#: N·m.
+FLOORS = {'penetration': LENGTH_SCALE, 'C_o_twist': 1e-6}
 SOFT = {'model.torsional_friction': 0.005}
 SPHERE = {'model.object.shape': 'sphere', 'model.object.size': 0.3}
-#: Per case: the model's overrides of the paper's, and the stack it must get.
+#: Per case: the model's overrides of the paper's, and whether its object surfaces are flat.
 PAPER_CASES = {
-    'cube': ({}, SphereOnPlaneStack),
-    'cube, soft fingers': (SOFT, SphereOnPlaneStack),
-    'sphere': (SPHERE, SphereOnSphereStack),
-    'sphere, soft fingers': ({**SPHERE, **SOFT}, SphereOnSphereStack),
+    'cube': ({}, True),
+    'cube, soft fingers': (SOFT, True),
+    'sphere': (SPHERE, False),
+    'sphere, soft fingers': ({**SPHERE, **SOFT}, False),
 }
 FOUR_FINGER_CASES = {'point contacts': {}, 'soft fingers': SOFT}
 SPHERE_SEEDS = (1, 3, 5)
@@ -88,21 +85,13 @@ def _assert_close(actual, expected, what, floor=1e-300):
     assert error <= RTOL, f'{what}: relative difference {error:.2e} > {RTOL:g}'
 
 
-def _check_state(model, configuration, stack_type, label):
+def _check_state(model, configuration, flat, label):
     """Check that GraspModel.state is one packed pass, equal to the staged numpy evaluation."""
-    assert isinstance(model._contact_stack, stack_type)
     args = (0.5, *configuration)
     packed = model.state(*args)
     assert isinstance(packed, PackedGraspState), label
-    general = ContactStack(model.contacts)
-    staged = staged_state(
-        model.hand,
-        model.object,
-        general,
-        *args,
-        torsion=model.soft_finger,
-        torsional_compliance=model.torsional_compliance,
-    )
+    assert model._compiled_contacts.flat is flat
+    staged = staged_state(model, *args)
     for field in dataclasses.fields(GraspState):
         ours, theirs = getattr(packed, field.name), getattr(staged, field.name)
         if field.name in ('t', 'w_e'):
@@ -115,7 +104,7 @@ def _check_state(model, configuration, stack_type, label):
         else:
             assert not ours.flags.writeable, field.name
             ours, theirs = (ours,), (theirs,)
-        floor = LENGTH_SCALE if field.name == 'penetration' else 1e-300
+        floor = FLOORS.get(field.name, 1e-300)
         for a, b in zip(ours, theirs, strict=True):
             _assert_close(a, b, f'{label}: {field.name}', floor)
     # xi_co_ddot is a view of the buffer's xi_co_ddot_augmented (the pass's closed form).
@@ -135,60 +124,58 @@ def _check_state(model, configuration, stack_type, label):
         )
 
 
-def _check_stack(model, configuration, stack_type, label):
-    """Check the closed-form stack's kinematics, geometry and rates against the general's."""
-    closed, general = contact_stack(model.contacts), ContactStack(model.contacts)
-    assert type(closed) is stack_type
+def _check_stack(model, configuration, flat, label):
+    """Check the pass's contact kinematics (in its buffer) against the oracle's."""
     q, dq, p_object, R_object, twist_object = configuration
+    packed = model.state(0.5, *configuration)
+    assert model._compiled_contacts.flat is flat
     hand = model.hand.terms(q, dq)
     pose = (hand.p_fingertip_in_palm, hand.R_fingertip_to_palm)
-    ours = closed.kinematics(*pose, hand.twist_fingertip, p_object, R_object, twist_object)
-    theirs = general.kinematics(*pose, hand.twist_fingertip, p_object, R_object, twist_object)
-    w = np.random.default_rng(0).normal(size=(len(model.contacts), 3))
-    ours += (closed.geometry(*pose, p_object, R_object), closed.rolling_rates(theirs[0], w))
-    theirs += (general.geometry(*pose, p_object, R_object), general.rolling_rates(theirs[0], w))
-    for a, b in zip(ours, theirs, strict=True):
-        for field in dataclasses.fields(b):
+    oracle = ContactStack(model.contacts)
+    theirs = oracle.kinematics(*pose, hand.twist_fingertip, p_object, R_object, twist_object)
+    for terms in theirs:
+        for field in dataclasses.fields(terms):
             floor = LENGTH_SCALE if field.name == 'penetration' else 1e-300
             _assert_close(
-                getattr(a, field.name), getattr(b, field.name), f'{label}: {field.name}', floor
+                getattr(packed, field.name), getattr(terms, field.name),
+                f'{label}: {field.name}', floor,
             )
 
 
 @pytest.mark.parametrize('check', [_check_state, _check_stack])
 @pytest.mark.parametrize('case', list(PAPER_CASES))
 def test_the_paper_hand_matches_the_general_evaluation(case, check):
-    overrides, stack_type = PAPER_CASES[case]
+    overrides, flat = PAPER_CASES[case]
     model = paper_model(**overrides)
     rng = np.random.default_rng(11)
     for k in range(4):
         c = random_configuration(model, rng)
         configuration = (c.q, c.dq, c.p_object, c.R_object, c.twist_object)
-        check(model, configuration, stack_type, f'{case} #{k}')
+        check(model, configuration, flat, f'{case} #{k}')
 
 
 @pytest.mark.parametrize('case', list(FOUR_FINGER_CASES))
 def test_the_four_finger_hand_on_its_sphere_matches_the_general_evaluation(case):
     model, configurations = _four_finger(FOUR_FINGER_CASES[case])
     for k, configuration in enumerate(configurations):
-        _check_stack(model, configuration, SphereOnSphereStack, f'{case} #{k}')
-        _check_state(model, configuration, SphereOnSphereStack, f'{case} #{k}')
+        _check_stack(model, configuration, False, f'{case} #{k}')
+        _check_state(model, configuration, False, f'{case} #{k}')
 
 
 @pytest.mark.parametrize('case', list(FOUR_FINGER_CASES))
 def test_the_four_finger_hand_on_its_box_matches_the_general_evaluation(case):
     model, configurations = _four_finger(FOUR_FINGER_CASES[case], 'four_finger_box.yaml')
     for k, configuration in enumerate(configurations):
-        _check_stack(model, configuration, SphereOnPlaneStack, f'{case} #{k}')
-        _check_state(model, configuration, SphereOnPlaneStack, f'{case} #{k}')
+        _check_stack(model, configuration, True, f'{case} #{k}')
+        _check_state(model, configuration, True, f'{case} #{k}')
 
 
 @pytest.mark.parametrize('seed', SPHERE_SEEDS)
 def test_random_hands_on_spheres_match_the_general_evaluation(seed, tmp_path):
     model, configurations = _random_sphere_hand(seed, tmp_path)
     for k, configuration in enumerate(configurations):
-        _check_stack(model, configuration, SphereOnSphereStack, f'seed {seed} #{k}')
-        _check_state(model, configuration, SphereOnSphereStack, f'seed {seed} #{k}')
+        _check_stack(model, configuration, False, f'seed {seed} #{k}')
+        _check_state(model, configuration, False, f'seed {seed} #{k}')
 
 
 def test_a_fingertip_at_the_sphere_centre_is_refused():
@@ -198,6 +185,7 @@ def test_a_fingertip_at_the_sphere_centre_is_refused():
     hand = model.hand.terms(c.q, c.dq)
     pose = (hand.p_fingertip_in_palm, hand.R_fingertip_to_palm)
     p_object = hand.p_fingertip_in_palm[0]
-    for stack in (contact_stack(model.contacts), ContactStack(model.contacts)):
-        with pytest.raises(ValueError, match='centre'):
-            stack.geometry(*pose, p_object, c.R_object)
+    with pytest.raises(ValueError, match='centre'):
+        model.state(0.0, c.q, c.dq, p_object, c.R_object, c.twist_object)
+    with pytest.raises(ValueError, match='centre'):
+        ContactStack(model.contacts).geometry(*pose, p_object, c.R_object)

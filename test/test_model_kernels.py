@@ -13,14 +13,14 @@ from __future__ import annotations
 import dataclasses
 
 from grasp_states import Configuration, paper_model, random_configuration, random_hand_grasps
+from model_oracles import ContactStack
 import numpy as np
 from numpy_model_terms import numpy_model_terms
 import pinocchio as pin
 import pytest
 
-from grasp_safety_filter.model.closed_form_stacks import contact_stack, SphereOnPlaneStack
-from grasp_safety_filter.model.contact_dynamics import contact_dynamics
-from grasp_safety_filter.model.contact_stack import ContactStack
+from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
+from grasp_safety_filter.model.wrench_solve import contact_wrench
 
 PAPER_CASES = {
     'cube': {},
@@ -89,24 +89,18 @@ def test_a_singular_B_ho_raises_as_numpy_solve_does():
     """No inertia anywhere: B_ho = 0, which the start-up check reports as singular."""
     n, m = 3, 9
     zeros = np.zeros
-    arguments = (
-        zeros((n, 6, m)), zeros((n, 6)), zeros((n, 6)), zeros((n, 3)), zeros((m, m)), zeros(m),
-        zeros(3), zeros(6), zeros((6, 6)), zeros(6), zeros(6), zeros((n, 3)),
-        np.tile(np.eye(3), (n, 1, 1)), zeros((n, 2, 3)), zeros((n, 2)), zeros((n, 2)),
-        zeros((n, 3)), np.tile([0, m], (m, 1)), np.tile([0, m], (n, 1)),
-    )
     with pytest.raises(np.linalg.LinAlgError, match='B_ho is singular'):
-        contact_dynamics(*arguments)
+        contact_wrench(zeros((3 * n, 3 * n)), zeros((3 * n, m + 1)), False, 0.0)
     with pytest.raises(np.linalg.LinAlgError, match='Singular matrix'):
         np.linalg.solve(zeros((3 * n, 3 * n)), zeros((3 * n, m + 1)))
 
 
-def test_the_fused_sphere_on_plane_kinematics_match_the_general_stack():
-    """SphereOnPlaneStack.kinematics (one kernel) against ContactStack's numpy formulas."""
+def test_the_compiled_sphere_on_plane_kinematics_match_the_numpy_oracle():
+    """sphere_on_plane_contacts (one kernel) against the oracle ContactStack's formulas."""
     model = paper_model()
     rng = np.random.default_rng(2)
-    fused, general = contact_stack(model.contacts), ContactStack(model.contacts)
-    assert isinstance(fused, SphereOnPlaneStack)
+    general = ContactStack(model.contacts)
+    surfaces = model._compiled_contacts.surface_arrays
     for _ in range(4):
         c = random_configuration(model, rng)
         hand = model.hand.terms(c.q, c.dq)
@@ -118,12 +112,11 @@ def test_the_fused_sphere_on_plane_kinematics_match_the_general_stack():
             c.R_object,
             c.twist_object,
         )
-        for ours, theirs in zip(
-            fused.kinematics(*arguments), general.kinematics(*arguments), strict=True
-        ):
+        ours = iter(sphere_on_plane_contacts(*arguments, *surfaces))
+        for theirs in general.kinematics(*arguments):
             for field in dataclasses.fields(theirs):
                 np.testing.assert_allclose(
-                    getattr(ours, field.name),
+                    next(ours),
                     getattr(theirs, field.name),
                     rtol=0.0,
                     atol=1e-12,

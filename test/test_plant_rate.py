@@ -11,13 +11,13 @@ contacts and with soft fingers (the torsion rows after the force rows).
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
 
-from grasp_safety_filter.model.contact_stack import ContactStack
 from grasp_safety_filter.model.quaternion import quaternion_derivative, rotation_matrix
 from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.simulator import SimState, Simulator
-from hand_sim_node.stage import _rotation_matrix, PlantRate
+from hand_sim_node.stage import PlantRate
 
 SCENARIO = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
 
@@ -136,18 +136,20 @@ def test_stage_rate_uses_the_normalised_rotation_and_the_raw_quaternion(scenario
     np.testing.assert_allclose(long[quaternion], 1.5 * unit[quaternion], rtol=1e-12, atol=1e-15)
 
 
-def test_stage_rotation_matrix_has_the_models_bits():
+def test_the_rotation_matrix_is_pinocchios_of_the_normalised_quaternion():
     rng = np.random.default_rng(9)
     for quaternion in rng.normal(0.0, 1.0, (2000, 4)) * rng.uniform(0.5, 2.0, (2000, 1)):
-        np.testing.assert_array_equal(_rotation_matrix(quaternion), rotation_matrix(quaternion))
+        x, y, z, w = quaternion / np.linalg.norm(quaternion)
+        expected = pin.Quaternion(w, x, y, z).toRotationMatrix()
+        np.testing.assert_allclose(rotation_matrix(quaternion), expected, rtol=0, atol=1e-15)
     for bad in (np.zeros(4), np.array([np.nan, 0.0, 0.0, 1.0]), np.array([np.inf, 0, 0, 1.0])):
         with pytest.raises(ValueError, match='non-zero finite quaternion'):
-            _rotation_matrix(bad)
+            rotation_matrix(bad)
 
 
 @pytest.mark.parametrize('seed', range(4))
-def test_stage_rate_is_the_models_terms_bit_for_bit(scenario, seed):
-    """One implementation: ``at`` runs the kernels ``GraspModel.state`` runs, on the same bits."""
+def test_stage_rate_is_the_rate_at_the_models_state(scenario, seed):
+    """One implementation: ``at`` is ``from_state`` at ``GraspModel.state``'s terms."""
     model, config = scenario
     m = model.n_joints
     rng = np.random.default_rng(20 + seed)
@@ -157,20 +159,25 @@ def test_stage_rate_is_the_models_terms_bit_for_bit(scenario, seed):
     s = SimState.from_vector(0.0, x, m)
     state = model.state(0.0, s.q, s.dq, s.p_object_in_palm, s.R_object_to_palm, s.twist_object)
     from_state, _ = rate.from_state(state, u, x[2 * m + 3 : 2 * m + 7], 2500.0, 100.0)
-    np.testing.assert_array_equal(rate.at(x, u, 2500.0, 100.0), from_state)
+    np.testing.assert_allclose(
+        rate.at(x, u, 2500.0, 100.0), from_state, rtol=0, atol=1e-12 * np.abs(from_state).max()
+    )
 
 
-def test_stage_rate_of_any_contact_stack_equals_the_solved_equations(scenario):
-    """The general stack's path (curved surfaces; numpy kinematics) on the paper's faces."""
-    model, config = scenario
+def test_stage_rate_on_a_sphere_object_equals_the_solved_equations():
+    """The same one path with the sphere object's kernel (curved object surfaces)."""
+    loaded = Scenario.load(
+        SCENARIO, plant_overrides={'model.object.shape': 'sphere', 'model.object.size': 0.3}
+    )
+    model, config = loaded.model, loaded.sim_config
     m = model.n_joints
     rng = np.random.default_rng(31)
     rate = PlantRate(model)
-    rate._contact_pairs, rate._contact_stack = model.contacts, ContactStack(model.contacts)
     for gap in (0.0, 1e-4):
         x = random_state(model, config, rng, gap)
         u = rng.normal(0.0, 0.5, m)
         _, expected, _ = oracle_rate(model, x, u, 2500.0, 100.0)
+        assert not model._compiled_contacts.flat
         np.testing.assert_allclose(
             rate.at(x, u, 2500.0, 100.0), expected, rtol=0, atol=1e-11 * np.abs(expected).max()
         )

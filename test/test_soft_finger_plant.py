@@ -24,9 +24,9 @@ from pathlib import Path
 from grasp_states import paper_model, random_configuration
 import numpy as np
 import pytest
+from stacked_arrays import skew
 from test_simulator import hand_kinetic_energy, unactuated_run
 
-from grasp_safety_filter.model.arrays import skew
 from grasp_safety_filter.model.quaternion import from_rotation_matrix
 from grasp_tools.bench.recorded_run import Scenario
 from hand_sim_node.simulator import SimState, Simulator

@@ -2,7 +2,7 @@
 
 From the hand's terms (Pinocchio), the object's and the contacts' geometry and rolling
 rates, :func:`velocity_terms` and :func:`acceleration_terms` compute, on either side of the
-solve of ``B_ho`` (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`;
+solve of ``B_ho`` (:func:`~grasp_safety_filter.model.packed_pass.write_grasp_terms`;
 DESIGN.md §3; the derivation is in
 :mod:`grasp_safety_filter.model.grasp_model`), per contact i, with ``R_cp,i = R_pc,i^T``,
 ``p_fc,i = p_c,i - p_f,i`` and ``p_oc,i = p_c,i - p_o``:
@@ -94,10 +94,9 @@ def velocity_terms(
 ) -> tuple[np.ndarray, ...]:
     """Everything up to ``B_ho f_c = rhs``: the Jacobians, rates, ``B_ho`` and ``rhs``.
 
-    The first of :func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`' two
-    compiled passes; a compiled caller that solves ``B_ho`` itself (the simulator's
-    Runge–Kutta stages) calls both. With ``torsion``, rows ``3n + i`` are contact i's torsion
-    rows (module docstring).
+    The first of the two compiled passes around the solve of ``B_ho``
+    (:func:`~grasp_safety_filter.model.packed_pass.write_grasp_terms`). With ``torsion``,
+    rows ``3n + i`` are contact i's torsion rows (module docstring).
     """
     n = J_fingertip.shape[0]
     m = J_fingertip.shape[2]

@@ -48,11 +48,11 @@ def project_to_contact(
     q = np.array(q, dtype=float)
     model.bind_contacts(q, p_object_in_palm, R_object_to_palm)
     for _ in range(max_iterations):
-        p_f, R_f, J_f = model.hand.fingertip_placements(q)
+        _, _, J_f = model.hand.fingertip_placements(q)
         delta = np.empty(model.n_contacts)
         jacobian = np.empty((model.n_contacts, model.n_joints))
-        for i, contact in enumerate(model.contacts):
-            geometry = contact.geometry(p_f[i], R_f[i], p_object_in_palm, R_object_to_palm)
+        geometries = model.contact_geometry(q, p_object_in_palm, R_object_to_palm)
+        for i, geometry in enumerate(geometries):
             delta[i] = geometry.penetration
             n_object = -geometry.R_contact_to_palm[:, 2]
             jacobian[i] = -n_object @ J_f[i, :3]

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model import grasp_configuration
-from grasp_safety_filter.model.closed_form_stacks import ClosedFormStack, contact_stack
+from grasp_safety_filter.model.contact_surfaces import compiled_contacts, CompiledContacts
 from grasp_safety_filter.model.fingertip_workspace import FingertipWorkspace, GraspConfigError
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
@@ -43,7 +43,6 @@ from grasp_safety_filter.model.per_contact import (
 )
 from grasp_safety_filter.model.rigid_object import RigidObject
 from grasp_safety_filter.model.rolling import ContactGeometry, ContactPair
-from grasp_safety_filter.model.staged_state import staged_state
 from grasp_safety_filter.model.surfaces import SphereSurface
 
 __all__ = ['FingertipWorkspace', 'GraspConfigError', 'GraspModel']
@@ -125,7 +124,7 @@ class GraspModel:
         self.object_shape = object_shape
         self.declared_faces = list(declared_faces) if declared_faces is not None else [None] * n
         self._contacts: list[ContactPair] | None = None
-        self._contact_stack = None
+        self._compiled_contacts: CompiledContacts | None = None
         self._packed_layout: PackedLayout | None = None
         if contacts is not None:
             self._set_contacts(contacts)
@@ -140,19 +139,20 @@ class GraspModel:
 
     # ----------------------------------------------------------------------------- contacts
     def _set_contacts(self, contacts: Sequence[ContactPair]) -> None:
+        """Take the contact pairs and the compiled pass's kernel and layout for them.
+
+        Raises:
+            GraspConfigError: The pairs are not spherical fingertips on flat faces or on a
+                sphere about the object's centre (the surfaces the model implements).
+        """
+        try:
+            compiled = compiled_contacts(contacts)
+        except ValueError as error:
+            raise GraspConfigError(f'model: contacts: {error}') from None
         self._contacts = list(contacts)
-        self._contact_stack = contact_stack(self._contacts)
-        # Spherical fingertips on flat faces or a sphere: every term in one compiled pass
-        # (packed_terms).
-        self._packed_layout = (
-            PackedLayout.of(
-                len(self._contacts),
-                self.hand.n_joints,
-                self.soft_finger,
-                self.torsional_compliance,
-            )
-            if isinstance(self._contact_stack, ClosedFormStack)
-            else None
+        self._compiled_contacts = compiled
+        self._packed_layout = PackedLayout.of(
+            len(self._contacts), self.hand.n_joints, self.soft_finger, self.torsional_compliance
         )
 
     @property
@@ -284,13 +284,14 @@ class GraspModel:
     def contact_geometry(
         self, q: np.ndarray, p_object_in_palm: np.ndarray, R_object_to_palm: np.ndarray
     ) -> list[ContactGeometry]:
-        """Contact coordinates and frames of every contact at a configuration."""
+        """Contact coordinates and frames of every contact at a configuration.
+
+        The compiled contact geometry of the per-tick terms
+        (:meth:`~grasp_safety_filter.model.contact_surfaces.CompiledContacts.geometry`).
+        """
         self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
         p_f, R_f, _ = self.hand.fingertip_placements(np.asarray(q, dtype=float))
-        return [
-            contact.geometry(p_f[i], R_f[i], p_object_in_palm, R_object_to_palm)
-            for i, contact in enumerate(self.contacts)
-        ]
+        return self._compiled_contacts.geometry(p_f, R_f, p_object_in_palm, R_object_to_palm)
 
     #: Smallest joint correction that makes every fingertip touch its surface exactly
     #: (:func:`~grasp_safety_filter.model.grasp_configuration.project_to_contact`).
@@ -334,43 +335,28 @@ class GraspModel:
         R_object_to_palm: np.ndarray,
         twist_object: np.ndarray,
     ) -> GraspState:
-        """Every model term at one instant (see :class:`GraspState`).
+        """Every model term at one instant (see :class:`GraspState`), in one compiled pass.
 
-        All contacts are evaluated together (arrays with a leading contact axis), and the
-        torque-affine terms as augmented matrices ``[matrix | offset]`` acting on ``(u, 1)``,
-        in one compiled pass
-        (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`).
-        Spherical fingertips on flat faces (the paper's cube) or on a sphere take one
-        compiled pass for everything after Pinocchio, into one buffer whose views are the
-        fields (:func:`~grasp_safety_filter.model.packed_state.packed_state`); other contacts take
-        the stages of :func:`~grasp_safety_filter.model.staged_state.staged_state`.
+        All contacts are evaluated together, and the torque-affine terms as augmented
+        matrices ``[matrix | offset]`` acting on ``(u, 1)``, into one buffer whose views are
+        the fields (:func:`~grasp_safety_filter.model.packed_state.packed_state`).
+
+        A state whose terms are not finite (an input that is not, or terms that overflow)
+        has NaN contact wrench and accelerations.
+
+        Raises:
+            numpy.linalg.LinAlgError: ``B_ho`` is singular.
+            ValueError: An input's shape is not the model's, or a fingertip centre is a
+                sphere object's centre.
         """
         if self._contacts is None:
             self.bind_contacts(q, p_object_in_palm, R_object_to_palm)
-        if self._packed_layout is not None:
-            # One compiled pass (packed_state); None: the staged computation reports a
-            # singular B_ho or returns the non-finite terms, as it always has.
-            packed = packed_state(
-                self.hand,
-                self.object,
-                self._contact_stack,
-                self._packed_layout,
-                (t, q, dq, p_object_in_palm, R_object_to_palm, twist_object),
-            )
-            if packed is not None:
-                return packed
-        return staged_state(
+        return packed_state(
             self.hand,
             self.object,
-            self._contact_stack,
-            t,
-            q,
-            dq,
-            p_object_in_palm,
-            R_object_to_palm,
-            twist_object,
-            torsion=self.soft_finger,
-            torsional_compliance=self.torsional_compliance,
+            self._compiled_contacts,
+            self._packed_layout,
+            (t, q, dq, p_object_in_palm, R_object_to_palm, twist_object),
         )
 
 

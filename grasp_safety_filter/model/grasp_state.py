@@ -77,7 +77,7 @@ class GraspState:
         xi_cf_ddot: ``u ↦ (a_1_ddot, b_1_ddot, a_2_ddot, ...)``, shape (2n, m).
         xi_co_rate_terms: Returns ``(M_co^-1 R_psi M_cf, c)`` of this instant, shapes
             (n, 2, 2) and (n, 2), with ``xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot + c``
-            (:meth:`~grasp_safety_filter.model.contact_stack.ContactStack.object_rate_terms`).
+            (:func:`~grasp_safety_filter.model.rolling_kernels.object_coordinate_rate_terms`).
         xi_co_ddot: ``u ↦`` second derivatives of ``xi_co`` (contact-major, like
             ``xi_cf_ddot``), shape (2n, m); m/s² on a face, rad/s² in a sphere chart.
             A property computed once, on first use, from ``xi_cf_ddot`` and

@@ -8,9 +8,8 @@ them (the formulas of Pinocchio's ``getFrameJacobian`` and ``getFrameClassicalAc
 in LOCAL_WORLD_ALIGNED, the same operations in the same order: the frame Jacobians are those
 calls' bits; the accelerations agree to rounding, as Pinocchio's compiled code may fuse a
 multiply-add) and gathers everything into the model's joint order. One implementation
-serves the staged hand terms (:meth:`~grasp_safety_filter.model.hand.HandModel.terms`), the
-one-pass grasp terms (:func:`~grasp_safety_filter.model.packed_pass.hand_and_object_terms`)
-and the simulator's stages.
+serves the hand's terms (:meth:`~grasp_safety_filter.model.hand.HandModel.terms`) and the
+one-pass grasp terms (:func:`~grasp_safety_filter.model.packed_pass.hand_and_object_terms`).
 
 Placements are rows of 12: the rotation's 9 entries column by column, then the translation
 (Pinocchio's ``SE3`` in memory); motions are rows of 6, ``(linear, angular)``.

@@ -1,9 +1,15 @@
-"""An anisotropic object's per-tick dynamic terms in one compiled pass, numpy's to the bit.
+"""The object's per-tick dynamic terms, compiled: ``M_o``, ``M_o^-1`` and ``C_o x_o_dot``.
 
-:class:`~grasp_safety_filter.model.rigid_object.RigidObject`'s ``M_o``, ``M_o^-1`` and
-``C_o x_o_dot`` of a body whose inertia is not isotropic (a box) are each a few 3 × 3
-products, some 14 µs of numpy calls a tick together. :func:`object_dynamics` makes the same
-BLAS calls as numpy's ``@`` (:mod:`~grasp_safety_filter.model.fortran_linalg`) in one call.
+In palm coordinates, with ``R = R_object_to_palm`` and the body-frame inertia ``I_body``:
+
+    M_o = blkdiag(m I3, R I_body R^T),     M_o^-1 = blkdiag(I3 / m, R I_body^-1 R^T)
+    C_o x_o_dot = (0, w × (R I_body R^T w))
+
+An isotropic inertia ``c I3`` (the cube's, the sphere's) is the same in every frame and has
+no gyroscopic torque: the terms are then the body-frame constants. One implementation
+serves :class:`~grasp_safety_filter.model.rigid_object.RigidObject` and the one-pass grasp
+terms (:func:`~grasp_safety_filter.model.packed_pass.hand_and_object_terms`). Units: kg,
+kg·m², N·m.
 """
 
 from __future__ import annotations
@@ -11,52 +17,46 @@ from __future__ import annotations
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.fortran_linalg import dgemm, matrix_matrix, matrix_vector
 
 
 @kernel
-def _rotated(R: np.ndarray, inertia: np.ndarray, out: np.ndarray) -> None:
-    """Write numpy's ``R @ inertia @ R.T`` (3, 3) into ``out[3:, 3:]``."""
-    left = np.empty((3, 3))
-    matrix_matrix(R, inertia, left)
-    rotated = np.empty((3, 3))
-    # numpy's left @ R.T: R.T is R's buffer transposed, so BLAS gets 'T' on it.
-    dgemm(ord('T'), ord('N'), 3, 3, 3, 1.0, R, 0, 3, left, 0, 3, 0.0, rotated, 0, 3)
-    out[3:, 3:] = rotated
+def _rotate_into(R: np.ndarray, inertia: np.ndarray, out: np.ndarray) -> None:
+    """Write ``R @ inertia @ R^T`` (3, 3) into ``out[3:, 3:]``."""
+    for i in range(3):
+        for j in range(3):
+            total = 0.0
+            for k in range(3):
+                for m in range(3):
+                    total += R[i, k] * inertia[k, m] * R[j, m]
+            out[3 + i, 3 + j] = total
 
 
 @kernel
 def object_dynamics(
-    mass: float,
-    inertia: tuple[np.ndarray, np.ndarray],
-    R: np.ndarray,
-    twist: np.ndarray,
+    M_o_in_body: np.ndarray, isotropic: bool, R: np.ndarray, twist: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return ``(M_o, M_o^-1, C_o x_o_dot)`` as :class:`RigidObject`'s methods compute them.
+    """Return ``(M_o, M_o^-1, C_o x_o_dot)`` in palm coordinates, (6, 6), (6, 6), (6,).
 
     Args:
-        mass: kg.
-        inertia: ``(I_body, I_body^-1)``, (3, 3) each, C order.
-        R: ``R_object_to_palm``, (3, 3), C order.
-        twist: ``(v_o, w_o)``, (6,).
+        M_o_in_body: ``blkdiag(m I3, I_body)`` and ``blkdiag(I3 / m, I_body^-1)``, (2, 6, 6)
+            (:attr:`~grasp_safety_filter.model.rigid_object.RigidObject.mass_matrices_in_body`).
+        isotropic: Whether ``I_body`` is isotropic (then the body-frame matrices and a zero
+            bias are returned, as copies).
+        R: ``R_object_to_palm``, (3, 3).
+        twist: ``(v_o, w_o)``, (6,), palm coordinates (m/s, rad/s).
     """
-    inertia_in_body, inverse_in_body = inertia
-    M_o = np.zeros((6, 6))
-    M_o_inverse = np.zeros((6, 6))
-    inverse_mass = 1.0 / mass
-    for i in range(3):
-        M_o[i, i] = mass * 1.0
-        M_o_inverse[i, i] = inverse_mass * 1.0
-    _rotated(R, inertia_in_body, M_o)
-    _rotated(R, inverse_in_body, M_o_inverse)
-    w = twist[3:].copy()
-    in_body = np.empty(3)
-    matrix_vector(3, 3, R.reshape(-1), 0, 1, 3, w, in_body)  # R.T @ w
-    momentum_in_body = np.empty(3)
-    matrix_vector(3, 3, inertia_in_body.reshape(-1), 0, 3, 1, in_body, momentum_in_body)
-    Iw = np.empty(3)
-    matrix_vector(3, 3, R.reshape(-1), 0, 3, 1, momentum_in_body, Iw)
+    M_o = M_o_in_body[0].copy()
+    M_o_inverse = M_o_in_body[1].copy()
     bias = np.zeros(6)
+    if isotropic:
+        return M_o, M_o_inverse, bias
+    _rotate_into(R, M_o_in_body[0, 3:, 3:], M_o)
+    _rotate_into(R, M_o_in_body[1, 3:, 3:], M_o_inverse)
+    w = twist[3:]
+    Iw = np.zeros(3)
+    for i in range(3):
+        for j in range(3):
+            Iw[i] += M_o[3 + i, 3 + j] * w[j]
     bias[3] = w[1] * Iw[2] - w[2] * Iw[1]
     bias[4] = w[2] * Iw[0] - w[0] * Iw[2]
     bias[5] = w[0] * Iw[1] - w[1] * Iw[0]

@@ -1,9 +1,10 @@
 """The one-pass grasp terms' shared stages: hand and object before the contacts, the rest after.
 
 Each one-pass kernel of :mod:`grasp_safety_filter.model.packed_terms` (one per kind of
-object surface) runs :func:`hand_and_object_terms`, its surface's contact kernel, and
+object surface) runs :func:`hand_and_object_terms`, its surface's contact kernel,
 :func:`write_grasp_terms`, which solves the contact dynamics and writes every term into the
-buffer in :func:`~grasp_safety_filter.model.packed_terms.packed_fields`' order. The two
+buffer in :func:`~grasp_safety_filter.model.packed_terms.packed_fields`' order, and
+:func:`write_object_coordinate_acceleration`, the last term. The
 stages are inlined into each kernel by numba (:data:`~grasp_safety_filter.model.compiled.
 inline_kernel`): as calls, handing over their two dozen arrays cost the paper hand's pass
 1.3 of its 10.5 µs. The pass stays one call from Python.
@@ -17,6 +18,7 @@ from grasp_safety_filter.model.compiled import inline_kernel, kernel
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
 from grasp_safety_filter.model.hand_kernel import hand_in_model_order
 from grasp_safety_filter.model.object_kernel import object_dynamics
+from grasp_safety_filter.model.rolling_kernels import object_coordinate_rate_terms
 from grasp_safety_filter.model.wrench_solve import wrench_solve
 
 #: The object's terms: ``M_o``, ``M_o^-1`` (6, 6) and ``C_o x_o_dot`` (6,), palm frame.
@@ -87,24 +89,15 @@ def hand_and_object_terms(
     of the same names.
 
     Returns:
-        ``(M_o, M_o^-1, C_o x_o_dot)`` (RigidObject's ``inertia_matrix``,
-        ``inverse_inertia_matrix``, ``bias_wrench``) and :func:`~grasp_safety_filter.model.
+        ``(M_o, M_o^-1, C_o x_o_dot)`` (:func:`~grasp_safety_filter.model.object_kernel.
+        object_dynamics`) and :func:`~grasp_safety_filter.model.
         hand_kernel.hand_in_model_order`'s ``(p_f, R_f, J_f, twist_f, J_f_dot dq, M_h,
         M_h^-1, h_bias, g)`` (HandModel.terms).
     """
-    # ---- The object (RigidObject's inertia_matrix, bias_wrench, inverse_inertia_matrix).
-    if isotropic:
-        M_o = M_o_in_body[0].copy()
-        M_o_inverse = M_o_in_body[1].copy()
-        C_o_twist = np.zeros(6)
-    else:
-        inertia = (
-            np.ascontiguousarray(M_o_in_body[0, 3:, 3:]),
-            np.ascontiguousarray(M_o_in_body[1, 3:, 3:]),
-        )
-        M_o, M_o_inverse, C_o_twist = object_dynamics(
-            M_o_in_body[0, 0, 0], inertia, R_object_to_palm, twist_object
-        )
+    # ---- The object (RigidObject.dynamics).
+    M_o, M_o_inverse, C_o_twist = object_dynamics(
+        M_o_in_body, isotropic, R_object_to_palm, twist_object
+    )
     # ---- The hand, in the model's joint order (HandModel.terms).
     p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = (
         hand_in_model_order(
@@ -137,8 +130,8 @@ def write_grasp_terms(
 ) -> tuple[int, np.ndarray]:
     """Solve the contact dynamics and write the terms into ``out``, in ``packed_fields``' order.
 
-    The contact dynamics are :func:`~grasp_safety_filter.model.contact_dynamics.
-    contact_dynamics`' two passes around the solve of ``B_ho``. Every term but the last,
+    The contact dynamics are :mod:`~grasp_safety_filter.model.dynamics_kernel`'s two
+    passes around the solve of ``B_ho``. Every term but the last,
     ``xi_co_ddot_augmented``, is written: its closed form is the object surface's, which the
     caller writes from what this returns.
 
@@ -165,11 +158,12 @@ def write_grasp_terms(
         ``[matrix | offset]`` (2n, m + 1).
 
     Raises:
-        numpy.linalg.LinAlgError: B_ho is singular.
+        numpy.linalg.LinAlgError: B_ho is singular (a ``B_ho`` or right-hand side that is not
+            finite gives NaN wrench and accelerations instead).
     """
     M_o, M_o_inverse, C_o_twist = object_terms
     p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = hand_terms
-    # ---- Contact dynamics (contact_dynamics: two passes around the solve of B_ho).
+    # ---- Contact dynamics (dynamics_kernel: two passes around the solve of B_ho).
     (
         J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
         x_ddot_free, w_c, w_relative,
@@ -178,7 +172,11 @@ def write_grasp_terms(
         twist_object, M_o_inverse, C_o_twist, w_e, contacts[4], contacts[5], contacts[10],
         contacts[11], contacts[12], contacts[13], joint_span, fingertip_span, torsion,
     )
-    if torsion:
+    if not (np.isfinite(B_ho).all() and np.isfinite(force_rhs).all()):
+        # Terms that overflowed (a huge but finite state): every term after the solve is
+        # NaN, which the consumers refuse, rather than an error from the solve.
+        force = np.full(force_rhs.shape, np.nan)
+    elif torsion:
         force = wrench_solve(B_ho, force_rhs, torsional_compliance)
     else:
         force = np.linalg.solve(B_ho, force_rhs)
@@ -225,3 +223,48 @@ def write_grasp_terms(
     at = _put2(out, at, xi_ddot)
     at = _put2(out, at, M_o)
     return _put(out, at, C_o_twist), xi_ddot
+
+
+@inline_kernel
+def write_object_coordinate_acceleration(
+    out: np.ndarray,
+    at: int,
+    contacts: tuple[np.ndarray, ...],
+    xi_cf_ddot: np.ndarray,
+    radius: np.ndarray,
+    object_radius: np.ndarray,
+    flat: bool,
+) -> None:
+    """Write ``u ↦ xi_co_ddot``, ``[matrix | offset]`` (2n, m + 1), C order, at ``out[at:]``.
+
+    Per contact ``xi_co_ddot = A xi_cf_ddot + c``
+    (:func:`~grasp_safety_filter.model.rolling_kernels.object_coordinate_rate_terms`), with
+    ``xi_cf_ddot``'s rows ``[matrix | offset]``.
+
+    Args:
+        out: The packed buffer; entries ``at .. at + 2n (m + 1) - 1`` are written.
+        at: Where ``xi_co_ddot_augmented`` starts in it.
+        contacts: The contacts' 14 arrays (:func:`~grasp_safety_filter.model.rolling_kernels.
+            sphere_on_plane_contacts`).
+        xi_cf_ddot: ``u ↦ xi_cf_ddot``, ``[matrix | offset]`` (2n, m + 1).
+        radius: Each fingertip's radius, (n,), m.
+        object_radius: The object's radius per contact, (n,), m (not read when ``flat``).
+        flat: Whether the object surfaces are flat faces (else a sphere).
+    """
+    A, bias = object_coordinate_rate_terms(
+        contacts[0], contacts[1], contacts[2], contacts[7], contacts[8], contacts[9],
+        contacts[12], radius, object_radius, flat,
+    )
+    columns = xi_cf_ddot.shape[1]
+    m = columns - 1
+    for i in range(radius.shape[0]):
+        top, bottom = at + 2 * i * columns, at + (2 * i + 1) * columns
+        for k in range(columns):
+            out[top + k] = (
+                A[i, 0, 0] * xi_cf_ddot[2 * i, k] + A[i, 0, 1] * xi_cf_ddot[2 * i + 1, k]
+            )
+            out[bottom + k] = (
+                A[i, 1, 0] * xi_cf_ddot[2 * i, k] + A[i, 1, 1] * xi_cf_ddot[2 * i + 1, k]
+            )
+        out[top + m] += bias[i, 0]
+        out[bottom + m] += bias[i, 1]

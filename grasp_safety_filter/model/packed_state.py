@@ -10,12 +10,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.model.affine import AffineMap
-from grasp_safety_filter.model.closed_form_stacks import ClosedFormStack
-from grasp_safety_filter.model.contact_stack import (
-    ContactStack,
-    StackedContactGeometry,
-    StackedRollingRates,
-)
+from grasp_safety_filter.model.contact_surfaces import CompiledContacts
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.hand import HandModel
 from grasp_safety_filter.model.packed_terms import packed_fields, PackedLayout
@@ -59,11 +54,10 @@ class PackedGraspState(GraspState):
     """A :class:`GraspState` whose fields are views of one read-only buffer.
 
     The buffer is :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`'s
-    (or ``sphere_on_sphere_terms``'): the same fields and values as the staged computation,
-    read-only arrays. Each field is a view of the buffer, made when it is first read and
-    kept; a tick's state is thus built with no array per term, and a consumer pays only for
-    the fields it reads. Build with :meth:`of`; ``dataclasses.replace`` gives a copy with
-    every field set.
+    (or ``sphere_on_sphere_terms``'), made read-only. Each field is a view of the buffer,
+    made when it is first read and kept; a tick's state is thus built with no array per
+    term, and a consumer pays only for the fields it reads. Build with :meth:`of`;
+    ``dataclasses.replace`` gives a copy with every field set.
     """
 
     @property
@@ -91,7 +85,7 @@ class PackedGraspState(GraspState):
         buffer: np.ndarray,
         layout: PackedLayout,
         w_e: np.ndarray,
-        stack: ContactStack,
+        contacts: CompiledContacts,
     ) -> PackedGraspState:
         """Wrap a filled buffer (made read-only here) as the state at time ``t``, s.
 
@@ -100,7 +94,7 @@ class PackedGraspState(GraspState):
             buffer: The terms, laid out as ``layout`` says.
             layout: Where each term lies.
             w_e: The external wrench on the object, (6,), read-only.
-            stack: The contacts (for :attr:`GraspState.xi_co_rate_terms`).
+            contacts: The contact surfaces (for :attr:`GraspState.xi_co_rate_terms`).
         """
         buffer.setflags(write=False)
         state = object.__new__(cls)
@@ -109,7 +103,7 @@ class PackedGraspState(GraspState):
         fields['w_e'] = w_e
         fields['_buffer'] = buffer
         fields['_layout'] = layout
-        fields['_stack'] = stack
+        fields['_contacts'] = contacts
         return state
 
     @cached_property
@@ -137,25 +131,16 @@ class PackedGraspState(GraspState):
         raise AttributeError(name)
 
     def _rate_terms(self) -> Callable[[], tuple[np.ndarray, np.ndarray]]:
-        geometry = StackedContactGeometry(
+        return partial(
+            self._contacts.object_rate_terms,
             self.xi_cf,
             self.xi_co,
             self.psi,
-            self.penetration,
-            self.p_contact_in_palm,
-            self.R_contact_to_palm,
-            self.R_contact_to_fingertip,
-        )
-        rates = StackedRollingRates(
             self.xi_cf_dot,
             self.xi_co_dot,
             self.psi_dot,
-            self.H_cf,
-            self.H_cf_dot_w,
             self.sliding_velocity,
-            self.frame_angular_velocity,
         )
-        return partial(self._stack.object_rate_terms, geometry, rates)
 
 
 def _install_views(cls: type[PackedGraspState]) -> None:
@@ -183,33 +168,30 @@ _install_views(PackedGraspState)
 def packed_state(
     hand: HandModel,
     rigid_object: RigidObject,
-    stack: ClosedFormStack,
+    contacts: CompiledContacts,
     layout: PackedLayout,
     sample: tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
-) -> PackedGraspState | None:
+) -> PackedGraspState:
     """Return every model term of one instant, computed in one compiled pass.
 
-    The stack's ``terms_kernel`` (:func:`~grasp_safety_filter.model.packed_terms.
+    The contacts' ``terms_kernel`` (:func:`~grasp_safety_filter.model.packed_terms.
     sphere_on_plane_terms` for spherical fingertips on flat faces, ``sphere_on_sphere_terms``
-    on a sphere object) gives the same terms as the staged computation of
-    :meth:`~grasp_safety_filter.model.grasp_model.GraspModel.state` (the same formulas and
-    LAPACK solve), computed in one compiled pass from Pinocchio's terms and the object's
-    mass matrices into one buffer.
+    on a sphere object) computes every term from Pinocchio's terms and the object's mass
+    matrices into one buffer.
 
     Args:
         hand: The hand.
         rigid_object: The object.
-        stack: The contacts (:class:`~grasp_safety_filter.model.closed_form_stacks.
-            SphereOnPlaneStack` or ``SphereOnSphereStack``).
+        contacts: The contact surfaces (:func:`~grasp_safety_filter.model.contact_surfaces.
+            compiled_contacts`).
         layout: The buffer's layout for these contacts and joints.
         sample: ``(t, q, dq, p_object_in_palm, R_object_to_palm, twist_object)``.
 
-    Returns:
-        The state, or None when ``B_ho`` is singular or the solve's matrix or right-hand side
-        is not finite (numba's solve refuses them; the caller then runs the staged
-        computation, which reports them as it always has).
+    Terms that overflow (a huge but finite input) or inputs that are not finite give
+    non-finite terms (NaN from the solve of ``B_ho`` on), which consumers refuse.
 
     Raises:
+        numpy.linalg.LinAlgError: ``B_ho`` is singular.
         ValueError: A fingertip centre is a sphere object's centre, or an input's shape is
             not the model's: q and dq (m,), ``p_object_in_palm`` (3,), ``R_object_to_palm``
             (3, 3), ``twist_object`` (6,).
@@ -235,28 +217,25 @@ def packed_state(
     raw = hand.raw_terms(q, dq)
     w_e = rigid_object.external_wrench()
     buffer = np.empty(layout.size)
-    try:
-        stack.terms_kernel(
-            buffer,
-            *raw,
-            *hand.fingertip_frames,
-            hand.pinocchio_index,
-            *hand.branches,
-            q,
-            dq,
-            p_o,
-            R_o,
-            twist_o,
-            rigid_object.mass_matrices_in_body,
-            rigid_object.isotropic,
-            w_e,
-            *stack.surface_arrays,
-            layout.torsion,
-            layout.torsional_compliance,
-        )
-    except np.linalg.LinAlgError:
-        return None
-    return PackedGraspState.of(float(t), buffer, layout, w_e, stack)
+    contacts.terms_kernel(
+        buffer,
+        *raw,
+        *hand.fingertip_frames,
+        hand.pinocchio_index,
+        *hand.branches,
+        q,
+        dq,
+        p_o,
+        R_o,
+        twist_o,
+        rigid_object.mass_matrices_in_body,
+        rigid_object.isotropic,
+        w_e,
+        *contacts.surface_arrays,
+        layout.torsion,
+        layout.torsional_compliance,
+    )
+    return PackedGraspState.of(float(t), buffer, layout, w_e, contacts)
 
 
 def _raise_shape_error(m: int, **inputs: np.ndarray) -> None:

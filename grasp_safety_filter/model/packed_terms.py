@@ -1,21 +1,19 @@
 """Every model term of a tick in one compiled pass, written into one flat buffer.
 
-For spherical fingertips on flat faces (the paper's cube), :func:`sphere_on_plane_terms`
-(on a sphere object, :func:`sphere_on_sphere_terms`) takes Pinocchio's raw hand terms
-(:meth:`~grasp_safety_filter.model.hand.HandModel.raw_terms`: the
-:class:`~grasp_safety_filter.model.hand.RawHandTerms` and
-:class:`~grasp_safety_filter.model.hand.FingertipFrames` arguments)
-and the object's, and runs in one call what :meth:`HandModel.terms
-<grasp_safety_filter.model.hand.HandModel.terms>`, the contact kinematics
+The model's one evaluation of a tick. For spherical fingertips on flat faces (the paper's
+cube), :func:`sphere_on_plane_terms` (on a sphere object, :func:`sphere_on_sphere_terms`)
+takes Pinocchio's raw hand terms (:meth:`~grasp_safety_filter.model.hand.HandModel.raw_terms`:
+the :class:`~grasp_safety_filter.model.hand.RawHandTerms` and
+:class:`~grasp_safety_filter.model.hand.FingertipFrames` arguments) and the object's, and runs
+in one call the hand's terms in the model's joint order
+(:func:`~grasp_safety_filter.model.hand_kernel.hand_in_model_order`), the contact kinematics
 (:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`,
-:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`) and the contact
-dynamics (:func:`~grasp_safety_filter.model.contact_dynamics.contact_dynamics`) compute one
-after the other: the same formulas (those functions' docstrings), the same LAPACK solve of
-``B_ho``; last, :attr:`GraspState.xi_co_ddot
-<grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot>` in the surface's closed form
-(:func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_coordinate_acceleration`,
-:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_object_coordinate_acceleration`),
-which an object-workspace barrier reads. Each term goes to its place in one float64 buffer
+:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`), the
+contact dynamics (:mod:`~grasp_safety_filter.model.dynamics_kernel`, around one LAPACK solve
+of ``B_ho``) and last :attr:`GraspState.xi_co_ddot
+<grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot>`
+(:func:`~grasp_safety_filter.model.rolling_kernels.object_coordinate_rate_terms`), which an
+object-workspace barrier reads. Each term goes to its place in one float64 buffer
 (:class:`PackedLayout`), from which :class:`~grasp_safety_filter.model.packed_state.
 PackedGraspState` hands out read-only views when they are read. A tick's terms are a few
 hundred float operations: one call with one output, instead of a call per stage and an
@@ -30,15 +28,13 @@ from typing import NamedTuple
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
-from grasp_safety_filter.model.packed_pass import hand_and_object_terms, write_grasp_terms
-from grasp_safety_filter.model.rolling_kernels import (
-    sphere_on_plane_contacts,
-    sphere_on_plane_coordinate_acceleration,
+from grasp_safety_filter.model.packed_pass import (
+    hand_and_object_terms,
+    write_grasp_terms,
+    write_object_coordinate_acceleration,
 )
-from grasp_safety_filter.model.sphere_object_kernels import (
-    sphere_object_coordinate_acceleration,
-    sphere_on_sphere_contacts,
-)
+from grasp_safety_filter.model.rolling_kernels import sphere_on_plane_contacts
+from grasp_safety_filter.model.sphere_object_kernels import sphere_on_sphere_contacts
 
 
 def packed_fields(
@@ -223,7 +219,7 @@ def sphere_on_plane_terms(
         out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
         p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
     )
-    sphere_on_plane_coordinate_acceleration(out, at, contacts, xi_cf_ddot, radius)
+    write_object_coordinate_acceleration(out, at, contacts, xi_cf_ddot, radius, radius, True)
 
 
 @kernel
@@ -285,4 +281,6 @@ def sphere_on_sphere_terms(
         out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
         p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
     )
-    sphere_object_coordinate_acceleration(out, at, contacts, xi_cf_ddot, object_radius, radius)
+    write_object_coordinate_acceleration(
+        out, at, contacts, xi_cf_ddot, radius, object_radius, False
+    )

@@ -15,6 +15,8 @@ quaternion, so intermediate stages need not be unit.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pinocchio as pin
 
@@ -56,9 +58,33 @@ def normalized(quaternion_xyzw: np.ndarray) -> np.ndarray:
 
 
 def rotation_matrix(quaternion_xyzw: np.ndarray) -> np.ndarray:
-    """Return the rotation matrix of a quaternion ``(x, y, z, w)`` (normalised first), (3, 3)."""
-    x, y, z, w = normalized(quaternion_xyzw)
-    return pin.Quaternion(w, x, y, z).toRotationMatrix()
+    """Return the rotation matrix of a quaternion ``(x, y, z, w)`` (normalised first), (3, 3).
+
+    Eigen's ``toRotationMatrix`` of the normalised quaternion, written out in floats (the
+    simulator calls it at every Runge–Kutta stage, where a numpy and Pinocchio round trip
+    would cost a few µs).
+
+    Raises:
+        ValueError: The quaternion is (near) zero or not finite.
+    """
+    quaternion = np.asarray(quaternion_xyzw, dtype=float)
+    norm = math.sqrt(float(quaternion.dot(quaternion)))
+    if not (math.isfinite(norm) and norm >= 1e-12):
+        raise ValueError(
+            f'quaternion: expected a non-zero finite quaternion, got {quaternion_xyzw}'
+        )
+    x, y, z, w = (quaternion / norm).tolist()
+    tx, ty, tz = 2.0 * x, 2.0 * y, 2.0 * z
+    twx, twy, twz = tx * w, ty * w, tz * w
+    txx, txy, txz = tx * x, ty * x, tz * x
+    tyy, tyz, tzz = ty * y, tz * y, tz * z
+    return np.array(
+        [
+            [1.0 - (tyy + tzz), txy - twz, txz + twy],
+            [txy + twz, 1.0 - (txx + tzz), tyz - twx],
+            [txz - twy, tyz + twx, 1.0 - (txx + tyy)],
+        ]
+    )
 
 
 def from_rotation_matrix(R: np.ndarray) -> np.ndarray:

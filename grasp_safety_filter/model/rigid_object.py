@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from grasp_safety_filter.model.arrays import read_only
+from grasp_safety_filter.model.object_kernel import object_dynamics
 
 
 class RigidObject:
@@ -81,49 +82,24 @@ class RigidObject:
         matrix[3:, 3:] = rotational
         return matrix
 
-    def inertia_matrix(self, R_object_to_palm: np.ndarray) -> np.ndarray:
-        """``M_o``, (6, 6), read-only (a shared array if the inertia is isotropic)."""
-        if self.isotropic:
-            return self._M_o
-        return read_only(
-            self._block_diagonal(
-                self.mass, R_object_to_palm @ self.inertia_in_body @ R_object_to_palm.T
-            )
-        )
+    def dynamics(
+        self, R_object_to_palm: np.ndarray, twist: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(M_o, M_o^-1, C_o x_o_dot)`` in palm coordinates, (6, 6), (6, 6), (6,), read-only.
 
-    def inverse_inertia_matrix(self, R_object_to_palm: np.ndarray) -> np.ndarray:
-        """``M_o^-1 = blkdiag(I3 / m, R I_body^-1 R^T)``, (6, 6), read-only (shared if isotropic).
-
-        Read-only either way, so that the compiled model kernels see one array type.
+        :func:`~grasp_safety_filter.model.object_kernel.object_dynamics` at the orientation
+        ``R_object_to_palm`` and twist ``(v_o, w_o)`` (m/s, rad/s); shared constants if the
+        inertia is isotropic.
         """
         if self.isotropic:
-            return self._M_o_inv
-        return read_only(
-            self._block_diagonal(
-                1.0 / self.mass,
-                R_object_to_palm @ self.inverse_inertia_in_body @ R_object_to_palm.T,
-            )
+            return self._M_o, self._M_o_inv, self._zero_wrench
+        terms = object_dynamics(
+            self.mass_matrices_in_body,
+            False,
+            np.ascontiguousarray(R_object_to_palm, dtype=float),
+            np.ascontiguousarray(twist, dtype=float),
         )
-
-    def bias_wrench(self, R_object_to_palm: np.ndarray, twist: np.ndarray) -> np.ndarray:
-        """``C_o x_o_dot = (0, w × I w)``, (6,), read-only (shared zeros if isotropic)."""
-        if self.isotropic:
-            return self._zero_wrench
-        w = twist[3:]
-        Iw = R_object_to_palm @ (self.inertia_in_body @ (R_object_to_palm.T @ w))
-        # The cross product written out: np.cross costs ~15 µs of axis handling per call.
-        return read_only(
-            np.array(
-                [
-                    0.0,
-                    0.0,
-                    0.0,
-                    w[1] * Iw[2] - w[2] * Iw[1],
-                    w[2] * Iw[0] - w[0] * Iw[2],
-                    w[0] * Iw[1] - w[1] * Iw[0],
-                ]
-            )
-        )
+        return read_only(terms[0]), read_only(terms[1]), read_only(terms[2])
 
     def external_wrench(self) -> np.ndarray:
         """``w_e``: gravity at the centre of mass, (6,) (a shared read-only array)."""

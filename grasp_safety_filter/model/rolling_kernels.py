@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from grasp_safety_filter.model.compiled import inline_kernel, kernel
+from grasp_safety_filter.model.compiled import kernel
 
 
 @kernel
@@ -310,54 +310,67 @@ def sphere_on_plane_contacts(
     )
 
 
-@inline_kernel
-def sphere_on_plane_coordinate_acceleration(
-    out: np.ndarray,
-    at: int,
-    contacts: tuple[np.ndarray, ...],
-    xi_cf_ddot: np.ndarray,
+@kernel
+def object_coordinate_rate_terms(
+    xi_cf: np.ndarray,
+    xi_co: np.ndarray,
+    psi: np.ndarray,
+    xi_cf_dot: np.ndarray,
+    xi_co_dot: np.ndarray,
+    psi_dot: np.ndarray,
+    sliding_velocity: np.ndarray,
     radius: np.ndarray,
-) -> None:
-    """Write ``u ↦ xi_co_ddot`` on flat faces, ``[matrix | offset]`` (2n, m + 1), C order.
+    object_radius: np.ndarray,
+    flat: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """How the object coordinates' second derivative follows from the fingertip's.
 
-    :meth:`~grasp_safety_filter.model.contact_stack.ContactStack.object_rate_terms` and
-    :attr:`~grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot` in closed form: a
-    face's chart is Cartesian (``M_co = I``, ``M_co_dot = 0``), so per contact, with
-    ``M_cf = diag(R, R cos a)``,
+    Montana's equations give both sides the sliding velocity, ``M_co xi_co_dot = R_psi M_cf
+    xi_cf_dot``; differentiated, per contact,
 
-        xi_co_ddot = R_psi M_cf xi_cf_ddot + R_psi_dot sliding + R_psi M_cf_dot xi_cf_dot
-        M_cf_dot = diag(0, -R sin(a) a_dot)
-        R_psi_dot = psi_dot [[-sin psi, -cos psi], [-cos psi, sin psi]]
+        xi_co_ddot = A xi_cf_ddot + c,        A = M_co^-1 R_psi M_cf
+        c = M_co^-1 (R_psi_dot sliding + R_psi M_cf_dot xi_cf_dot - M_co_dot xi_co_dot)
 
-    (m/s² on the face), with ``xi_cf_ddot``'s rows ``[matrix | offset]``.
+    with ``M_cf = diag(R, R cos a_f)``, ``M_cf_dot = diag(0, -R sin(a_f) a_f_dot)``,
+    ``R_psi = [[c, -s], [-s, -c]]`` and ``R_psi_dot = psi_dot [[-s, -c], [-c, s]]``. A flat
+    face's chart is Cartesian (``M_co = I``, ``M_co_dot = 0``; c in m/s²); a sphere object's
+    is ``M_co = diag(R_o, R_o cos a_o)`` (c in rad/s²).
 
     Args:
-        out: The packed buffer; entries ``at .. at + 2n (m + 1) - 1`` are written.
-        at: Where ``xi_co_ddot_augmented`` starts in it.
-        contacts: The 14 arrays of :func:`sphere_on_plane_contacts`.
-        xi_cf_ddot: ``u ↦ xi_cf_ddot``, ``[matrix | offset]`` (2n, m + 1).
+        xi_cf: Fingertip contact coordinates, (n, 2), rad.
+        xi_co: Object contact coordinates, (n, 2) (m on a face, rad on a sphere).
+        psi: Angle between the surfaces' first tangent axes, (n,), rad.
+        xi_cf_dot: Their rates, (n, 2), rad/s.
+        xi_co_dot: Their rates, (n, 2).
+        psi_dot: Its rate, (n,), rad/s.
+        sliding_velocity: ``M_cf xi_cf_dot``, (n, 2), m/s.
         radius: Each fingertip's radius, (n,), m.
+        object_radius: The object's radius per contact, (n,), m (not read when ``flat``).
+        flat: Whether the object surfaces are flat faces (else a sphere).
+
+    Returns:
+        ``A`` (n, 2, 2) and ``c`` (n, 2).
     """
-    xi_cf, psi_all, xi_cf_dot = contacts[0], contacts[2], contacts[7]
-    psi_dot_all, sliding = contacts[9], contacts[12]
     n = radius.shape[0]
-    columns = xi_cf_ddot.shape[1]
-    m = columns - 1
+    A = np.empty((n, 2, 2))
+    bias = np.empty((n, 2))
     for i in range(n):
-        R_f, a = radius[i], xi_cf[i, 0]
-        sliding_x, sliding_y = sliding[i, 0], sliding[i, 1]
-        psi, psi_dot = psi_all[i], psi_dot_all[i]
-        s, c = math.sin(psi), math.cos(psi)
-        M_cf_y = R_f * math.cos(a)
-        # M_cf_dot xi_cf_dot: only its second entry is nonzero.
-        fingertip_y = -R_f * math.sin(a) * xi_cf_dot[i, 0] * xi_cf_dot[i, 1]
-        bias_x = psi_dot * (-s * sliding_x - c * sliding_y) - s * fingertip_y
-        bias_y = psi_dot * (-c * sliding_x + s * sliding_y) - c * fingertip_y
-        # R_psi M_cf, R_psi = [[c, -s], [-s, -c]].
-        A_xx, A_xy, A_yx, A_yy = c * R_f, -s * M_cf_y, -s * R_f, -c * M_cf_y
-        top, bottom = at + 2 * i * columns, at + (2 * i + 1) * columns
-        for k in range(columns):
-            out[top + k] = A_xx * xi_cf_ddot[2 * i, k] + A_xy * xi_cf_ddot[2 * i + 1, k]
-            out[bottom + k] = A_yx * xi_cf_ddot[2 * i, k] + A_yy * xi_cf_ddot[2 * i + 1, k]
-        out[top + m] += bias_x
-        out[bottom + m] += bias_y
+        R_f, a_f = radius[i], xi_cf[i, 0]
+        s, c = math.sin(psi[i]), math.cos(psi[i])
+        M_cf_x, M_cf_y = R_f, R_f * math.cos(a_f)
+        if flat:
+            M_co_x, M_co_y, object_y = 1.0, 1.0, 0.0
+        else:
+            R_o, a_o = object_radius[i], xi_co[i, 0]
+            M_co_x, M_co_y = R_o, R_o * math.cos(a_o)
+            object_y = -R_o * math.sin(a_o) * xi_co_dot[i, 0] * xi_co_dot[i, 1]
+        # M_cf_dot xi_cf_dot and M_co_dot xi_co_dot: only their second entries are nonzero.
+        fingertip_y = -R_f * math.sin(a_f) * xi_cf_dot[i, 0] * xi_cf_dot[i, 1]
+        sliding_x, sliding_y = sliding_velocity[i, 0], sliding_velocity[i, 1]
+        bias[i, 0] = (psi_dot[i] * (-s * sliding_x - c * sliding_y) - s * fingertip_y) / M_co_x
+        bias[i, 1] = (
+            psi_dot[i] * (-c * sliding_x + s * sliding_y) - c * fingertip_y - object_y
+        ) / M_co_y
+        A[i, 0, 0], A[i, 0, 1] = c * M_cf_x / M_co_x, -s * M_cf_y / M_co_x
+        A[i, 1, 0], A[i, 1, 1] = -s * M_cf_x / M_co_y, -c * M_cf_y / M_co_y
+    return A, bias

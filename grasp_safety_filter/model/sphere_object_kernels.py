@@ -8,8 +8,7 @@ fingertips are spheres of radius R in the paper's chart, as in
 :mod:`grasp_safety_filter.model.rolling_kernels`, whose per-contact helpers these kernels
 share; the outputs are those of
 :func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`, in the same
-order, and the formulas those of :class:`~grasp_safety_filter.model.contact_stack.
-ContactStack` in closed form.
+order (Montana's rolling equations in closed form).
 """
 
 from __future__ import annotations
@@ -18,7 +17,7 @@ import math
 
 import numpy as np
 
-from grasp_safety_filter.model.compiled import inline_kernel, kernel
+from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.rolling_kernels import (
     contact_on_object_surface,
     relative_rotation_in_contact,
@@ -218,64 +217,3 @@ def sphere_on_sphere_contacts(
         xi_cf, xi_co, psi, penetration, p_contact, R_pc, R_fc,
         xi_cf_dot, xi_co_dot, psi_dot, H_cf, H_cf_dot_w, sliding, Omega,
     )
-
-
-@inline_kernel
-def sphere_object_coordinate_acceleration(
-    out: np.ndarray,
-    at: int,
-    contacts: tuple[np.ndarray, ...],
-    xi_cf_ddot: np.ndarray,
-    object_radius: np.ndarray,
-    radius: np.ndarray,
-) -> None:
-    """Write ``u ↦ xi_co_ddot`` on a sphere object, ``[matrix | offset]`` (2n, m + 1), C order.
-
-    :meth:`~grasp_safety_filter.model.contact_stack.ContactStack.object_rate_terms` and
-    :attr:`~grasp_safety_filter.model.grasp_state.GraspState.xi_co_ddot` in closed form:
-    per contact, with ``M_cf = diag(R, R cos a_f)``, ``M_co = diag(R_o, R_o cos a_o)``,
-
-        xi_co_ddot = M_co^-1 R_psi M_cf xi_cf_ddot
-                     + M_co^-1 (R_psi_dot sliding + R_psi M_cf_dot xi_cf_dot - M_co_dot xi_co_dot)
-        M_cf_dot = diag(0, -R sin(a_f) a_f_dot),   M_co_dot = diag(0, -R_o sin(a_o) a_o_dot)
-        R_psi_dot = psi_dot [[-sin psi, -cos psi], [-cos psi, sin psi]]
-
-    (rad/s² in the object's charts), with ``xi_cf_ddot``'s rows ``[matrix | offset]``.
-
-    Args:
-        out: The packed buffer; entries ``at .. at + 2n (m + 1) - 1`` are written.
-        at: Where ``xi_co_ddot_augmented`` starts in it.
-        contacts: The 14 arrays of :func:`sphere_on_sphere_contacts`.
-        xi_cf_ddot: ``u ↦ xi_cf_ddot``, ``[matrix | offset]`` (2n, m + 1).
-        object_radius: The object's radius per contact, (n,), m.
-        radius: Each fingertip's radius, (n,), m.
-    """
-    xi_cf, xi_co, psi_all, xi_cf_dot = contacts[0], contacts[1], contacts[2], contacts[7]
-    xi_co_dot, psi_dot_all, sliding = contacts[8], contacts[9], contacts[12]
-    n = radius.shape[0]
-    columns = xi_cf_ddot.shape[1]
-    m = columns - 1
-    for i in range(n):
-        R_f, R_o = radius[i], object_radius[i]
-        a_f, a_o = xi_cf[i, 0], xi_co[i, 0]
-        a_f_dot, b_f_dot = xi_cf_dot[i, 0], xi_cf_dot[i, 1]
-        a_o_dot, b_o_dot = xi_co_dot[i, 0], xi_co_dot[i, 1]
-        sliding_x, sliding_y = sliding[i, 0], sliding[i, 1]
-        psi, psi_dot = psi_all[i], psi_dot_all[i]
-        s, c = math.sin(psi), math.cos(psi)
-        M_cf_x, M_cf_y = R_f, R_f * math.cos(a_f)
-        M_co_x, M_co_y = R_o, R_o * math.cos(a_o)
-        # M_cf_dot xi_cf_dot and M_co_dot xi_co_dot: only their second entries are nonzero.
-        fingertip_y = -R_f * math.sin(a_f) * a_f_dot * b_f_dot
-        object_y = -R_o * math.sin(a_o) * a_o_dot * b_o_dot
-        bias_x = (psi_dot * (-s * sliding_x - c * sliding_y) - s * fingertip_y) / M_co_x
-        bias_y = (psi_dot * (-c * sliding_x + s * sliding_y) - c * fingertip_y - object_y) / M_co_y
-        # M_co^-1 R_psi M_cf, R_psi = [[c, -s], [-s, -c]].
-        A_xx, A_xy = c * M_cf_x / M_co_x, -s * M_cf_y / M_co_x
-        A_yx, A_yy = -s * M_cf_x / M_co_y, -c * M_cf_y / M_co_y
-        top, bottom = at + 2 * i * columns, at + (2 * i + 1) * columns
-        for k in range(columns):
-            out[top + k] = A_xx * xi_cf_ddot[2 * i, k] + A_xy * xi_cf_ddot[2 * i + 1, k]
-            out[bottom + k] = A_yx * xi_cf_ddot[2 * i, k] + A_yy * xi_cf_ddot[2 * i + 1, k]
-        out[top + m] += bias_x
-        out[bottom + m] += bias_y

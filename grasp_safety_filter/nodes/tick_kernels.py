@@ -92,9 +92,10 @@ def _made_up_tick(
         odometry.R_object_to_palm,
         odometry.twist_object,
     )
-    # The start-up grasp check's last step evaluates the hand at the state's own read-only
-    # arrays (another specialisation of the model's kernel); a made-up state never gets
-    # that far in grasp_findings, so it is called directly.
+    # The start-up grasp check evaluates the contacts' geometry, then the hand at the
+    # state's own read-only arrays (another specialisation of the model's kernel); a
+    # made-up state never gets that far in grasp_findings, so both are called directly.
+    model.contact_geometry(state.q, state.p_object_in_palm, state.R_object_to_palm)
     hand_findings(model, state.q, state.p_object_in_palm, state.R_object_to_palm)
     return state, odometry, effort_from_msg(effort_msg, names).effort
 

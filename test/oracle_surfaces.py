@@ -1,8 +1,8 @@
-"""Surfaces evaluated together: k surfaces of one kind at stacked coordinates ``xi`` (k, 2).
+"""Oracle (tests only): k surfaces of one kind at stacked coordinates ``xi`` (k, 2), numpy.
 
 The closed forms of :mod:`grasp_safety_filter.model.surfaces`, one numpy call per term for
-all contacts: the per-tick model runs at 1 kHz, and one call per term for all contacts costs
-a fraction of one call per term and contact.
+all contacts, for any mix of surfaces (:class:`SurfaceList` through the per-surface
+interface): :mod:`model_oracles`' stacked contact kinematics.
 """
 
 from __future__ import annotations
@@ -11,8 +11,10 @@ from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
 import numpy as np
+from oracle_geometry import geometry_of
+from stacked_arrays import matvec
 
-from grasp_safety_filter.model.arrays import matvec, read_only
+from grasp_safety_filter.model.arrays import read_only
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface, Surface
 
 
@@ -147,7 +149,7 @@ class FlatStack(SurfaceStack):
 
     def __init__(self, planes: Sequence[FlatSurface]) -> None:
         self.origin = np.array([plane.origin for plane in planes])
-        self._frame = read_only(np.array([plane.frame(np.zeros(2)) for plane in planes]))
+        self._frame = read_only(np.array([plane.axes for plane in planes]))
         k = len(planes)
         self._ones = read_only(np.ones((k, 2)))
         self._zeros_2 = read_only(np.zeros((k, 2)))
@@ -188,7 +190,7 @@ class SurfaceList(SurfaceStack):
     """Any surfaces, evaluated one by one through the :class:`Surface` interface."""
 
     def __init__(self, surfaces: Sequence[Surface]) -> None:
-        self.surfaces = list(surfaces)
+        self.surfaces = [geometry_of(surface) for surface in surfaces]
 
     def _each(self, method: str, *args: np.ndarray) -> np.ndarray:
         return np.array(

@@ -1,23 +1,31 @@
-"""All rolling contacts of a grasp at once: Montana's kinematics on stacked arrays.
+"""Oracles of the model (tests only): Montana's rolling kinematics as stacked numpy, any surfaces.
 
-The formulas of :mod:`grasp_safety_filter.model.rolling`, evaluated for the n contacts of a
-grasp together along a leading contact axis (one call per tick instead of one per contact).
-:mod:`grasp_safety_filter.model.closed_form_stacks` evaluates them in compiled closed forms
-for spherical fingertips on flat faces or on a sphere, and picks the evaluation for a grasp's
-contacts (:func:`~grasp_safety_filter.model.closed_form_stacks.contact_stack`).
+:class:`ContactStack` evaluates the formulas of :mod:`grasp_safety_filter.model.rolling` for
+the n contacts of a grasp together along a leading contact axis, for any surfaces
+(:mod:`oracle_surfaces`); :func:`staged_state` builds a :class:`GraspState` stage by stage
+from it, Pinocchio's hand terms and the dynamics kernels. The product computes the same terms
+in compiled closed forms for spherical fingertips on flat faces or on a sphere
+(:mod:`grasp_safety_filter.model.packed_terms`); the tests compare the two to rounding.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
+from typing import Any
 
 import numpy as np
+from oracle_rolling import ROLL_SELECT
+from oracle_surfaces import SphereStack, stack_surfaces
+from stacked_arrays import matvec
 
-from grasp_safety_filter.model.arrays import matvec
-from grasp_safety_filter.model.rolling import ContactPair, ROLL_SELECT
+from grasp_safety_filter.model.affine import AffineMap
+from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
+from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.model.rolling import ContactPair
 from grasp_safety_filter.model.rolling_kernels import fingertip_contact_frames
-from grasp_safety_filter.model.surface_stacks import SphereStack, stack_surfaces
+from grasp_safety_filter.model.wrench_solve import contact_wrench
 
 
 def _reflections(psi: np.ndarray) -> np.ndarray:
@@ -261,3 +269,111 @@ class ContactStack:
             - self.object_surfaces.metric_rate(xi_co, rates.xi_co_dot) * rates.xi_co_dot
         ) / M_co
         return R_psi * M_cf[:, None, :] / M_co[:, :, None], bias
+
+
+def object_terms(
+    rigid_object: Any, R_object_to_palm: np.ndarray, twist: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``(M_o, M_o^-1, C_o x_o_dot)`` in palm coordinates, by numpy products.
+
+    The formulas of :mod:`grasp_safety_filter.model.object_kernel`.
+    """
+    R = np.asarray(R_object_to_palm, dtype=float)
+    M_o, M_o_inverse = np.zeros((6, 6)), np.zeros((6, 6))
+    M_o[:3, :3] = rigid_object.mass * np.eye(3)
+    M_o_inverse[:3, :3] = np.eye(3) / rigid_object.mass
+    M_o[3:, 3:] = R @ rigid_object.inertia_in_body @ R.T
+    M_o_inverse[3:, 3:] = R @ np.linalg.inv(rigid_object.inertia_in_body) @ R.T
+    w = np.asarray(twist, dtype=float)[3:]
+    return M_o, M_o_inverse, np.concatenate((np.zeros(3), np.cross(w, M_o[3:, 3:] @ w)))
+
+
+def staged_state(
+    model: Any,
+    t: float,
+    q: np.ndarray,
+    dq: np.ndarray,
+    p_object_in_palm: np.ndarray,
+    R_object_to_palm: np.ndarray,
+    twist_object: np.ndarray,
+    contacts: ContactStack | None = None,
+) -> GraspState:
+    """Every model term at one instant, stage by stage, with numpy contact kinematics.
+
+    Hand terms (Pinocchio, :meth:`HandModel.terms`), the contacts' geometry and rolling rates
+    (:class:`ContactStack`, of ``model.contacts`` unless given), the object's terms
+    (:func:`object_terms`), then the contact dynamics' two compiled passes around
+    the solve of ``B_ho`` (:mod:`grasp_safety_filter.model.dynamics_kernel`, whose own
+    oracle is :mod:`numpy_model_terms`).
+    """
+    m = model.n_joints
+    model.bind_contacts(q, p_object_in_palm, R_object_to_palm)
+    contacts = ContactStack(model.contacts) if contacts is None else contacts
+    torsion, compliance = model.soft_finger, model.torsional_compliance
+    q, dq = np.array(q, dtype=float), np.array(dq, dtype=float)
+    p_o, R_o = np.array(p_object_in_palm, dtype=float), np.array(R_object_to_palm, dtype=float)
+    twist_o = np.array(twist_object, dtype=float)
+    hand = model.hand.terms(q, dq)
+    p_f, R_pf, J_s = hand.p_fingertip_in_palm, hand.R_fingertip_to_palm, hand.J_fingertip
+    geometry, rates = contacts.kinematics(p_f, R_pf, hand.twist_fingertip, p_o, R_o, twist_o)
+    R_pc = geometry.R_contact_to_palm
+    rigid_object = model.object
+    M_o, M_o_inverse, C_o_twist = object_terms(rigid_object, R_o, twist_o)
+    w_e = rigid_object.external_wrench()
+    spans = model.hand.branches
+    (
+        J_h, G, Jh_dot_dq, G_dot_T_twist, B_ho, force_rhs, ddq, M_h_inv_J_hT, M_o_inv_G,
+        x_ddot_free, w_c, w_relative,
+    ) = velocity_terms(
+        J_s, hand.twist_fingertip, hand.J_fingertip_dot_dq, p_f, hand.M_h_inverse,
+        hand.h_bias, p_o, twist_o, M_o_inverse, C_o_twist, w_e,
+        geometry.p_contact_in_palm, R_pc, rates.H_cf, rates.H_cf_dot_w,
+        rates.sliding_velocity, rates.frame_angular_velocity, *spans, torsion,
+    )
+    force = contact_wrench(B_ho, force_rhs, torsion, compliance)
+    ddq, x_ddot, xi_ddot = acceleration_terms(
+        force, ddq, M_h_inv_J_hT, M_o_inv_G, x_ddot_free, w_c, w_relative, J_s,
+        hand.J_fingertip_dot_dq, R_pc, rates.H_cf, rates.H_cf_dot_w, *spans,
+    )
+    arrays = {
+        'q': q,
+        'dq': dq,
+        'p_object_in_palm': p_o,
+        'R_object_to_palm': R_o,
+        'twist_object': twist_o,
+        'p_fingertip_in_palm': p_f,
+        'R_fingertip_to_palm': R_pf,
+        'twist_fingertip': hand.twist_fingertip,
+        'xi_cf': geometry.xi_cf,
+        'xi_co': geometry.xi_co,
+        'psi': geometry.psi,
+        'xi_cf_dot': rates.xi_cf_dot,
+        'xi_co_dot': rates.xi_co_dot,
+        'psi_dot': rates.psi_dot,
+        'penetration': geometry.penetration,
+        'p_contact_in_palm': geometry.p_contact_in_palm,
+        'R_contact_to_palm': R_pc,
+        'M_h': hand.M_h,
+        'h_bias': hand.h_bias,
+        'gravity_torque': hand.gravity_torque,
+        'J_fingertip': J_s,
+        'J_h': J_h,
+        'G': G,
+        'Jh_dot_dq': Jh_dot_dq,
+        'G_dot_T_twist': G_dot_T_twist,
+        'M_o': M_o,
+        'C_o_twist': C_o_twist,
+        'w_e': w_e,
+        'B_ho': B_ho,
+    }
+    for array in (*arrays.values(), force, ddq, x_ddot, xi_ddot):
+        array.setflags(write=False)
+    return GraspState(
+        t=float(t),
+        **arrays,
+        contact_force=AffineMap(force[:, :m], force[:, m]),
+        joint_acceleration=AffineMap(ddq[:, :m], ddq[:, m]),
+        object_acceleration=AffineMap(x_ddot[:, :m], x_ddot[:, m]),
+        xi_cf_ddot=AffineMap(xi_ddot[:, :m], xi_ddot[:, m]),
+        xi_co_rate_terms=partial(contacts.object_rate_terms, geometry, rates),
+    )
