@@ -31,33 +31,45 @@ print(sum(sum(k.stats.cache_hits.values()) for k in kernels),
 
 
 @pytest.mark.parametrize(
-    ('explicit', 'package_writable', 'user_writable', 'expected'),
+    ('explicit', 'user_writable', 'expected'),
     [
-        ('/some/dir', False, False, None),  # NUMBA_CACHE_DIR given: numba's own choice
-        ('', True, False, None),  # __pycache__ next to the source
-        ('', False, True, None),  # the user's cache directory
-        ('', False, False, 'temporary'),  # neither: a directory under the temporary one
+        ('/some/dir', False, None),  # NUMBA_CACHE_DIR given: numba's own choice
+        ('', True, 'user'),  # the user's cache directory
+        ('', False, 'temporary'),  # not writable: a directory under the temporary one
     ],
 )
-def test_the_cache_falls_back_to_a_temporary_directory_only_when_nothing_else_is_writable(
-    monkeypatch, explicit, package_writable, user_writable, expected
+def test_the_cache_is_the_users_or_a_temporary_directory_named_after_the_sources(
+    monkeypatch, explicit, user_writable, expected
 ):
     monkeypatch.setattr(numba.config, 'CACHE_DIR', explicit)
     monkeypatch.setenv('XDG_CACHE_HOME', '/user-cache')
-
-    def writable(directory: Path) -> bool:
-        if directory == Path('/user-cache/numba'):
-            return user_writable
-        assert directory == Path(compiled.__file__).resolve().parent / '__pycache__'
-        return package_writable
-
-    monkeypatch.setattr(compiled, '_writable', writable)
-    found = compiled.fallback_cache_directory()
+    monkeypatch.setattr(compiled, '_writable', lambda directory: user_writable)
+    found = compiled.cache_directory()
     if expected is None:
         assert found is None
+        return
+    name = f'numba-{compiled.source_key()}'
+    if expected == 'user':
+        assert Path(found) == Path('/user-cache/grasp_safety_filter') / name
     else:
-        assert Path(found).parent == Path(tempfile.gettempdir())
-        assert str(os.getuid()) in Path(found).name
+        assert Path(found).name == name
+        assert Path(found).parent.parent == Path(tempfile.gettempdir())
+        assert str(os.getuid()) in Path(found).parent.name
+
+
+def test_any_change_to_the_sources_names_a_new_cache(tmp_path):
+    """numba checks a kernel only against its own file: a helper it inlines must count too."""
+    package = tmp_path / 'grasp_safety_filter'
+    (package / 'model').mkdir(parents=True)
+    kernel, helper = package / 'model' / 'terms.py', package / 'model' / 'inlined.py'
+    kernel.write_text('def terms(x):\n    return helper(x)\n')
+    helper.write_text('def helper(x):\n    return x + 1.0\n')
+    first = compiled.source_key((package,))
+    assert compiled.source_key((package,)) == first
+    helper.write_text('def helper(x):\n    return x + 2.0\n')
+    assert compiled.source_key((package,)) != first
+    assert len(first) == 16
+    assert {p.name for p in compiled.SOURCES} == {'grasp_safety_filter', 'hand_sim_node'}
 
 
 def test_a_second_process_loads_the_kernels_from_the_cache_instead_of_compiling(tmp_path):

@@ -2,23 +2,38 @@
 
 A tick's model terms are a few hundred float operations on arrays of 3 to 60 elements; as
 numpy calls, nearly all of their cost is the calls' own overhead. The kernels are plain
-loops compiled by numba with ``cache=True``: the machine code is written next to the module
-(``__pycache__``) the first time a process compiles it (seconds), and later processes load
-it (a fraction of a second) instead of compiling again.
+loops compiled by numba with ``cache=True``: the machine code is written to disk the first
+time a process compiles it (seconds), and later processes load it (a fraction of a second)
+instead of compiling again.
 
-Where the package directory cannot be written (an installed, read-only package), numba
-writes its cache to the user's cache directory; where neither can be written, to a
-directory under the system's temporary directory (numba's ``config.CACHE_DIR``, set here
-before any kernel is decorated; an explicit ``NUMBA_CACHE_DIR`` is left as it is).
+numba checks a cached kernel only against the file that defines it, not against the
+modules whose functions it inlines or calls: after an update of one of those (a ``git
+pull`` in an editable install), it would load stale machine code. So the cache lives in a
+directory named after a hash of the package's sources (:func:`source_key`): any change to
+them starts a new cache. The directory is under the user's cache directory
+(``$XDG_CACHE_HOME`` or ``~/.cache``), or under the system's temporary directory where that
+cannot be written (numba's ``config.CACHE_DIR``, set here before any kernel is decorated;
+an explicit ``NUMBA_CACHE_DIR`` is left as it is).
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
 import os
 from pathlib import Path
 import tempfile
 
 import numba
+
+#: The packages whose sources key the cache: this one and the simulator's, which compiles
+#: with :data:`kernel` too.
+SOURCES = tuple(
+    Path(location)
+    for name in ('grasp_safety_filter', 'hand_sim_node')
+    if (spec := importlib.util.find_spec(name)) is not None
+    for location in spec.submodule_search_locations or ()
+)
 
 
 def _writable(directory: Path) -> bool:
@@ -31,24 +46,33 @@ def _writable(directory: Path) -> bool:
     return True
 
 
-def fallback_cache_directory() -> str | None:
-    """Return a temporary cache directory if numba's own choices are read-only, else None.
+def source_key(packages: tuple[Path, ...] = SOURCES) -> str:
+    """Return a short hash of every Python source under ``packages`` (names and contents)."""
+    digest = hashlib.sha1()
+    for package in packages:
+        for path in sorted(package.rglob('*.py')):
+            digest.update(str(path.relative_to(package.parent)).encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
 
-    numba caches in ``config.CACHE_DIR`` (``NUMBA_CACHE_DIR``) when set, else next to the
-    source (``__pycache__``), else in the user's cache directory (``$XDG_CACHE_HOME`` or
-    ``~/.cache``); with none writable it refuses to decorate a cached function.
+
+def cache_directory() -> str | None:
+    """Return the kernels' cache directory for these sources; None if ``NUMBA_CACHE_DIR`` is set.
+
+    ``<user cache>/grasp_safety_filter/numba-<source key>`` when it can be written, else the
+    same name under the system's temporary directory (with the user's id).
     """
     if numba.config.CACHE_DIR:
         return None
-    if _writable(Path(__file__).resolve().parent / '__pycache__'):
-        return None
-    user_cache = Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'numba'
-    if _writable(user_cache):
-        return None
-    return str(Path(tempfile.gettempdir()) / f'grasp_safety_filter-numba-{os.getuid()}')
+    name = f'numba-{source_key()}'
+    user_cache = Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache')
+    directory = user_cache / 'grasp_safety_filter' / name
+    if _writable(directory):
+        return str(directory)
+    return str(Path(tempfile.gettempdir()) / f'grasp_safety_filter-{os.getuid()}' / name)
 
 
-numba.config.CACHE_DIR = fallback_cache_directory() or numba.config.CACHE_DIR
+numba.config.CACHE_DIR = cache_directory() or numba.config.CACHE_DIR
 
 #: The kernels' decorator: no Python objects, cached machine code, numpy's float semantics
 #: (division by zero gives inf or NaN, as in the numpy code, instead of raising).
