@@ -58,7 +58,7 @@ def test_the_cache_is_the_users_or_a_temporary_directory_named_after_the_sources
 
 
 def test_any_change_to_the_sources_names_a_new_cache(tmp_path):
-    """numba checks a kernel only against its own file: a helper it inlines must count too."""
+    """A helper a kernel inlines counts too: numba checks a kernel against its own file only."""
     package = tmp_path / 'grasp_safety_filter'
     (package / 'model').mkdir(parents=True)
     kernel, helper = package / 'model' / 'terms.py', package / 'model' / 'inlined.py'
