@@ -124,7 +124,12 @@ def _interrupt_message(interrupt: Any) -> str:
 def demo_main(argv: list[str] | None = None) -> int:
     """``grasp-demo``: a scenario's runs (default: the paper's), with figures and verdicts."""
     try:
-        return _demo(argv)
+        from grasp_safety_filter.io.interrupts import interrupt_on_signals
+
+        # Start-up too: the grasp check compiles or loads kernels, and a signal that lands
+        # in numba's code is sent again after it, not raised in a finalizer.
+        with interrupt_on_signals():
+            return _demo(argv)
     except KeyboardInterrupt:
         # Outside a run (start-up, between runs, the verdict): no partial run to report.
         print('\ngrasp-demo: interrupted before or between runs: no partial run', file=sys.stderr)
