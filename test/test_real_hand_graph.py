@@ -1,6 +1,6 @@
 """The three nodes on a hand's streams, over real DDS: the simulator in its hardware mode.
 
-``hand_sim_node`` runs as a hand's driver and an object tracker on the wall clock (250 Hz
+``hand_sim_node`` runs as a hand's driver and an object tracker on the wall clock (200 Hz
 joint states with two joints of an arm, the object's pose at 100 Hz, 10 ms late, with 0.5 mm
 of noise), takes u* as ros2_control's ``Float64MultiArray``, and starts publishing without
 waiting for any controller; the nominal controller and the safety filter
@@ -24,7 +24,7 @@ from grasp_safety_filter.io.launch_arguments import real_hand
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
 #: A driver's rate the four processes keep on two shared cores with a recorder (the figures at
 #: 500 Hz and 1 kHz: grasp-bench-realtime --mode graph).
-RATE = 250.0
+RATE = 200.0
 HARDWARE = {
     'hardware.rate': RATE,
     'hardware.extra_joints': 2,
