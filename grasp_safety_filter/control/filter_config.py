@@ -169,14 +169,12 @@ class SafetyFilterConfig:
         return ClassKFunction(self.alpha2_kind, self.alpha2_gain)
 
     def osqp_settings(self) -> dict[str, Any]:
-        """Keyword settings for ``osqp.OSQP.setup``."""
+        """Return the ``osqp.*`` parameters as ``osqp.OSQP.setup`` settings (backend adds more)."""
         return {
-            'verbose': False,
             'eps_abs': self.eps_abs,
             'eps_rel': self.eps_rel,
             'max_iter': self.max_iter,
             'polishing': self.polish,
-            'warm_starting': True,
             # Check convergence every 5 iterations instead of OSQP's 25: the warm-started
             # problems converge in a few, and daqp finishes those that do not.
             'check_termination': 5,

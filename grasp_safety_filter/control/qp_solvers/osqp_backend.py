@@ -31,8 +31,8 @@ from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_solvers.daqp_backend import DAQPBackend
 from grasp_safety_filter.control.qp_solvers.problem import Problem, Solution, SolutionStatus
 
-#: Settings under the filter's own (``osqp.*`` parameters): quiet, warm-started, polished.
-DEFAULT_SETTINGS: dict[str, Any] = {'verbose': False, 'warm_starting': True, 'polishing': True}
+#: Settings the backend needs under the ``osqp.*`` parameters: quiet, warm-started.
+DEFAULT_SETTINGS: dict[str, Any] = {'verbose': False, 'warm_starting': True}
 
 #: Largest KKT violation of an accepted OSQP answer (:func:`kkt_violation`). A polished
 #: answer on the right rows meets it by orders of magnitude; at 1e-6, answers polished on a
