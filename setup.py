@@ -30,7 +30,7 @@ setup(
         'numpy>=1.24',
         'osqp>=1.0',
         'daqp>=0.11',  # the qp.solver=daqp backend: a warm-started daqp.Model
-        'scipy>=1.8',  # sparse matrices for OSQP, LU/QR in the active-set step
+        'scipy>=1.8',  # sparse matrices for OSQP
         # The model's per-tick kernels (grasp_safety_filter/model/compiled.py); tested with
         # numba 0.68.1 on numpy 2.4.
         'numba>=0.68',

@@ -15,6 +15,7 @@ from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
 )
+from grasp_safety_filter.control.qp_solvers import osqp_backend
 from grasp_safety_filter.model.grasp_model import state_of
 from grasp_tools.bench.recorded_run import Scenario, Tick
 
@@ -92,9 +93,8 @@ def _standalone_osqp(safety_filter: SafetyFilter) -> osqp.OSQP:
     """Set up an OSQP solver like the filter's hard-QP solver (same pattern and settings)."""
     hard = safety_filter.hard_qp
     solver = osqp.OSQP()
-    solver.setup(
-        hard.P, hard.q, hard.C, hard.lower, hard.upper, **safety_filter.config.osqp_settings()
-    )
+    settings = {**osqp_backend.DEFAULT_SETTINGS, **safety_filter.config.osqp_settings()}
+    solver.setup(hard.P, hard.q, hard.C, hard.lower, hard.upper, **settings)
     return solver
 
 
