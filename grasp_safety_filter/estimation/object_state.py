@@ -301,22 +301,14 @@ class ObjectStateEstimator:
             raise ValueError(f'dq: expected shape ({self._J_h.shape[1]},), got {dq.shape}')
         with np.errstate(all='ignore'):
             rhs = self._J_h @ dq
-        if np.all(np.isfinite(rhs)) and np.all(np.isfinite(self._G)):
-            # Normal equations where G G^T is surely well conditioned: for a positive
-            # definite 6x6 A, cond(A) <= tr(A)^6 / det(A), and cond(A) = cond(G)^2. Half
-            # the cost of the SVD below, which decides the rest.
-            A = self._G @ self._G.T
-            trace, det = float(np.trace(A)), float(np.linalg.det(A))
-            if det > 0.0 and trace**6 <= det * MAX_GRASP_MAP_CONDITION**2:
-                twist = np.linalg.solve(A, self._G @ rhs)
-                if np.all(np.isfinite(twist)):
-                    return twist, KINEMATICS
+        # The SVD needs finite input; it gives the rank and the condition number too.
+        if np.isfinite(rhs).all() and np.isfinite(self._G).all():
             try:
                 twist, _, rank, singular = np.linalg.lstsq(self._G.T, rhs, rcond=None)
             except np.linalg.LinAlgError:  # the SVD did not converge
                 return self._sample_twist.copy(), TRACKER
             well_conditioned = rank == 6 and singular[-1] * MAX_GRASP_MAP_CONDITION >= singular[0]
-            if well_conditioned and np.all(np.isfinite(twist)):
+            if well_conditioned and np.isfinite(twist).all():
                 return twist, KINEMATICS
         return self._sample_twist.copy(), TRACKER
 
