@@ -1,49 +1,26 @@
 """The safety filter's message-level endpoint: state and u_nom in, u* out.
 
-Pure Python, shared by the rclpy node (:mod:`grasp_safety_filter.nodes.safety_filter_node`)
-and the ROS-free runner. With ``input.sync: exact`` (the lockstep simulator) a tick runs when
-the three inputs of one stamp t are in hand and valid::
+Pure Python, shared by the rclpy node (:mod:`~grasp_safety_filter.nodes.safety_filter_node`)
+and the ROS-free runner. A tick::
 
-    /hand/joint_states (t) + /object/odom (t) + /hand/effort_nominal (t)
+    /hand/joint_states + object state + /hand/effort_nominal, one stamp t
         ──▶ GraspModel.state ──▶ SafetyFilter.solve(state, u_nom) ──▶ HoldPolicy.accept
-        ──▶ /hand/effort_command stamped t (u* by joint name, N·m)
-            /safety_filter/margins stamped t (barrier value h per row; row names in the
-                first message, on change and once a second: io.margin_stream)
-            /diagnostics: status ``safety_filter`` (below)
+        ──▶ /hand/effort_command stamped t (u* by joint name, N·m), and when due
+            /safety_filter/margins and the ``safety_filter`` status on /diagnostics
 
-With ``input.sync: latest`` (a real hand's driver and tracker) each joint state is a tick,
-the object's state estimated at its stamp, its u_nom the nominal controller's answer to it or
-the newest one (:mod:`~grasp_safety_filter.nodes.latest_inputs`).
+With ``input.sync: exact`` (the lockstep simulator) a tick runs when the three inputs of one
+stamp are in hand and valid (:mod:`~grasp_safety_filter.nodes.tick_inputs`); with ``latest``
+(a real hand's driver and tracker) each joint state is a tick, the object's state estimated at
+its stamp (:mod:`~grasp_safety_filter.nodes.latest_inputs`).
 
-Inputs are parsed by joint name (joints the model does not have are ignored in joint
-states) and their stamps checked (stale, future, out of order:
-:mod:`~grasp_safety_filter.nodes.tick_inputs`). A rejected input yields no computed command:
-the hold policy gives the last safe command or, after ``input.hold_timeout``, the fallback
-(:mod:`~grasp_safety_filter.nodes.held_commands`), stamped with the rejected message's stamp
-when it is readable and current (a lockstep simulator waiting for that stamp goes on), else
-with ``now``; the tick of that stamp is then closed. A complete, valid set arriving again for
-the last tick's stamp (a simulator that re-sent its state) gets the same messages again, and
-the input watchdog then waits from it: those inputs did not stop. Before the first tick no
-command goes out at all: a rejected input gets a WARN ``input_ignored`` status only (once a
-second), as does a rejected tracker sample at any time (the ticks go on with the estimate).
-
-Input watchdog (:mod:`~grasp_safety_filter.nodes.input_watchdog`): :meth:`watchdog`, called
-every :data:`WATCHDOG_PERIOD` s on a steady clock, sends the fallback and an ERROR once no
-tick has been answered for ``input.hold_timeout`` s of wall-clock time.
-
-Grasp check (:mod:`~grasp_safety_filter.nodes.grasp_watch`): each tick's state is checked
-before it is filtered, with the filter on or off. Until one passes the start-up check, no QP
-runs and the fallback goes out (``grasp_invalid``, ERROR naming each failing contact or
-joint); afterwards a contact whose gap or penetration passes ``grasp_check.gap_tolerance`` is
-lost: no QP, the last safe u* held for ``input.hold_timeout`` (``grasp_held``), then the
-fallback (``grasp_fallback``), both ERROR; filtering resumes when the contacts are back.
-Each change is logged once (:meth:`SafetyFilterEndpoint.take_log`).
-
-With ``enabled=False`` (the paper's unfiltered run) the endpoint validates the same inputs
-and publishes ``u* = u_nom`` on the same topic, with the margins at u_nom; its status is
-then WARN (the grasp constraints are not enforced). :meth:`SafetyFilterEndpoint.switch`
-turns the filter on or off at run time and records when. The status's values:
-:mod:`~grasp_safety_filter.nodes.filter_status`.
+Input that fails its checks (joints by name, NaN, size, stale, future, out of order) gets no
+computed command: the hold policy's (:mod:`~grasp_safety_filter.nodes.held_commands`), and
+none at all before the first tick. The input watchdog
+(:mod:`~grasp_safety_filter.nodes.input_watchdog`) sends the fallback once no tick has been
+answered for ``input.hold_timeout`` s of wall time. The grasp check
+(:mod:`~grasp_safety_filter.nodes.grasp_watch`) keeps the QP off states that are not the grasp.
+With ``enabled=False`` (the paper's unfiltered run) u* = u_nom, validated alike, status WARN.
+The whole behaviour, for users: ``docs/ros_nodes.md``.
 """
 
 from __future__ import annotations
@@ -92,11 +69,8 @@ NOMINAL_HINT = (
     'see its status on /diagnostics'
 )
 
-#: Period of the input watchdog, s (steady clock). The fallback goes out and /diagnostics
-#: say ERROR at most ``input.hold_timeout`` + this after the last accepted tick, and the
-#: fallback is repeated at this period while the inputs stay away: 50 Hz keeps a driver
-#: with a command timeout of 20 ms or more fed, and costs the 1 kHz loop one subtraction
-#: per call.
+#: Period of the input watchdog, s (steady clock): the fallback is repeated at this period
+#: while the inputs stay away, which keeps a driver with a command timeout of 20 ms fed.
 WATCHDOG_PERIOD = 0.02
 
 
@@ -114,28 +88,20 @@ class SafetyFilterEndpoint:
         grasp_check_config: ``grasp_check.gap_tolerance`` (default: the start-up check's).
         parse: The joint state and odometry parses, shared with the nominal controller in
             process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
-        wall_clock: The clock of the handlers' ``wall`` (the node's ``time.monotonic``),
-            read when a tick is answered: the input watchdog waits from the answer, so a
-            tick that took longer than ``input.hold_timeout`` (its first, which loads the
-            compiled kernels) is not followed by the fallback. None: a tick is dated by its
-            ``wall``, when its last input came.
+        wall_clock: The clock of the handlers' ``wall`` (``time.monotonic``), read when a
+            tick is answered: the watchdog waits from the answer, so a slow tick is not
+            followed by the fallback. None: a tick is dated by its last input's ``wall``.
         stream: ``input.sync`` and the object's estimate (default: ``exact``).
         command_config: ``command.*``: u* also in ros2_control's form (default: JointState).
         topic_names: The input topics as the node resolved them (remapped), by table name,
             for the texts (default: the table's; the object's: the configured one).
 
     Attributes:
-        filter: The safety filter core.
-        hold: The input hold policy.
-        inputs: The input checks (stamps) and the pending inputs of the ticks to come.
-        answer: Builds a computed tick's command, margins and status.
-        grasp: The start-up and run-time grasp checks.
-        enabled: Whether u* is filtered (True) or u_nom passed through (False); change it
-            with :meth:`switch`.
+        filter: The safety filter core; hold: the input hold policy.
+        inputs: The input checks and the pending inputs of the ticks to come.
+        enabled: u* filtered (True) or u_nom passed through (False): :meth:`switch`.
         last_result: The last tick's :class:`FilterResult` (None when disabled or before).
-        late_nominal: With ``input.sync: latest``, u_nom dropped as stale or out of order
-            (late answers to states already answered or gone).
-        held: The hold policy's commands and statuses; input_watchdog: its wall clocks.
+        late_nominal: With ``input.sync: latest``, late u_nom dropped (states answered).
 
     """
 
@@ -213,20 +179,13 @@ class SafetyFilterEndpoint:
     def on_effort_nominal(
         self, msg: Any, now: float | None = None, wall: float | None = None
     ) -> list[Outgoing]:
-        """Handle ``/hand/effort_nominal``; tick when all inputs of its stamp are in hand.
+        """Handle ``/hand/effort_nominal``; return the messages to send (none: no tick yet).
 
         Args:
             msg: The message.
             now: The node's clock, s (simulation time under ``use_sim_time``). None: the
-                time of the last tick, so a runner without a clock still detects stale and
-                out-of-order input.
-            wall: The steady clock at receipt, s (the clock :meth:`watchdog` is called
-                with). None: the watchdog does not watch this input.
-
-        Returns:
-            Nothing while the tick's inputs are incomplete; on a tick, ``/hand/effort_command``,
-            ``/safety_filter/margins`` and ``/diagnostics``; on a rejected input,
-            ``/hand/effort_command`` (held or fallback) and ``/diagnostics``.
+                last tick's time (a runner without a clock still detects stale input).
+            wall: The steady clock at receipt, s (:meth:`watchdog`'s). None: not watched.
 
         """
         return self._on_input(EFFORT_NOMINAL, msg, now, wall)
@@ -234,23 +193,16 @@ class SafetyFilterEndpoint:
     def watchdog(self, now_wall: float, now: float) -> list[Outgoing]:
         """Stand in for ticks that stopped coming: the fallback command and an ERROR.
 
-        Call it periodically (every :data:`WATCHDOG_PERIOD` s) from a steady clock: under
-        ``use_sim_time`` a dead simulator stops the node clock too.
+        Called every :data:`WATCHDOG_PERIOD` s on a steady clock (under ``use_sim_time`` a
+        dead simulator stops the node clock too). Before the first tick: a WARN naming the
+        inputs not received yet, every few seconds, and no command (a driver must not get
+        torques from a filter that has never seen its hand). Afterwards, once the last tick
+        is ``input.hold_timeout`` s old: the fallback and an ERROR naming the silent inputs.
 
         Args:
             now_wall: The steady clock, s (that of the handlers' ``wall``).
-            now: The node's clock, s: the stamp of the fallback command (not before the
-                last tick's stamp, so commands never go back in time; 1 ns later if a tick of
-                that stamp has some of its inputs, so the fallback never answers a tick that
-                is under way).
-
-        Returns:
-            Before the first answered tick, every :data:`~grasp_safety_filter.nodes.
-            input_watchdog.WAITING_REPORT_PERIOD` s a WARN naming the inputs not received
-            yet, and no command (a hand driver should not get torques from a filter that has
-            never seen its hand); nothing while the last tick is at most
-            ``input.hold_timeout`` s old; else the fallback and an ERROR naming the silent
-            inputs (:meth:`HeldCommands.absent`).
+            now: The node's clock, s: the fallback's stamp (never before the last tick's,
+                and 1 ns after a tick that is under way, which must still get its own u*).
 
         """
         if not self.input_watchdog.started:
