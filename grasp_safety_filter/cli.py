@@ -378,7 +378,7 @@ def _analyze(argv: list[str] | None) -> int:
         return EXIT_CONFIG_ERROR
     try:
         summary, figures = analyze_bag(
-            args.bag, out_dir, force=args.force, fingers=scenario.fingers
+            args.bag, out_dir, force=args.force, fingers=scenario.fingers, model=scenario.model
         )
     except (RunDataError, OutputError) as error:
         print(f'grasp-analyze: {error}', file=sys.stderr)

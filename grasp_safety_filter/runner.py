@@ -90,7 +90,7 @@ __all__ = [
     'check_output_dir',
     'record_run',
     'run',
-    'scenario_fingers',
+    'scenario_hand',
 ]
 
 
@@ -188,12 +188,11 @@ def build_endpoints(
     return sim, nominal, safety_filter
 
 
-def scenario_fingers(options: RunOptions) -> list[Finger]:
-    """Group the scenario hand's joints by finger (:mod:`grasp_safety_filter.model.fingers`)."""
+def scenario_hand(options: RunOptions) -> tuple[list[Finger], GraspModel]:
+    """Return the scenario hand's joints by finger and its model."""
     overrides = {k: v for k, v in options.overrides.items() if NODE_SCHEMAS[HAND_SIM_NODE].get(k)}
-    return fingers_from_parameters(
-        load_node_parameters(options.config, HAND_SIM_NODE, overrides=overrides)
-    )
+    params = load_node_parameters(options.config, HAND_SIM_NODE, overrides=overrides)
+    return fingers_from_parameters(params), GraspModel.from_parameters(params)
 
 
 def record_run(
@@ -281,11 +280,16 @@ def _write_summary(out_dir: Path, summary: dict[str, Any]) -> None:
 
 
 def analyze_bag(
-    bag_path: Path, out_dir: Path, force: bool = False, fingers: Sequence[Finger] | None = None
+    bag_path: Path,
+    out_dir: Path,
+    force: bool = False,
+    fingers: Sequence[Finger] | None = None,
+    model: GraspModel | None = None,
 ) -> tuple[dict[str, Any], list[Path]]:
     """Figures and ``summary.json`` of a recorded run, into ``out_dir``.
 
-    ``fingers``: the run's hand's joints by finger, for the figures (None: not known).
+    ``fingers``, ``model``: the run's hand's joints by finger and its model, for the figures
+    (None: not known; without the model the grasp is not drawn in space).
 
     Raises:
         RunDataError: The bag cannot be analysed.
@@ -298,7 +302,7 @@ def analyze_bag(
     summary = summarize(run)
     out_dir.mkdir(parents=True, exist_ok=True)
     _write_summary(out_dir, summary)
-    return summary, plot_run(run, out_dir, fingers)
+    return summary, plot_run(run, out_dir, fingers, model)
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -330,7 +334,7 @@ def run(
     """
     out_dir = Path(out_dir)
     check_output_dir(out_dir, force)
-    fingers = scenario_fingers(options)
+    fingers, model = scenario_hand(options)
     out_dir.mkdir(parents=True, exist_ok=True)
     bag_path, summary_path = out_dir / BAG_DIRECTORY, out_dir / SUMMARY_FILE
     started, written = [False], [False]
@@ -354,7 +358,7 @@ def run(
                     summary['interrupted'] = recording.interrupted
                 _write_summary(out_dir, summary)
                 written[0] = True
-            figures = plot_run(run_data, out_dir, fingers)
+            figures = plot_run(run_data, out_dir, fingers, model)
         except RunInterrupted:
             raise  # stopped before a first step: it names its own signal
         except KeyboardInterrupt as interrupt:

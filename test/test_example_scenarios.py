@@ -30,7 +30,7 @@ from grasp_safety_filter.model.grasp_check import grasp_findings, load_initial_g
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.quaternion import rotation_matrix
 from grasp_safety_filter.model.surfaces import FlatSurface, SphereSurface
-from grasp_safety_filter.runner import RunOptions, scenario_fingers
+from grasp_safety_filter.runner import RunOptions, scenario_hand
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config'
 SCENARIOS = ('four_finger_box.yaml', 'four_finger_sphere.yaml')
@@ -160,7 +160,7 @@ def test_grasp_demo_on_the_example_gives_the_generic_verdict_and_exits_0(box_dem
 def test_the_joint_figures_have_a_row_per_finger_with_its_own_joints(box_demo, which):
     _, _, out = box_demo
     run = load_run(out / 'filtered' / 'bag')
-    fingers = scenario_fingers(RunOptions(CONFIG / 'four_finger_box.yaml'))
+    fingers, _ = scenario_hand(RunOptions(CONFIG / 'four_finger_box.yaml'))
     figure = joints_figure(run, fingers) if which == 'joints' else torques_figure(run, fingers)
     panels = [axes for axes in figure.axes if axes.get_visible()]
     rows: dict[str, list[str]] = {}

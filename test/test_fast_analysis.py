@@ -20,6 +20,7 @@ from grasp_safety_filter.analysis import figures, topic_readers
 from grasp_safety_filter.analysis.forked import ForkedCall, ForkedCallError
 from grasp_safety_filter.analysis.run_data import load_run, RunData, RunDataError
 from grasp_safety_filter.io import topics
+from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.runner import record_run, RunOptions
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
@@ -169,9 +170,10 @@ def test_a_forked_call_that_hangs_is_given_up_and_killed(monkeypatch):
 
 def test_figures_drawn_beside_are_the_figures_drawn_alone(bag, tmp_path, monkeypatch):
     run = load_run(bag)
-    beside = figures.plot_run(run, tmp_path / 'beside')
+    model, _ = GraspModel.from_parameter_file(CONFIG)
+    beside = figures.plot_run(run, tmp_path / 'beside', model=model)
     monkeypatch.setattr(figures, 'FORKED_FIGURES', ())
-    alone = figures.plot_run(run, tmp_path / 'alone')
+    alone = figures.plot_run(run, tmp_path / 'alone', model=model)
     assert [p.name for p in beside] == [p.name for p in alone] == list(figures.FIGURE_FILES)
     for a, b in zip(beside, alone, strict=True):
         assert a.read_bytes() == b.read_bytes(), a.name

@@ -40,6 +40,7 @@ class ScenarioFile:
         expected_outcome: Its ``expected_outcome`` (``"none"``: none).
         fingers: Its hand's joints by finger.
         document: The ``/grasp/scenario`` document its simulator publishes.
+        model: Its ``GraspModel`` (the grasp drawn in space).
 
     """
 
@@ -47,6 +48,7 @@ class ScenarioFile:
     expected_outcome: str
     fingers: list[Finger]
     document: dict[str, Any]
+    model: Any = None
 
 
 def load_scenario_file(path: Path, overrides: Mapping[str, Any] | None = None) -> ScenarioFile:
@@ -64,11 +66,14 @@ def load_scenario_file(path: Path, overrides: Mapping[str, Any] | None = None) -
     schema = NODE_SCHEMAS[HAND_SIM_NODE]
     own = {name: value for name, value in (overrides or {}).items() if name in schema}
     params = load_node_parameters(path, HAND_SIM_NODE, overrides=own)
-    document = scenario_document(
-        GraspModel.from_parameters(params), SimConfig.from_parameters(params)
-    )
+    model = GraspModel.from_parameters(params)
+    document = scenario_document(model, SimConfig.from_parameters(params))
     return ScenarioFile(
-        Path(path), str(params['expected_outcome']), fingers_from_parameters(params), document
+        Path(path),
+        str(params['expected_outcome']),
+        fingers_from_parameters(params),
+        document,
+        model,
     )
 
 
@@ -87,12 +92,14 @@ class BagScenario:
         fingers: Its joints by finger for the figures, or None (another hand).
         note: One line on why the file's expected outcome does not apply to a bag of its
             hand, or None.
+        model: The hand's ``GraspModel`` for the figures, or None (another hand).
 
     """
 
     expected_outcome: str
     fingers: Sequence[Finger] | None
     note: str | None = None
+    model: Any = None
 
 
 def bag_scenario(recorded: Mapping[str, Any], scenario: ScenarioFile, given: bool) -> BagScenario:
@@ -121,11 +128,11 @@ def bag_scenario(recorded: Mapping[str, Any], scenario: ScenarioFile, given: boo
         return BagScenario(NO_OUTCOME, None)
     differences = scenario_differences(recorded, scenario.document)
     if not differences:
-        return BagScenario(scenario.expected_outcome, scenario.fingers)
+        return BagScenario(scenario.expected_outcome, scenario.fingers, model=scenario.model)
     note = None
     if scenario.expected_outcome != NO_OUTCOME:
         note = (
             f'expected outcome {scenario.expected_outcome!r} of {scenario.path} not checked: '
             f'the bag records another scenario (differing in {", ".join(differences)})'
         )
-    return BagScenario(NO_OUTCOME, scenario.fingers, note)
+    return BagScenario(NO_OUTCOME, scenario.fingers, note, scenario.model)

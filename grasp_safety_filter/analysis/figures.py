@@ -15,20 +15,31 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 import io
 from pathlib import Path
+from typing import Any
 
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 import numpy as np
 
 from grasp_safety_filter.analysis.forked import ForkedCall
+from grasp_safety_filter.analysis.grasp_figures import configuration_picture, setup_picture
 from grasp_safety_filter.analysis.object_figure import object_figure
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.files import write_file
 from grasp_safety_filter.model.fingers import all_joints, Finger
+from grasp_safety_filter.view.scene import SceneBuilder
 
-#: The figures of a run, in :func:`plot_run`'s order (torques only with commands, object
-#: only with ``/object/odom``).
-FIGURE_FILES = ('contacts.png', 'joints.png', 'friction.png', 'torques.png', 'object.png')
+#: The figures of a run, in :func:`plot_run`'s order (torques only with commands; the object
+#: and the grasp in space only with ``/object/odom``, the latter two with the hand's model).
+FIGURE_FILES = (
+    'contacts.png',
+    'joints.png',
+    'friction.png',
+    'torques.png',
+    'object.png',
+    'setup.png',
+    'configuration.png',
+)
 INFEASIBLE = {'color': '0.85', 'zorder': 0}
 # Symmetric grasps give identical curves; line styles keep each one visible.
 LINE_STYLES = ('-', '--', ':', '-.')
@@ -36,7 +47,7 @@ LINE_STYLES = ('-', '--', ':', '-.')
 MAX_POINTS = 4000
 #: The figures :func:`plot_run` draws in a forked child while it draws the others
 #: (:mod:`~grasp_safety_filter.analysis.forked`): about half of the drawing time.
-FORKED_FIGURES = ('joints.png', 'object.png')
+FORKED_FIGURES = ('joints.png', 'object.png', 'setup.png')
 #: Most joint panels in a row of the joint and torque figures (a longer finger wraps).
 MAX_COLUMNS = 4
 
@@ -270,7 +281,12 @@ def torques_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Fig
     return figure
 
 
-def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = None) -> list[Path]:
+def plot_run(
+    run: RunData,
+    out_dir: Path,
+    fingers: Sequence[Finger] | None = None,
+    model: Any | None = None,
+) -> list[Path]:
     """Draw every figure of a run into ``out_dir``; return their paths.
 
     Args:
@@ -279,10 +295,13 @@ def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = Non
         fingers: The hand's joints by finger (:mod:`grasp_safety_filter.model.fingers`), one
             row of joint panels each; None: one group of every joint, in rows of
             :data:`MAX_COLUMNS` (a bag analysed without its hand model).
+        model: The run's :class:`~grasp_safety_filter.model.grasp_model.GraspModel`, for the
+            grasp in space (:mod:`~grasp_safety_filter.analysis.grasp_figures`); None: not
+            drawn.
 
     """
     out_dir.mkdir(parents=True, exist_ok=True)
-    drawings: dict[str, Callable[[], Path]] = {
+    drawings: dict[str, Callable[[], Path | None]] = {
         'contacts.png': lambda: plot_contacts(run, out_dir / 'contacts.png'),
         'joints.png': lambda: plot_joints(run, out_dir / 'joints.png', fingers),
         'friction.png': lambda: plot_friction(run, out_dir / 'friction.png'),
@@ -291,9 +310,17 @@ def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = Non
         drawings['torques.png'] = lambda: plot_torques(run, out_dir / 'torques.png', fingers)
     if run.tracking is not None:
         drawings['object.png'] = lambda: _save(object_figure(run), out_dir / 'object.png')
+        if model is not None:
+            builder = SceneBuilder(model)
+            drawings['setup.png'] = lambda: _save(
+                setup_picture(run, builder), out_dir / 'setup.png', tight=False
+            )
+            drawings['configuration.png'] = lambda: _save(
+                configuration_picture(run, builder), out_dir / 'configuration.png', tight=False
+            )
     # Two halves of about the same drawing time, one in a forked child (FORKED_FIGURES).
     forked = [name for name in drawings if name in FORKED_FIGURES]
-    paths: dict[str, Path] = {}
+    paths: dict[str, Path | None] = {}
     failed = False
     with ForkedCall(lambda: [drawings[name]() for name in forked]) as child:
         try:
@@ -303,13 +330,18 @@ def plot_run(run: RunData, out_dir: Path, fingers: Sequence[Finger] | None = Non
             failed = True
     if failed:  # the child stopped: all again, in order (the same files or error)
         paths = {name: draw() for name, draw in drawings.items()}
-    return [paths[name] for name in drawings]
+    return [path for name in drawings if (path := paths[name]) is not None]
 
 
-def _save(figure: Figure, path: Path) -> Path:
+def _save(figure: Figure | None, path: Path, tight: bool = True) -> Path | None:
     # Figure without pyplot: no GUI backend, no global state, works headless. Written
     # through a temporary file: a symbolic link at ``path`` is replaced, not followed.
-    figure.tight_layout()
+    # None: a figure that cannot be drawn of this run; a previous run's file goes.
+    if figure is None:
+        path.unlink(missing_ok=True)
+        return None
+    if tight:
+        figure.tight_layout()
     png = io.BytesIO()
     figure.savefig(png, dpi=120, format='png')
     return write_file(path, png.getvalue())

@@ -94,6 +94,7 @@ from grasp_safety_filter.io.diagnostic_keys import (
 )
 from grasp_safety_filter.io.plant_schema import RIGID_PLANT
 from grasp_safety_filter.model.per_contact import compact
+from hand_sim_node.constraint_margins import ConstraintMargins, Event
 from hand_sim_node.event_log import EventLog
 from hand_sim_node.events import EventMonitor
 
@@ -141,9 +142,9 @@ def _tick_weights(run: RunData) -> np.ndarray:
     return weights
 
 
-def constraint_log(run: RunData) -> EventLog:
-    """Judge every step of the run with the simulator's event monitor."""
-    monitor = EventMonitor(
+def _monitor(run: RunData) -> EventMonitor:
+    """Return the simulator's event monitor for the run's hand and scenario."""
+    return EventMonitor(
         run.joint_lower_limits,
         run.joint_upper_limits,
         tuple(run.workspace_per_contact.T),
@@ -153,15 +154,30 @@ def constraint_log(run: RunData) -> EventLog:
         run.object_face_half_widths,
         run.torsional_friction_per_contact,
     )
-    # A soft finger's wrench: the 3n forces, then the n torsions (as the simulator's).
-    forces = run.force.reshape(len(run.t), 3 * len(run.contact_names))
-    wrench = forces if run.torsion is None else np.concatenate((forces, run.torsion), axis=1)
+
+
+def _margins_at(monitor: EventMonitor, run: RunData, k: int) -> ConstraintMargins:
+    """Return sample k's margins (a soft finger's wrench: 3n forces, then n torsions)."""
+    forces = run.force[k].reshape(-1)
+    wrench = forces if run.torsion is None else np.concatenate((forces, run.torsion[k]))
+    xi_co = None if run.xi_co is None else run.xi_co[k]
+    return monitor.margins_at(run.t[k], run.q[k], run.xi_cf[k], wrench, xi_co)
+
+
+def constraint_log(run: RunData) -> EventLog:
+    """Judge every step of the run with the simulator's event monitor."""
+    monitor = _monitor(run)
     log = EventLog()
-    for k, t in enumerate(run.t):
-        xi_co = None if run.xi_co is None else run.xi_co[k]
-        margins = monitor.margins_at(t, run.q[k], run.xi_cf[k], wrench[k], xi_co)
+    for k in range(len(run.t)):
+        margins = _margins_at(monitor, run, k)
         log.record(margins, monitor.events(margins))
     return log
+
+
+def events_at(run: RunData, k: int) -> tuple[Event, ...]:
+    """Return the constraints the simulator's event monitor finds violated at sample k."""
+    monitor = _monitor(run)
+    return monitor.events(_margins_at(monitor, run, k))
 
 
 def tick_counts(run: RunData) -> dict[str, int]:

@@ -178,6 +178,8 @@ class HandModel:
         gravity: np.ndarray,
     ) -> None:
         urdf_path = Path(urdf_path)
+        #: The hand's URDF (its geometry is drawn from it).
+        self.urdf_path = urdf_path
         check_urdf_file(urdf_path)
         try:
             self.model = pin.buildModelFromUrdf(str(urdf_path))

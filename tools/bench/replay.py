@@ -25,7 +25,7 @@ COMPONENTS: dict[str, str] = {
     'nominal_controller': 'nominal controller',
     'qp_assembly': 'QP assembly (SafetyFilter.assemble)',
     'osqp_solve': 'OSQP solve (update + solve)',
-    'filter_qp_solve': 'filter QP solve (OSQP + active set)',
+    'filter_qp_solve': 'filter QP solve (qp.solver backend)',
     'filter_step': 'filter step (SafetyFilter.solve)',
     'node_tick': 'filter node tick (model + filter step)',
 }

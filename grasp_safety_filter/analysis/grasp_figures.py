@@ -1,0 +1,79 @@
+"""The grasp in space from a run's series: ``setup.png`` (Fig. 2) and ``configuration.png``.
+
+The scenes (:mod:`~grasp_safety_filter.view.scene`) need the hand's model, which a bag does
+not record: the run's scenario file gives it (``grasp-demo``'s own; ``grasp-analyze
+--config``, or the paper's for a bag of its hand). The joint angles and contact forces are the
+run's samples; the object's pose is ``/object/odom``'s sample nearest before. ``setup.png`` is
+the first sample (the initial grasp), ``configuration.png`` the last, with the constraints the
+simulator's event monitor finds violated there marked (the paper's nominal run: the failed
+grasp of Fig. 3a).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+from matplotlib.figure import Figure
+import numpy as np
+
+from grasp_safety_filter.analysis.run_data import RunData
+from grasp_safety_filter.analysis.summary import events_at
+from grasp_safety_filter.view.pictures import configuration_figure, setup_figure
+from grasp_safety_filter.view.scene import GraspScene, SceneBuilder
+from hand_sim_node.constraint_margins import JOINT_LIMITS
+
+#: The pictures of a run, in drawing order.
+GRASP_FIGURES = ('setup.png', 'configuration.png')
+
+
+def scene_at(builder: SceneBuilder, run: RunData, k: int) -> GraspScene:
+    """Return the scene of sample ``k`` of ``run`` (``run.tracking`` must hold a pose).
+
+    Raises:
+        ValueError: No object pose at or before the sample, or the model refuses the state.
+    """
+    tracking = run.tracking
+    t = float(run.t[k])
+    j = int(np.searchsorted(tracking.t, t + 1e-9, side='right')) - 1
+    if j < 0:
+        raise ValueError(f'no object pose at or before t = {t:.3f} s')
+    return builder.scene(
+        t, run.q[k], tracking.p_object_in_palm[j], tracking.R_object_to_palm[j], run.force[k]
+    )
+
+
+def violations_at(run: RunData, k: int) -> tuple[dict[str, list[str]], list[str]]:
+    """Return the violated families per contact name, and the joints at a limit, at sample k."""
+    contacts: dict[str, list[str]] = defaultdict(list)
+    joints: list[str] = []
+    for event in events_at(run, k):
+        if event.family == JOINT_LIMITS:
+            joints.append(event.name)
+        elif event.family not in contacts[event.name]:
+            contacts[event.name].append(event.family)
+    return dict(contacts), joints
+
+
+def setup_picture(run: RunData, builder: SceneBuilder) -> Figure | None:
+    """Draw the initial grasp from two sides (the paper's Fig. 2); None if it cannot be."""
+    try:
+        scene = scene_at(builder, run, 0)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    return setup_figure(scene, f'{run.mode} run: initial grasp')
+
+
+def configuration_picture(run: RunData, builder: SceneBuilder) -> Figure | None:
+    """Draw the last sample's grasp, its violations marked (Fig. 3a); None if it cannot be.
+
+    A state the model refuses (an object flown off a sphere's centre, a singular contact
+    map) is not drawn: the time series show what happened.
+    """
+    k = len(run.t) - 1
+    try:
+        scene = scene_at(builder, run, k)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    contacts, joints = violations_at(run, k)
+    title = f'{run.mode} run: end ({run.stop_reason or "recording ended"})'
+    return configuration_figure(scene, title, contacts, joints)

@@ -1,0 +1,140 @@
+"""Pictures of a grasp scene: the paper's Fig. 2 (the initial grasp) and Fig. 3a (a failed one).
+
+:func:`setup_figure` draws a :class:`~grasp_safety_filter.view.scene.GraspScene` from two
+sides, isometric and from the top (palm z towards the viewer): the URDF's links, the kinematic
+chain, the fingertip spheres, the object, each contact's point and normal, the contact forces
+and the palm frame. :func:`configuration_figure` draws one scene isometrically with what is
+violated marked on it: a contact in red with its families' names, a joint at its limit in red.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+import numpy as np
+
+from grasp_safety_filter.view.scene import GraspScene, Shape
+
+#: The two views of the setup figure: name, elevation and azimuth, degrees.
+VIEWS = (('isometric', 30.0, -135.0), ('top', 90.0, -90.0))
+LINK_COLOUR, TIP_COLOUR, OBJECT_COLOUR = '#7f8c9a', '#e0a040', '#4a90d9'
+VIOLATED = '#d62728'
+#: Box faces as corner indices (corners numbered by the bits of their sign pattern).
+_BOX_FACES = ((0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5))
+_SIGNS = np.array([[(i >> 2) & 1, (i >> 1) & 1, i & 1] for i in range(8)]) * 2.0 - 1.0
+
+
+def _solid(axes: Axes, shape: Shape, colour: str, alpha: float) -> None:
+    """Draw a box as its faces; a sphere, cylinder or capsule as a coarse surface."""
+    R, p = shape.R_shape_to_palm, shape.p_shape_in_palm
+    if shape.kind == 'box':
+        corners = p + (_SIGNS * shape.size) @ R.T
+        faces = [[corners[i] for i in face] for face in _BOX_FACES]
+        axes.add_collection3d(
+            Poly3DCollection(faces, facecolor=colour, edgecolor='k', linewidths=0.3, alpha=alpha)
+        )
+        return
+    u, v = np.meshgrid(np.linspace(0.0, 2.0 * np.pi, 17), np.linspace(0.0, np.pi, 9))
+    radius = shape.size[0]
+    if shape.kind == 'sphere':
+        local = radius * np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)])
+    else:  # cylinder or capsule, along the shape's z
+        half = shape.size[1]
+        z = np.where(v < np.pi / 2, half, -half) + (
+            radius * np.cos(v) if shape.kind == 'capsule' else 0.0
+        )
+        ring = radius * (np.sin(v) if shape.kind == 'capsule' else np.ones_like(v))
+        local = np.stack([ring * np.cos(u), ring * np.sin(u), z])
+    world = np.einsum('ij,jab->iab', R, local) + p[:, None, None]
+    axes.plot_surface(*world, color=colour, alpha=alpha, linewidth=0.0, shade=True)
+
+
+def _equal_axes(axes: Axes, points: np.ndarray) -> float:
+    """Set equal scales around ``points`` (N, 3); return the half width of the box, m."""
+    low, high = points.min(axis=0), points.max(axis=0)
+    centre, half = 0.5 * (low + high), 0.5 * float(np.max(high - low))
+    for set_limits, c in zip((axes.set_xlim, axes.set_ylim, axes.set_zlim), centre, strict=True):
+        set_limits(c - half, c + half)
+    axes.set_box_aspect((1.0, 1.0, 1.0), zoom=0.95)
+    axes.set_xlabel('x (m)')
+    axes.set_ylabel('y (m)')
+    axes.set_zlabel('z (m)')
+    return half
+
+
+def draw_scene(
+    axes: Axes,
+    scene: GraspScene,
+    violated_contacts: Mapping[str, Sequence[str]] | None = None,
+    violated_joints: Sequence[str] = (),
+) -> None:
+    """Draw ``scene`` on 3-D ``axes``; mark the violated contacts (name -> families) and joints."""
+    violated_contacts = violated_contacts or {}
+    half = _equal_axes(axes, scene.points())
+    for link in scene.links:
+        _solid(axes, link, LINK_COLOUR, 0.35)
+    for tip in scene.fingertips:
+        _solid(axes, tip, TIP_COLOUR, 0.5)
+    if scene.object is not None:
+        _solid(axes, scene.object, OBJECT_COLOUR, 0.25)
+    for start, end in scene.chain:
+        axes.plot(*np.stack([start, end]).T, color='k', linewidth=1.0)
+    arrow = 0.3 * half
+    for axis, colour in zip(np.eye(3), ('r', 'g', 'b'), strict=True):  # the palm frame
+        axes.quiver(0.0, 0.0, 0.0, *(arrow * axis), color=colour, linewidth=1.5)
+    p_c = scene.p_contact_in_palm
+    axes.quiver(*p_c.T, *(arrow * scene.normal_in_palm).T, color='k', linewidth=0.8)
+    if scene.force_in_palm is not None:
+        largest = float(np.max(np.linalg.norm(scene.force_in_palm, axis=1)))
+        if largest > 0.0:
+            f = scene.force_in_palm * (1.5 * arrow / largest)
+            axes.quiver(*p_c.T, *f.T, color='#2ca02c', linewidth=1.5)
+    for name, p in zip(scene.contact_names, p_c, strict=True):
+        violated = name in violated_contacts
+        colour = VIOLATED if violated else 'k'
+        # Drawn last and unshaded: a contact stays visible through the solids around it.
+        axes.scatter(*p, color=colour, s=45 if violated else 15, depthshade=False, zorder=10)
+        axes.text(*p, f' {name}', color=colour, fontsize=7, zorder=11)
+    for name in violated_joints:
+        p = scene.p_joint_in_palm[name]
+        axes.scatter(*p, color=VIOLATED, marker='X', s=60, depthshade=False, zorder=10)
+        axes.text(*p, f' {name}', color=VIOLATED, fontsize=7, zorder=11)
+
+
+def setup_figure(scene: GraspScene, title: str) -> Figure:
+    """Draw the grasp from two sides (module docstring): the paper's Fig. 2."""
+    figure = Figure(figsize=(11.0, 5.5))
+    for column, (name, elevation, azimuth) in enumerate(VIEWS, start=1):
+        axes = figure.add_subplot(1, 2, column, projection='3d')
+        draw_scene(axes, scene)
+        axes.view_init(elev=elevation, azim=azimuth)
+        if name == 'top':  # z points at the viewer: its axis would only clutter
+            axes.set_zticks([])
+            axes.set_zlabel('')
+        axes.set_title(f'{name} view')
+    figure.suptitle(f'{title} (t = {scene.t:.3f} s; normals black, forces green)')
+    figure.tight_layout()
+    return figure
+
+
+def configuration_figure(
+    scene: GraspScene,
+    title: str,
+    violated_contacts: Mapping[str, Sequence[str]],
+    violated_joints: Sequence[str],
+) -> Figure:
+    """Draw the grasp with its violated constraints marked: the paper's Fig. 3a."""
+    figure = Figure(figsize=(10.0, 6.5))
+    axes = figure.add_axes((0.02, 0.02, 0.62, 0.9), projection='3d')
+    draw_scene(axes, scene, violated_contacts, violated_joints)
+    axes.view_init(elev=VIEWS[0][1], azim=VIEWS[0][2])
+    lines = [f'{name}: {", ".join(families)}' for name, families in violated_contacts.items()]
+    if violated_joints:
+        lines.append('at a joint limit: ' + ', '.join(violated_joints))
+    text = 'violated (red):\n' + '\n'.join(lines) if lines else 'no constraint violated'
+    figure.text(0.66, 0.5, text, fontsize=9, va='center', wrap=True)
+    figure.suptitle(f'{title}, t = {scene.t:.3f} s', fontsize=11)
+    return figure
