@@ -200,6 +200,12 @@ def _demo(argv: list[str] | None) -> int:
         'filtered one (same outputs, on two cores), 1 one after the other '
         '(default: %(default)s)',
     )
+    parser.add_argument(
+        '--no-animation',
+        dest='animate',
+        action='store_false',
+        help="skip each run's animation.gif",
+    )
     args = parser.parse_args(argv)
     if args.plant is not None:
         args.overrides.append(('plant', args.plant))
@@ -226,6 +232,7 @@ def _demo(argv: list[str] | None) -> int:
                 args.integrator,
                 args.storage,
                 dict(args.overrides),
+                args.animate,
             )
         except ConfigError as error:
             print(config_error_line('grasp-demo', error), file=sys.stderr)
@@ -352,6 +359,11 @@ def _analyze(argv: list[str] | None) -> int:
         help='only make an incomplete bag readable (metadata.yaml, a repaired storage '
         'file); no analysis',
     )
+    parser.add_argument(
+        '--animate',
+        action='store_true',
+        help='also animation.gif: the grasp in space over the run, in real time',
+    )
     args = parser.parse_args(argv)
     try:
         if args.recover or needs_recovery(args.bag):
@@ -378,7 +390,12 @@ def _analyze(argv: list[str] | None) -> int:
         return EXIT_CONFIG_ERROR
     try:
         summary, figures = analyze_bag(
-            args.bag, out_dir, force=args.force, fingers=scenario.fingers, model=scenario.model
+            args.bag,
+            out_dir,
+            force=args.force,
+            fingers=scenario.fingers,
+            model=scenario.model,
+            animate=args.animate,
         )
     except (RunDataError, OutputError) as error:
         print(f'grasp-analyze: {error}', file=sys.stderr)

@@ -28,6 +28,7 @@ class RunOptions:
         storage: Bag storage, ``"mcap"`` (default, as ``ros2 bag record``) or ``"sqlite3"``.
         overrides: ``{dotted name: value}`` replacing the scenario file's parameters, for
             every node that declares the name (e.g. ``{"barrier.alpha1.gain": 10.0}``).
+        animate: Also draw the run's ``animation.gif``.
     """
 
     config: Path
@@ -37,6 +38,7 @@ class RunOptions:
     integrator: str | None = None
     storage: str = 'mcap'
     overrides: Mapping[str, Any] = field(default_factory=dict)
+    animate: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:

@@ -285,11 +285,13 @@ def analyze_bag(
     force: bool = False,
     fingers: Sequence[Finger] | None = None,
     model: GraspModel | None = None,
+    animate: bool = False,
 ) -> tuple[dict[str, Any], list[Path]]:
     """Figures and ``summary.json`` of a recorded run, into ``out_dir``.
 
     ``fingers``, ``model``: the run's hand's joints by finger and its model, for the figures
-    (None: not known; without the model the grasp is not drawn in space).
+    (None: not known; without the model the grasp is not drawn in space); ``animate``: also
+    ``animation.gif``.
 
     Raises:
         RunDataError: The bag cannot be analysed.
@@ -302,7 +304,7 @@ def analyze_bag(
     summary = summarize(run)
     out_dir.mkdir(parents=True, exist_ok=True)
     _write_summary(out_dir, summary)
-    return summary, plot_run(run, out_dir, fingers, model)
+    return summary, plot_run(run, out_dir, fingers, model, animate)
 
 
 class RunInterrupted(KeyboardInterrupt):
@@ -358,7 +360,7 @@ def run(
                     summary['interrupted'] = recording.interrupted
                 _write_summary(out_dir, summary)
                 written[0] = True
-            figures = plot_run(run_data, out_dir, fingers, model)
+            figures = plot_run(run_data, out_dir, fingers, model, options.animate)
         except RunInterrupted:
             raise  # stopped before a first step: it names its own signal
         except KeyboardInterrupt as interrupt:

@@ -14,9 +14,10 @@ from pathlib import Path
 import xml.etree.ElementTree as ElementTree
 
 import numpy as np
+from PIL import Image
 import pytest
 
-from grasp_safety_filter.analysis.grasp_figures import scene_at, violations_at
+from grasp_safety_filter.analysis.grasp_figures import FPS, scene_at, violations_at
 from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.cli import analyze_main
 from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
@@ -114,12 +115,20 @@ def test_the_paper_nominal_run_ends_in_the_failed_grasp_of_fig_3a(nominal_bag, t
     first = scene_at(SceneBuilder(model), run, 0)
     assert np.allclose(first.chain, initial_scene('paper_scenario.yaml')[2].chain, atol=1e-9)
     with contextlib.redirect_stdout(io.StringIO()) as printed:
-        code = analyze_main([str(nominal_bag), '--out', str(tmp_path)])
+        code = analyze_main([str(nominal_bag), '--out', str(tmp_path), '--animate'])
     assert code == 0, printed.getvalue()
+    for name in ('setup.png', 'configuration.png', 'animation.gif'):
+        assert f'figure: {tmp_path / name}' in printed.getvalue()
     for name in ('setup.png', 'configuration.png'):
         png = (tmp_path / name).read_bytes()
         assert png.startswith(b'\x89PNG') and len(png) > 20_000, name
-        assert f'figure: {tmp_path / name}' in printed.getvalue()
+    # The animation plays the run in real time: a frame per 1 / FPS s of it.
+    with Image.open(tmp_path / 'animation.gif') as gif:
+        assert gif.format == 'GIF'
+        assert gif.n_frames == int((run.t[-1] - run.t[0]) * FPS + 1e-6) + 1
+        assert gif.info['duration'] == round(1000 / FPS)
+        gif.seek(gif.n_frames - 1)
+        assert len(set(gif.convert('RGB').getdata())) > 8  # drawn, not blank
 
 
 def test_a_bag_of_another_hand_gets_no_grasp_pictures(nominal_bag, tmp_path):

@@ -122,3 +122,35 @@ def test_the_compiled_sphere_on_plane_kinematics_match_the_numpy_oracle():
                     atol=1e-12,
                     err_msg=field.name,
                 )
+
+
+def _layouts(config: Configuration) -> dict[str, Configuration]:
+    """Return the same configuration as each kind of caller passes it."""
+    def read_only(array: np.ndarray) -> np.ndarray:
+        array = np.array(array)
+        array.flags.writeable = False
+        return array
+
+    def strided(array: np.ndarray) -> np.ndarray:  # a row of a recorded run's columns
+        wide = np.zeros((*array.shape, 2))
+        wide[..., 0] = array
+        return wide[..., 0]
+
+    fields = dataclasses.fields(config)
+    return {
+        name: Configuration(*(make(getattr(config, f.name)) for f in fields))
+        for name, make in (('writable', np.array), ('read-only', read_only), ('strided', strided))
+    }
+
+
+def test_every_kind_of_caller_shares_one_compiled_pass():
+    """A simulator (read-only state), a node (parsed messages), a bag's rows: one kernel."""
+    model = paper_model()
+    configs = _layouts(random_configuration(model, np.random.default_rng(7)))
+    first = configs.pop('writable').state(model)
+    kernel = model._compiled_contacts.terms_kernel
+    compiled = set(kernel.signatures)
+    for name, config in configs.items():
+        state = config.state(model)
+        assert set(kernel.signatures) == compiled, name  # no other specialisation
+        assert np.array_equal(state.contact_force_augmented, first.contact_force_augmented)

@@ -22,7 +22,11 @@ from matplotlib.figure import Figure
 import numpy as np
 
 from grasp_safety_filter.analysis.forked import ForkedCall
-from grasp_safety_filter.analysis.grasp_figures import configuration_picture, setup_picture
+from grasp_safety_filter.analysis.grasp_figures import (
+    animation,
+    configuration_picture,
+    setup_picture,
+)
 from grasp_safety_filter.analysis.object_figure import object_figure
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.files import write_file
@@ -48,6 +52,8 @@ MAX_POINTS = 4000
 #: The figures :func:`plot_run` draws in a forked child while it draws the others
 #: (:mod:`~grasp_safety_filter.analysis.forked`): about half of the drawing time.
 FORKED_FIGURES = ('joints.png', 'object.png', 'setup.png')
+#: The run's animation (:func:`plot_run` with ``animate``).
+ANIMATION = 'animation.gif'
 #: Most joint panels in a row of the joint and torque figures (a longer finger wraps).
 MAX_COLUMNS = 4
 
@@ -286,6 +292,7 @@ def plot_run(
     out_dir: Path,
     fingers: Sequence[Finger] | None = None,
     model: Any | None = None,
+    animate: bool = False,
 ) -> list[Path]:
     """Draw every figure of a run into ``out_dir``; return their paths.
 
@@ -298,6 +305,7 @@ def plot_run(
         model: The run's :class:`~grasp_safety_filter.model.grasp_model.GraspModel`, for the
             grasp in space (:mod:`~grasp_safety_filter.analysis.grasp_figures`); None: not
             drawn.
+        animate: With the model, also ``animation.gif`` (after the figures, on both cores).
 
     """
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -330,6 +338,9 @@ def plot_run(
             failed = True
     if failed:  # the child stopped: all again, in order (the same files or error)
         paths = {name: draw() for name, draw in drawings.items()}
+    if animate and 'setup.png' in drawings:
+        paths[ANIMATION] = animation(run, builder, out_dir / ANIMATION)
+        drawings[ANIMATION] = lambda: None
     return [path for name in drawings if (path := paths[name]) is not None]
 
 

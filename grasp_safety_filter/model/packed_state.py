@@ -197,11 +197,9 @@ def packed_state(
             (3, 3), ``twist_object`` (6,).
     """
     t, q, dq, p_object_in_palm, R_object_to_palm, twist_object = sample
-    q = np.ascontiguousarray(q, dtype=np.float64)
-    dq = np.ascontiguousarray(dq, dtype=np.float64)
-    p_o = np.ascontiguousarray(p_object_in_palm, dtype=np.float64)
-    R_o = np.ascontiguousarray(R_object_to_palm, dtype=np.float64)
-    twist_o = np.ascontiguousarray(twist_object, dtype=np.float64)
+    q, dq, p_o, R_o, twist_o = map(
+        _kernel_input, (q, dq, p_object_in_palm, R_object_to_palm, twist_object)
+    )
     m = layout.n_joints
     if (
         q.shape != (m,)
@@ -236,6 +234,20 @@ def packed_state(
         layout.torsional_compliance,
     )
     return PackedGraspState.of(float(t), buffer, layout, w_e, contacts)
+
+
+def _kernel_input(value: Any) -> np.ndarray:
+    """Return ``value`` as a read-only C-ordered float64 array.
+
+    Numba specialises a kernel on its arrays' layout and write flag: with every caller's
+    inputs alike (the simulator's read-only state, a node's parsed messages, a bag's rows),
+    one compiled pass serves them all, instead of one compiled (seconds) per kind of caller.
+    """
+    array = np.ascontiguousarray(value, dtype=np.float64)
+    if array.flags.writeable:
+        array = array.view()
+        array.flags.writeable = False
+    return array
 
 
 def _raise_shape_error(m: int, **inputs: np.ndarray) -> None:

@@ -204,16 +204,13 @@ class ObjectStream:
 
         """
         estimate = self.estimate(joints)
-        # Writable copies, as a parsed odometry's are: the model's compiled kernels are
-        # specialised on their arrays' types, and read-only arrays would compile new ones
-        # at the first tick (seconds) instead of using those loaded at start-up.
         state = self.model.state(
             joints.t,
             joints.position,
             joints.velocity,
-            np.array(estimate.p_object_in_palm),
-            np.array(estimate.R_object_to_palm),
-            np.array(estimate.twist_object),
+            estimate.p_object_in_palm,
+            estimate.R_object_to_palm,
+            estimate.twist_object,
         )
         self.estimator.observe(state)
         self.last_estimate = estimate

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -22,6 +23,8 @@ from grasp_safety_filter.view.scene import GraspScene, Shape
 VIEWS = (('isometric', 30.0, -135.0), ('top', 90.0, -90.0))
 LINK_COLOUR, TIP_COLOUR, OBJECT_COLOUR = '#7f8c9a', '#e0a040', '#4a90d9'
 VIOLATED = '#d62728'
+#: Colour of a friction cone by the share of it used, beta / mu in [0, 1].
+FRICTION_USE = colormaps['RdYlGn_r']
 #: Box faces as corner indices (corners numbered by the bits of their sign pattern).
 _BOX_FACES = ((0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5))
 _SIGNS = np.array([[(i >> 2) & 1, (i >> 1) & 1, i & 1] for i in range(8)]) * 2.0 - 1.0
@@ -65,15 +68,47 @@ def _equal_axes(axes: Axes, points: np.ndarray) -> float:
     return half
 
 
+def friction_cone(
+    p_contact: np.ndarray, normal: np.ndarray, mu: float, height: float
+) -> np.ndarray:
+    """Return a friction cone's surface (3, 2, 17): apex at the contact, about the normal, m.
+
+    The cone of the forces on the object the contact can transmit, ``|f_t| <= mu f_n``,
+    ``height`` long along the normal (into the object).
+    """
+    e1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    angle = np.linspace(0.0, 2.0 * np.pi, 17)
+    rim = normal[:, None] + mu * (np.outer(e1, np.cos(angle)) + np.outer(e2, np.sin(angle)))
+    along = np.array([0.0, height])
+    return p_contact[:, None, None] + rim[:, None, :] * along[None, :, None]
+
+
 def draw_scene(
     axes: Axes,
     scene: GraspScene,
     violated_contacts: Mapping[str, Sequence[str]] | None = None,
     violated_joints: Sequence[str] = (),
+    bounds: np.ndarray | None = None,
+    friction: tuple[np.ndarray, np.ndarray] | None = None,
+    reference: Shape | None = None,
 ) -> None:
-    """Draw ``scene`` on 3-D ``axes``; mark the violated contacts (name -> families) and joints."""
+    """Draw ``scene`` on 3-D ``axes``; mark the violated contacts (name -> families) and joints.
+
+    Args:
+        axes: 3-D axes.
+        scene: The grasp.
+        violated_contacts: Contact name -> its violated families, drawn red.
+        violated_joints: Joints at a limit, drawn red.
+        bounds: Points the axes must show, (N, 3), m (default: the scene's own); an animation
+            keeps one box for all its frames.
+        friction: ``(mu, beta)`` per contact: each friction cone coloured by the share of it
+            used, beta / mu (green 0, red 1 and beyond).
+        reference: The object's reference pose, drawn as its box's edges (dashed).
+    """
     violated_contacts = violated_contacts or {}
-    half = _equal_axes(axes, scene.points())
+    half = _equal_axes(axes, scene.points() if bounds is None else bounds)
     for link in scene.links:
         _solid(axes, link, LINK_COLOUR, 0.35)
     for tip in scene.fingertips:
@@ -87,6 +122,17 @@ def draw_scene(
         axes.quiver(0.0, 0.0, 0.0, *(arrow * axis), color=colour, linewidth=1.5)
     p_c = scene.p_contact_in_palm
     axes.quiver(*p_c.T, *(arrow * scene.normal_in_palm).T, color='k', linewidth=0.8)
+    if friction is not None:
+        for p, n, mu, beta in zip(p_c, scene.normal_in_palm, *friction, strict=True):
+            used = min(beta / mu, 1.0) if np.isfinite(beta) else 1.0
+            cone = friction_cone(p, n, mu, 0.6 * arrow)
+            axes.plot_surface(*cone, color=FRICTION_USE(used), alpha=0.45, linewidth=0.0)
+    if reference is not None:  # its edges (a sphere's: those of the cube around it)
+        R, p = reference.R_shape_to_palm, reference.p_shape_in_palm
+        corners = p + (_SIGNS * reference.size) @ R.T
+        for face in _BOX_FACES:
+            ring = corners[[*face, face[0]]]
+            axes.plot(*ring.T, color=OBJECT_COLOUR, linestyle='--', linewidth=0.8)
     if scene.force_in_palm is not None:
         largest = float(np.max(np.linalg.norm(scene.force_in_palm, axis=1)))
         if largest > 0.0:

@@ -140,9 +140,8 @@ class SceneBuilder:
         q = np.asarray(q, dtype=float)
         m = model.n_joints
         state = model.state(
-            t, q, np.zeros(m), np.asarray(p_object_in_palm, dtype=float),
-            np.asarray(R_object_to_palm, dtype=float), np.zeros(6),
-        )  # fmt: skip
+            t, q, np.zeros(m), p_object_in_palm, R_object_to_palm, np.zeros(6)
+        )
         data = self._pin_data
         q_pin = np.empty(self._pin_model.nq)
         q_pin[hand.pinocchio_index] = q
