@@ -316,8 +316,8 @@ def analyze_main(argv: list[str] | None = None) -> int:
 def _analyze(argv: list[str] | None) -> int:
     from grasp_safety_filter.analysis.run_data import RunDataError
     from grasp_safety_filter.io.bag import BagReadError
-    from grasp_safety_filter.io.bag_recovery import needs_recovery, recover_bag
-    from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS
+    from grasp_safety_filter.io.bag_recovery import recover_bag
+    from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS, needs_recovery
     from grasp_safety_filter.io.files import OutputError
     from grasp_safety_filter.output_dir import ANALYSIS_DIRECTORY, SUMMARY_FILE
     from grasp_safety_filter.runner import analyze_bag
