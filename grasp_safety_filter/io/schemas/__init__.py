@@ -40,8 +40,6 @@ from grasp_safety_filter.io.schemas.common import (  # noqa: F401
     PAPER_FINGER_JOINT_POSITIONS,
     PAPER_JOINT_NAMES,
     PAPER_OUTCOME,
-    REQUIRED_MODEL_PARAMETERS,
-    required_model_parameters,
     STRING,
     STRING_ARRAY,
 )
@@ -76,6 +74,7 @@ from grasp_safety_filter.io.schemas.inputs import (  # noqa: F401
 )
 from grasp_safety_filter.io.schemas.model import (  # noqa: F401
     MODEL_PARAMETERS,
+    REQUIRED_MODEL_PARAMETERS,
 )
 from grasp_safety_filter.io.schemas.nodes import (  # noqa: F401
     check_hand_sim_parameters,
