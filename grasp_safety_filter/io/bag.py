@@ -34,7 +34,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.typesys import get_typestore, Stores
 
 from grasp_safety_filter.io.bag_storage import DurableWriter, FLUSH_PERIOD_NS, needs_recovery
-from grasp_safety_filter.io.interrupts import critical_section
+from grasp_safety_filter.io.interrupts import deferred_interrupts
 from grasp_safety_filter.io.topics import TOPICS, TopicSpec
 
 Storage = Literal['mcap', 'sqlite3']
@@ -113,7 +113,7 @@ class BagRecorder:
             storage_plugin=_STORAGE_PLUGINS[self.storage],
             flush_period_ns=self.flush_period_ns,
         )
-        with critical_section():
+        with deferred_interrupts():
             writer.open()
             try:
                 for spec in self.topics.values():
@@ -171,7 +171,7 @@ class BagRecorder:
         return self._writer, spec
 
     def _append(self, writer: DurableWriter, topic: str, stamp_ns: int, data: bytes) -> None:
-        with critical_section():
+        with deferred_interrupts():
             writer.write(self._connections[topic], stamp_ns, data)
             self.counts[topic] += 1
 
@@ -192,7 +192,7 @@ class BagRecorder:
         writer, self._writer = self._writer, None
         if writer is None:
             return
-        with critical_section(raise_pending=raise_pending_interrupt):
+        with deferred_interrupts(raise_pending=raise_pending_interrupt):
             try:
                 writer.close()
             except BaseException:
