@@ -66,20 +66,9 @@ from grasp_safety_filter.io.messages.errors import (  # noqa: F401
     StaleInputError,
 )
 from grasp_safety_filter.io.messages.fields import (  # noqa: F401
-    clock_from_msg,
-    clock_to_msg,
-    header_stamp_ns,
     match_names,
     matrix_from_quaternion_xyzw,
-    NANOSECONDS_PER_SECOND,
-    nanoseconds_to_seconds,
     quaternion_xyzw_from_matrix,
-    seconds_to_nanoseconds,
-    Stamp,
-    stamp_nanoseconds,
-    time_from_msg,
-    time_msg_to_nanoseconds,
-    time_to_msg,
 )
 from grasp_safety_filter.io.messages.joint_states import (  # noqa: F401
     effort_from_msg,
@@ -116,5 +105,16 @@ from grasp_safety_filter.io.messages.reference import (  # noqa: F401
     ReferenceTrajectory,
 )
 from grasp_safety_filter.io.messages.stamps import (  # noqa: F401
+    clock_from_msg,
+    clock_to_msg,
+    header_stamp_ns,
+    NANOSECONDS_PER_SECOND,
+    nanoseconds_to_seconds,
+    seconds_to_nanoseconds,
+    Stamp,
+    stamp_nanoseconds,
     StampGuard,
+    time_from_msg,
+    time_msg_to_nanoseconds,
+    time_to_msg,
 )

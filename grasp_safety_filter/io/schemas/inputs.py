@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from grasp_safety_filter.io.messages import joint_order, MessageError
 from grasp_safety_filter.io.parameters import ParameterSpec, raise_parameter_errors
 from grasp_safety_filter.io.schemas.common import DOUBLE, STRING, STRING_ARRAY
 
@@ -125,19 +126,12 @@ def joint_order_errors(
 
     The sentinel :data:`MODEL_JOINT_ORDER` is always right.
     """
-    joints = list(joints)
-    if joints == [MODEL_JOINT_ORDER]:
-        return []
-    model = list(model_joints)
-    unknown = [name for name in joints if name not in model]
-    missing = [name for name in model if name not in joints]
-    twice = sorted({name for name in joints if joints.count(name) > 1})
-    if not (unknown or missing or twice):
-        return []
-    return [
-        f"parameter '{parameter}': expected every joint of 'model.joint_names' once; not model "
-        f'joints: {unknown}, missing: {missing}, twice: {twice}'
-    ]
+    try:
+        order = model_joint_order(joints, model_joints)
+        joint_order(f"parameter '{parameter}'", order, model_joints)
+    except MessageError as error:
+        return [str(error)]
+    return []
 
 
 def check_command_parameters(values: Mapping[str, Any], source: str = 'parameters') -> None:
