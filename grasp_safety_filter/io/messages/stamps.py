@@ -125,8 +125,6 @@ def duration_to_msg(msgs: MessageNamespace, t: float) -> Any:
     return msgs.Duration(sec=sec, nanosec=nanosec)
 
 
-
-
 def clock_to_msg(msgs: MessageNamespace, t: Stamp) -> Any:
     """Build a ``rosgraph_msgs/Clock`` at ``t`` (a :data:`Stamp`)."""
     return msgs.Clock(clock=time_to_msg(msgs, t))
@@ -135,7 +133,6 @@ def clock_to_msg(msgs: MessageNamespace, t: Stamp) -> Any:
 def clock_from_msg(msg: Any) -> float:
     """Return the time of a Clock message, s."""
     return time_from_msg(msg.clock, 'clock')
-
 
 
 class StampGuard:
