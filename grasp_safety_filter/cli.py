@@ -92,10 +92,7 @@ def _progress_printer(label: str) -> Callable[[float, float], None] | None:
 
 
 def parse_override(text: str) -> tuple[str, Any]:
-    """Parse ``NAME=VALUE``, the value typed as in a parameter file (``1e-5`` a double).
-
-    The argparse type of ``--set`` (``grasp-demo``) and of the MuJoCo tools' overrides.
-    """
+    """Parse ``--set NAME=VALUE`` (also the MuJoCo tools'), the value typed as in a file."""
     name, separator, value = text.partition('=')
     if not separator or not name:
         raise argparse.ArgumentTypeError(f'expected NAME=VALUE, got {text!r}')
@@ -107,18 +104,12 @@ def parse_override(text: str) -> tuple[str, Any]:
 
 def _interrupt_message(interrupt: Any) -> str:
     """Say what an interrupted run left (a ``demo_runs.Interruption``)."""
+    by = f'interrupted by {interrupt.signal}'
     if interrupt.bag is None:
-        return (
-            f'interrupted by {interrupt.signal} before recording: this run left no bag, no summary'
-        )
+        return f'{by} before recording: this run left no bag, no summary'
     if interrupt.summary is None:
-        return (
-            f'interrupted by {interrupt.signal}: the bag is in {interrupt.bag}; it holds too '
-            'little of the run for a summary'
-        )
-    return (
-        f'interrupted by {interrupt.signal}: the bag and summary are in {interrupt.summary.parent}'
-    )
+        return f'{by}: the bag is in {interrupt.bag}; it holds too little of the run for a summary'
+    return f'{by}: the bag and summary are in {interrupt.summary.parent}'
 
 
 def demo_main(argv: list[str] | None = None) -> int:
@@ -187,10 +178,9 @@ def _demo(argv: list[str] | None) -> int:
         'barrier.alpha1.gain=10.0 (YAML value, repeatable)',
     )
     parser.add_argument(
-        '--force',
-        action='store_true',
+        '--force', action='store_true',
         help='write into OUT even if it holds files that are not a previous output',
-    )
+    )  # fmt: skip
     parser.add_argument(
         '--jobs',
         type=int,
@@ -225,15 +215,10 @@ def _demo(argv: list[str] | None) -> int:
     for mode in modes:
         try:
             options = RunOptions(
-                args.config,
-                mode,
-                args.duration,
-                args.dt,
-                args.integrator,
-                args.storage,
+                args.config, mode, args.duration, args.dt, args.integrator, args.storage,
                 dict(args.overrides),
-                args.animate,
-            )
+                dict(args.overrides), args.animate,
+            )  # fmt: skip
         except ConfigError as error:
             print(config_error_line('grasp-demo', error), file=sys.stderr)
             return EXIT_CONFIG_ERROR
@@ -323,8 +308,8 @@ def analyze_main(argv: list[str] | None = None) -> int:
 def _analyze(argv: list[str] | None) -> int:
     from grasp_safety_filter.analysis.run_data import RunDataError
     from grasp_safety_filter.io.bag import BagReadError
-    from grasp_safety_filter.io.bag_recovery import needs_recovery, recover_bag
-    from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS
+    from grasp_safety_filter.io.bag_recovery import recover_bag
+    from grasp_safety_filter.io.bag_storage import FLUSH_PERIOD_NS, needs_recovery
     from grasp_safety_filter.io.files import OutputError
     from grasp_safety_filter.output_dir import ANALYSIS_DIRECTORY, SUMMARY_FILE
     from grasp_safety_filter.runner import analyze_bag
@@ -343,10 +328,9 @@ def _analyze(argv: list[str] | None) -> int:
         'a summary.json is already there, e.g. that of the grasp-demo run)',
     )
     parser.add_argument(
-        '--force',
-        action='store_true',
+        '--force', action='store_true',
         help='write into OUT even if it holds files that are not a previous output',
-    )
+    )  # fmt: skip
     parser.add_argument(
         '--config',
         type=Path,

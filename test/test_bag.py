@@ -22,6 +22,7 @@ from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import bag_topics, BagRecorder, iter_bag, read_bag
 from grasp_safety_filter.io.interrupts import interrupt_on_signals, signal_name, SignalInterrupt
 from grasp_safety_filter.io.messages import ContactData, DiagnosticReport, ObjectReference
+from grasp_safety_filter.io.readme_tables import topic_table_markdown
 
 REPO = Path(__file__).resolve().parent.parent
 JOINTS = [f'finger{i}_joint{j}' for i in (1, 2, 3) for j in (1, 2, 3)]
@@ -373,7 +374,7 @@ def test_qos_rejects_unknown_policies(args, match):
 
 
 def test_topic_table_markdown_lists_every_topic():
-    table = topics.topic_table_markdown()
+    table = topic_table_markdown()
     rows = table.strip().splitlines()
     assert len(rows) == 2 + len(topics.TOPICS)
     for spec, row in zip(topics.TOPICS, rows[2:], strict=True):

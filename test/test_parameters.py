@@ -27,6 +27,7 @@ from grasp_safety_filter.io.parameters import (
     validate_parameters,
 )
 from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.io.readme_tables import parameter_table_markdown
 from grasp_safety_filter.io.schemas import (
     check_hand_sim_parameters,
     check_model_parameters,
@@ -34,7 +35,6 @@ from grasp_safety_filter.io.schemas import (
     load_node_parameters,
     NODE_SCHEMAS,
     NOMINAL_CONTROLLER_NODE,
-    parameter_table_markdown,
     REQUIRED_MODEL_PARAMETERS,
     SAFETY_FILTER_NODE,
 )

@@ -1,25 +1,22 @@
 """Recovering a bag whose writer died: no ``metadata.yaml``, an unfinished storage file.
 
-A writer killed by SIGKILL, the OOM killer or a power loss leaves its bag without
-``metadata.yaml``, and the storage file unfinished: an mcap file without its summary and
-footer (and maybe a partly written last chunk), a sqlite3 file with a hot journal of its
-uncommitted last transaction. rosbags (and ``ros2 bag``) read neither.
-
-:func:`recover_bag` reads every message that reached the disk intact (the mcap file's
-records up to the first one cut off or damaged, each chunk checked record by record; the
-sqlite3 file's committed transactions, after sqlite has rolled back the last one) and writes
-them with rosbags' ``Writer`` to a new storage file and ``metadata.yaml``, which then
-replace the old file. Until then the original is untouched: an interrupted recovery leaves a
-``.recovery`` directory in the bag that the next one removes, and a repeated recovery
-finds the same messages. A bag whose storage file another process still holds open for
-writing (an ``flock`` taken by :class:`~grasp_safety_filter.io.bag_storage.DurableWriter`)
-is refused, not recovered under its writer.
+Such a bag (SIGKILL, the OOM killer, a power loss) has an mcap file without its summary and
+footer (and maybe a partly written last chunk), or a sqlite3 file with a hot journal of its
+uncommitted last transaction; rosbags and ``ros2 bag`` read neither. :func:`recover_bag`
+reads every message that reached the disk intact (the mcap records up to the first one cut
+off or damaged, each chunk checked record by record; the committed sqlite3 transactions,
+after sqlite has rolled back the last one) and writes them with rosbags' ``Writer`` to a new
+storage file and ``metadata.yaml``, which then replace the old file. Until then the
+original is untouched: an interrupted recovery leaves a ``.recovery`` directory that the
+next one removes, and a repeated recovery finds the same messages. A bag whose storage file
+a live writer still holds (its ``flock``) is refused.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from io import BytesIO
 import os
 from pathlib import Path
 import shutil
@@ -28,13 +25,20 @@ import struct
 from typing import BinaryIO
 
 from rosbags.interfaces import Connection, MessageDefinition, MessageDefinitionFormat, Qos
-from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.rosbag2.storage_mcap import decompress, get_qos
+from rosbags.rosbag2 import ReaderError, StoragePlugin, Writer
+from rosbags.rosbag2.storage_mcap import (
+    decompress,
+    get_qos,
+    read_bytes,
+    read_exact,
+    read_sized,
+    read_string,
+)
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 from rosbags.typesys.store import Typestore
 
-from grasp_safety_filter.io.bag import bag_topics, BAG_VERSION, BagReadError
+from grasp_safety_filter.io.bag import bag_topics, BAG_VERSION, BagReadError, require_bag_directory
 from grasp_safety_filter.io.bag_storage import (
     BagLockedError,
     storage_files,
@@ -49,6 +53,8 @@ _MCAP_MAGIC = b'\x89MCAP0\r\n'
 _RECORD = struct.Struct('<BQ')
 _CHUNK = struct.Struct('<QQQI')
 _MESSAGE = struct.Struct('<HIQQ')
+_UINT16 = struct.Struct('<H')
+_UINT16_PAIR = struct.Struct('<HH')
 _MSGDEF_FORMATS = {'ros2msg': MessageDefinitionFormat.MSG, 'ros2idl': MessageDefinitionFormat.IDL}
 
 
@@ -76,7 +82,7 @@ class Recovery:
         return f'{self.path}: {self.details()}'
 
     def details(self) -> str:
-        """Return what :meth:`describe` says after the path (also the bag's custom data)."""
+        """Return :meth:`describe` without the path (also the bag's custom data)."""
         last = '' if self.last_stamp_ns is None else f' to stamp {self.last_stamp_ns / 1e9:.3f} s'
         dropped = f', dropped {self.dropped_bytes} bytes after them' if self.dropped_bytes else ''
         return (
@@ -108,18 +114,12 @@ class _Scan:
     dropped_bytes: int | None = None
 
 
-class _DamagedError(Exception):
-    """A record that is cut off or not what the format allows: the intact data end here."""
+#: A record that is cut off or not what the format allows: the intact data end there.
+_DAMAGE = (ReaderError, UnicodeDecodeError)
 
 
 class _UnrecoverableError(Exception):
     """Nothing to recover from: the message says why."""
-
-
-def needs_recovery(path: Path | str) -> bool:
-    """Whether ``path`` is a bag directory with a storage file and no ``metadata.yaml``."""
-    path = Path(path)
-    return path.is_dir() and not (path / 'metadata.yaml').exists() and bool(storage_files(path))
 
 
 def recover_bag(path: Path | str) -> Recovery | None:
@@ -131,9 +131,7 @@ def recover_bag(path: Path | str) -> Recovery | None:
 
     """
     path = Path(path)
-    if not path.is_dir():
-        what = 'does not exist' if not path.exists() else 'is not a directory'
-        raise BagReadError(f'{path}: {what}; expected a rosbag2 bag directory')
+    require_bag_directory(path)
     if (path / 'metadata.yaml').exists():
         try:
             bag_topics(path)
@@ -273,28 +271,6 @@ def _scan_sqlite3(storage_file: Path, scan: _Scan) -> Iterator[_Event]:
 # mcap
 
 
-class _Cursor:
-    """Little-endian fields of one record, any overrun being damage."""
-
-    def __init__(self, buf: bytes, start: int, end: int) -> None:
-        self.buf, self.pos, self.end = buf, start, end
-
-    def take(self, size: int) -> bytes:
-        if size > self.end - self.pos:
-            raise _DamagedError
-        self.pos += size
-        return self.buf[self.pos - size : self.pos]
-
-    def uint(self, size: int) -> int:
-        return int.from_bytes(self.take(size), 'little')
-
-    def string(self) -> str:
-        try:
-            return self.take(self.uint(4)).decode()
-        except UnicodeDecodeError:
-            raise _DamagedError from None
-
-
 def _records(buf: bytes, start: int, end: int) -> Iterator[tuple[int, int, int]]:
     """``(opcode, body start, body end)`` of the records in ``buf[start:end]``.
 
@@ -341,8 +317,8 @@ def _scan_mcap_data(file: BinaryIO, size: int, scan: _Scan) -> Iterator[_Event]:
                 if op == 0x06:
                     events = _chunk(body, schemas, topics)
                 else:
-                    events = list(_record(op, body, 0, length, schemas, topics))
-            except _DamagedError:
+                    events = list(_record(op, body, schemas, topics))
+            except _DAMAGE:
                 break
             yield from events
         else:  # header, indexes, attachments, metadata
@@ -359,60 +335,58 @@ def _chunk(
     topics: dict[int, _Topic],
 ) -> list[_Event]:
     """Return a chunk's records, all checked: a damaged chunk contributes nothing."""
-    cursor = _Cursor(body, 0, len(body))
-    start_time, end_time, raw_size, crc = _CHUNK.unpack(cursor.take(_CHUNK.size))
-    compression = cursor.string()
-    data = cursor.take(cursor.uint(8))
+    record = BytesIO(body)
+    start_time, end_time, raw_size, crc = _CHUNK.unpack(read_exact(record, _CHUNK.size))
+    compression = read_string(record)
+    data = read_sized(record)
     try:
         raw = decompress(data, compression, raw_size, crc)
     except Exception:  # the codecs' own error types: a damaged chunk all the same
-        raise _DamagedError from None
+        raise ReaderError from None
     events: list[_Event] = []
     pos = 0
     for op, start, stop in _records(raw, 0, len(raw)):
         if op not in (0x03, 0x04, 0x05):
-            raise _DamagedError
-        for event in _record(op, raw, start, stop, schemas, topics):
+            raise ReaderError
+        for event in _record(op, raw[start:stop], schemas, topics):
             if not isinstance(event, _Topic) and not start_time <= event[1] <= end_time:
-                raise _DamagedError
+                raise ReaderError
             events.append(event)
         pos = stop
     if pos != len(raw):
-        raise _DamagedError
+        raise ReaderError
     return events
 
 
 def _record(
     op: int,
-    buf: bytes,
-    body: int,
-    end: int,
+    body: bytes,
     schemas: dict[int, tuple[str, MessageDefinition]],
     topics: dict[int, _Topic],
 ) -> Iterator[_Event]:
     """Yield what a record adds: a schema (registered), a connection or a message."""
-    cursor = _Cursor(buf, body, end)
+    record = BytesIO(body)
     if op == 0x05:
-        key, _, stamp, _ = _MESSAGE.unpack(cursor.take(_MESSAGE.size))
+        key, _, stamp, _ = _MESSAGE.unpack(read_exact(record, _MESSAGE.size))
         if key not in topics:
-            raise _DamagedError
-        yield key, stamp, cursor.take(end - cursor.pos)
+            raise ReaderError
+        yield key, stamp, record.read()
     elif op == 0x03:
-        key = cursor.uint(2)
-        name, encoding = cursor.string(), cursor.string()
+        (key,) = _UINT16.unpack(read_exact(record, 2))
+        name, encoding = read_string(record), read_string(record)
         fmt = _MSGDEF_FORMATS.get(encoding, MessageDefinitionFormat.NONE)
-        schemas[key] = (name, MessageDefinition(fmt, cursor.string()))
+        schemas[key] = (name, MessageDefinition(fmt, read_string(record)))
     else:
-        key, schema = cursor.uint(2), cursor.uint(2)
-        topic, encoding = cursor.string(), cursor.string()
-        metadata = cursor.take(cursor.uint(4))
+        key, schema = _UINT16_PAIR.unpack(read_exact(record, 4))
+        topic, encoding = read_string(record), read_string(record)
+        metadata = read_bytes(record)
         if schema not in schemas:
-            raise _DamagedError
+            raise ReaderError
         if key not in topics:
             try:
                 qos = get_qos(metadata)
             except Exception:  # rosbags' and the YAML parser's errors alike
-                raise _DamagedError from None
+                raise ReaderError from None
             msgtype, msgdef = schemas[schema]
             topics[key] = _Topic(key, topic, msgtype, msgdef, '', encoding, qos)
             yield topics[key]

@@ -1,20 +1,17 @@
 """rosbags' storage writers with a durability policy: what a SIGKILL or a power loss costs.
 
 On its own, rosbags' mcap writer keeps its open chunk in memory until it exceeds 1 MiB
-(about 0.13 s of a paper run) and writes through a buffered file that is never synced; its
-sqlite3 writer commits once, when the bag is closed. A writer killed by SIGKILL, the OOM
-killer or a power loss therefore leaves an mcap file without its last chunk (and without
-summary and ``metadata.yaml``), or a sqlite3 file with no message at all.
+(about 0.13 s of a paper run) and never syncs its file; its sqlite3 writer commits once, at
+close. A writer killed by SIGKILL, the OOM killer or a power loss would leave an mcap file
+without its last chunk, or a sqlite3 file with no message at all (and no
+``metadata.yaml`` either way).
 
-:class:`DurableWriter` is rosbags' ``Writer`` with two storage subclasses that bound the
-loss by the bags' own timestamps (simulated time for ``grasp-demo``, arrival time for
-``grasp-record``): an mcap chunk, or a sqlite3 transaction, never spans
-:data:`FLUSH_PERIOD_NS` of stamps or more (nor grows past :data:`FLUSH_BYTES`); each
-closed chunk is flushed and synced to disk, and each sqlite3 commit is synced by sqlite
-(its default ``synchronous=FULL`` with a rollback journal). What a kill loses is the open
-chunk or transaction: less than :data:`FLUSH_PERIOD_NS` of stamps before the message being
-written. The writer also holds an exclusive ``flock`` on its storage file while open, so
-that a recovery (:mod:`grasp_safety_filter.io.bag_recovery`) can tell a bag whose writer
+:class:`DurableWriter` bounds the loss by the bag's own timestamps (simulated time for
+``grasp-demo``, arrival time for ``grasp-record``): an mcap chunk, or a sqlite3
+transaction, never spans :data:`FLUSH_PERIOD_NS` of stamps (nor grows past
+:data:`FLUSH_BYTES`), and each is synced to disk when it ends (sqlite's default
+``synchronous=FULL``). It also holds an exclusive ``flock`` on its storage file while open,
+so that a recovery (:mod:`grasp_safety_filter.io.bag_recovery`) tells a bag whose writer
 died from one still being written; the kernel drops the lock with the process.
 """
 
@@ -48,6 +45,12 @@ def storage_files(bag: Path) -> list[Path]:
     return sorted(p for p in bag.iterdir() if p.suffix in ('.mcap', '.db3') and p.is_file())
 
 
+def needs_recovery(path: Path | str) -> bool:
+    """Whether ``path`` is a bag directory with a storage file and no ``metadata.yaml``."""
+    path = Path(path)
+    return path.is_dir() and not (path / 'metadata.yaml').exists() and bool(storage_files(path))
+
+
 def sync_paths(*paths: Path) -> None:
     """``fsync`` files or directories (their data and their directory entries)."""
     for path in paths:
@@ -58,9 +61,8 @@ def sync_paths(*paths: Path) -> None:
             os.close(fd)
 
 
-@contextmanager
-def writer_lock(path: Path) -> Iterator[None]:
-    """Hold an exclusive ``flock`` on a storage file (released when the process dies).
+def _take_lock(path: Path) -> int:
+    """Take an exclusive ``flock`` on a file; return its descriptor (closing it unlocks).
 
     Raises:
         BagLockedError: A live process holds it (a writer still recording).
@@ -68,13 +70,21 @@ def writer_lock(path: Path) -> Iterator[None]:
     """
     fd = os.open(path, os.O_RDONLY)
     try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise BagLockedError(f'{path} is still open for writing by another process') from None
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise BagLockedError(f'{path} is still open for writing by another process') from None
+    return fd
+
+
+@contextmanager
+def writer_lock(path: Path) -> Iterator[None]:
+    """Hold a storage file's writer lock for a block (:func:`_take_lock`)."""
+    fd = _take_lock(path)
+    try:
         yield
     finally:
-        os.close(fd)  # also releases the lock
+        os.close(fd)
 
 
 class PacedMcapWriter(McapWriter):
@@ -137,7 +147,7 @@ class CommittingSqlite3Writer(Sqlite3Writer):
 
 
 class DurableWriter(Writer):
-    """rosbags' ``Writer`` with the storages above, its storage file locked and synced.
+    """rosbags' ``Writer`` with the storages above, its storage file locked while open.
 
     ``close`` also syncs the storage file, ``metadata.yaml`` and the bag directory, so a
     closed bag survives a power loss too.
@@ -156,16 +166,7 @@ class DurableWriter(Writer):
         storage_plugin: StoragePlugin,
         flush_period_ns: int | None = FLUSH_PERIOD_NS,
     ) -> None:
-        """Prepare the bag (see ``Writer``).
-
-        Args:
-            path: Bag directory to create.
-            version: rosbag2 metadata version.
-            storage_plugin: mcap or sqlite3.
-            flush_period_ns: Longest span of stamps lost on a kill [ns]; None: rosbags'
-                own policy (the whole bag for sqlite3, 1 MiB for mcap, nothing synced).
-
-        """
+        """Prepare the bag (see ``Writer``); ``flush_period_ns`` None: rosbags' own policy."""
         super().__init__(path, version=version, storage_plugin=storage_plugin)
         if flush_period_ns is not None and flush_period_ns <= 0:
             raise ValueError(f'flush_period_ns: expected > 0 or None, got {flush_period_ns}')
@@ -180,8 +181,7 @@ class DurableWriter(Writer):
         assert isinstance(storage, (PacedMcapWriter, CommittingSqlite3Writer))
         storage.flush_period_ns = self.flush_period_ns
         self._storage_path = storage.path
-        self._lock = os.open(storage.path, os.O_RDONLY)
-        fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # a new file: never held
+        self._lock = _take_lock(storage.path)
 
     def close(self) -> None:
         """Close the storage, write ``metadata.yaml``, sync both, release the lock."""

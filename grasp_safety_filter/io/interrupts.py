@@ -1,37 +1,26 @@
 """SIGINT and SIGTERM as one exception raised where the program can take it, or as a request.
 
-Python turns SIGINT into ``KeyboardInterrupt`` wherever the program happens to be, possibly
-halfway through appending a record to a bag; SIGTERM ends the process without any clean-up.
-Inside :func:`interrupt_on_signals`, both raise :class:`SignalInterrupt` (a
-``KeyboardInterrupt``) instead, and not inside :func:`critical_section` blocks (a bag
-record being written, a bag being closed): there the interrupt waits until the block is
+Python raises SIGINT's ``KeyboardInterrupt`` wherever the program is, possibly halfway
+through appending a record to a bag; SIGTERM ends the process without any clean-up. Inside
+:func:`interrupt_on_signals`, both raise :class:`SignalInterrupt` (a ``KeyboardInterrupt``),
+but not inside :class:`deferred_interrupts` blocks (a bag record being written, a bag being
+closed): there the interrupt waits until the block is done.
+
+An interrupt is also held off where it could not propagate or would do harm, and delivered
+again (the same signal, raised anew from another thread) until it lands in the program's own
+code: in a weak-reference callback or ``__del__`` (Python would print it as "Exception
+ignored in ..." and lose it); during an import (an extension module that runs Python code
+while it initialises, as numpy imports ``datetime``, turns it into an ``ImportError``); in
+numba's own Python code (its compiled code turns it into ``SystemError``, and one raised
+while numba loads a cached kernel can break its typing context for the rest of the process).
+A kernel compiled for the first time can take seconds: the interrupt then comes when it is
 done.
 
-An exception that a signal handler raises while Python runs a weak-reference callback or a
-``__del__`` method cannot propagate: Python prints it as "Exception ignored in ..." with a
-traceback and goes on, and the interrupt would be lost. While the handlers are installed,
-such an interrupt is not printed but delivered again (the same signal, raised anew from
-another thread), so it lands in the program's own code.
-
-Nor is it raised while the main thread is importing a module: an extension module that
-runs Python code while it initialises (numpy imports ``datetime``) turns an exception
-raised there into an ``ImportError``. The signal is delivered again a little later, until
-the import is done. The same inside numba's own Python code: its compiled code turns an
-exception raised in a callback (``_numba_unpickle``) into ``SystemError``, and one raised
-while numba loads a cached kernel can leave its typing context broken for the rest of the
-process (a registry loader's generator ends, and every later load fails with
-``RuntimeError``). A kernel compiled for the first time (no cache yet) can take seconds:
-the interrupt then comes when it is done.
-
 A long-running node takes no exception at all: :class:`TerminationRequests` records the
-signal and its loop ends at the next turn.
-
-A forked child whose parent decides when it stops (a run beside the parent's own) calls
-:func:`leave_signals_to_parent`: SIGINT and SIGTERM are ignored from then on, also inside
-:func:`interrupt_on_signals`, so that no handler raises inside code that cannot take an
-exception (numba's loading of a cached kernel turns one into ``SystemError``); the parent
-asks it to stop where it can. A child starts with none of its parent's bookkeeping: a
-pending or held signal was the parent's, and the re-delivering thread is not forked.
+signal and its loop ends at the next turn. A forked child whose parent decides when it stops
+calls :func:`leave_signals_to_parent`: it ignores SIGINT and SIGTERM from then on, also
+inside :func:`interrupt_on_signals`. A child starts with none of its parent's bookkeeping (a
+pending or held signal was the parent's; the re-delivering thread is not forked).
 
 This module imports nothing heavy: a console script can install the handlers before it
 imports numpy, Pinocchio or rosbags.
@@ -57,9 +46,7 @@ IMPORT_REDELIVERY_DELAY = 10e-3
 """Delay before an interrupt held off an import or numba's code is sent again, s."""
 
 #: Code of Python's import system: a frame of these on the stack means an import is running.
-_IMPORT_SYSTEM = frozenset(
-    {'<frozen importlib._bootstrap>', '<frozen importlib._bootstrap_external>'}
-)
+_IMPORT_SYSTEM = ('<frozen importlib._bootstrap>', '<frozen importlib._bootstrap_external>')
 
 
 class SignalInterrupt(KeyboardInterrupt):
@@ -93,17 +80,11 @@ TERMINATION_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 class _InterruptState:
     """Signal bookkeeping of the main thread (handlers run there).
 
-    Attributes:
-        installed: Nesting depth of :func:`interrupt_on_signals`.
-        critical_depth: Nesting depth of :func:`critical_section`.
-        pending: A signal deferred by a critical section.
-        left_to_parent: SIGINT and SIGTERM stay ignored (:func:`leave_signals_to_parent`).
-        held: A signal being sent again (held off an import, or lost in a finaliser); raised
-            on leaving the outermost block if it has not been by then.
-        closing: The outermost block is restoring the previous handlers: a signal is held.
-        lock: Orders the re-sending thread against ``closing``.
-        outer_hook: The ``sys.unraisablehook`` the outermost block replaced: the other
-            unraisable exceptions go there.
+    ``held`` is a signal being sent again, raised on leaving the outermost block if it has not
+    been by then; ``pending`` one deferred by a :class:`deferred_interrupts` block;
+    ``closing``: the outermost block is restoring the previous handlers (a signal is held),
+    ordered against the re-sending thread by ``lock``; ``outer_hook``: the
+    ``sys.unraisablehook`` that the outermost block replaced.
     """
 
     installed = 0
@@ -120,31 +101,24 @@ def _in_main_thread() -> bool:
     return threading.get_ident() == threading.main_thread().ident
 
 
-def importing(frame: FrameType | None) -> bool:
-    """Whether ``frame`` or one of its callers is Python's import system at work."""
+def _on_stack(frame: FrameType | None, files: tuple[str, ...]) -> bool:
+    """Whether ``frame`` or one of its callers runs code of a file starting with ``files``."""
     while frame is not None:
-        if frame.f_code.co_filename in _IMPORT_SYSTEM:
+        if frame.f_code.co_filename.startswith(files):
             return True
         frame = frame.f_back
     return False
+
+
+def importing(frame: FrameType | None) -> bool:
+    """Whether ``frame`` or one of its callers is Python's import system at work."""
+    return _on_stack(frame, _IMPORT_SYSTEM)
 
 
 def in_numba(frame: FrameType | None) -> bool:
-    """Whether ``frame`` or one of its callers is numba's own Python code at work.
-
-    Compiling or loading a kernel, or a callback from compiled code (module doc). False
-    while numba is not imported: then none of its code can be on the stack.
-    """
-    numba = sys.modules.get('numba')
-    numba_file = getattr(numba, '__file__', None)
-    if numba_file is None:
-        return False
-    package = os.path.dirname(numba_file) + os.sep
-    while frame is not None:
-        if frame.f_code.co_filename.startswith(package):
-            return True
-        frame = frame.f_back
-    return False
+    """Whether ``frame`` or one of its callers is numba's own Python code (module doc)."""
+    numba_file = getattr(sys.modules.get('numba'), '__file__', None)
+    return numba_file is not None and _on_stack(frame, (os.path.dirname(numba_file) + os.sep,))
 
 
 def _handle_signal(signum: int, frame: FrameType | None) -> None:
@@ -166,11 +140,10 @@ def _handle_signal(signum: int, frame: FrameType | None) -> None:
 class TerminationRequests:
     """A signal handler that records SIGINT and SIGTERM instead of raising.
 
-    Python's default SIGINT handler raises KeyboardInterrupt wherever the main thread is,
-    e.g. inside ``destroy_node`` or an extension module's initialisation; rclpy's own
-    handlers shut the context down from another thread, under a callback that may still be
-    taking a message. Recording the request, and letting the program look at it where it
-    can stop, leaves no such moment.
+    Python's default SIGINT handler raises wherever the main thread is (inside
+    ``destroy_node``, an extension module's initialisation); rclpy's own handlers shut the
+    context down from another thread, under a callback that may still be taking a message.
+    A recorded request is looked at where the program can stop.
     """
 
     def __init__(self) -> None:
@@ -202,11 +175,7 @@ def record_termination_requests() -> TerminationRequests:
 
 
 def leave_signals_to_parent() -> None:
-    """Ignore SIGINT and SIGTERM in this process from now on, inside blocks too.
-
-    For a forked child that its parent stops: a Ctrl-C reaches the whole process group,
-    and the parent decides what it does to the child.
-    """
+    """Ignore SIGINT and SIGTERM from now on (a forked child: its parent stops it)."""
     _InterruptState.left_to_parent = True
     for signum in TERMINATION_SIGNALS:
         signal.signal(signum, signal.SIG_IGN)
@@ -238,10 +207,9 @@ class _Redelivery:
 def _redeliver_swallowed(unraisable: Any) -> None:
     """``sys.unraisablehook``: an interrupt raised where it cannot propagate is sent again.
 
-    The new signal is raised from another thread: raised here, its handler would run inside
-    this hook, where its exception cannot propagate either. A handler that still runs here
-    (the main thread was slow to leave) is caught and sent again the same way. Any other
-    unraisable exception goes to the hook the outermost block replaced.
+    From another thread: raised here, its handler would run inside this hook, where its
+    exception cannot propagate either (one that still runs here is sent again the same way).
+    Any other unraisable exception goes to the hook the outermost block replaced.
     """
     if not isinstance(unraisable.exc_value, SignalInterrupt) or _Redelivery.queue is None:
         _InterruptState.outer_hook(unraisable)
@@ -260,13 +228,12 @@ def _redeliver_swallowed(unraisable: Any) -> None:
 def interrupt_on_signals(
     signals: Sequence[signal.Signals] = TERMINATION_SIGNALS,
 ) -> Iterator[None]:
-    """Turn ``signals`` into :class:`SignalInterrupt`, deferred out of critical sections.
+    """Turn ``signals`` into :class:`SignalInterrupt`, except inside deferred_interrupts.
 
     Installs the handlers (and the hook that re-delivers an interrupt Python could not
-    raise) on entry and restores the previous ones on exit. A signal still being sent again
-    then (it came during an import just before the block ended) is raised as the block
-    ends, not left to the restored handlers. Must be entered from the main thread (Python
-    delivers signals there only).
+    raise) on entry and restores the previous ones on exit; a signal still being sent again
+    then is raised as the block ends, not left to the restored handlers. Must be entered
+    from the main thread (Python delivers signals there only).
 
     Raises:
         RuntimeError: Entered from another thread.
@@ -320,15 +287,15 @@ if hasattr(os, 'register_at_fork'):
     os.register_at_fork(after_in_child=_forget_parent_state)
 
 
-class critical_section(AbstractContextManager[None]):  # noqa: N801 (used as a function)
-    """Defer :func:`interrupt_on_signals` interrupts until the block is done.
+class deferred_interrupts(AbstractContextManager[None]):  # noqa: N801 (used as a function)
+    """Hold :func:`interrupt_on_signals` interrupts off a block that must complete.
 
     A class rather than a generator: a bag enters one per message written, and a
     generator's context manager costs several times as much to enter and leave.
 
     Args:
-        raise_pending: Raise a deferred interrupt after the block (when it completed);
-            else drop it (the caller is already stopping).
+        raise_pending: Raise a signal that arrived during the block after it (when it
+            completed); else drop it (the caller is already stopping on an earlier one).
 
     """
 
@@ -354,14 +321,3 @@ class critical_section(AbstractContextManager[None]):  # noqa: N801 (used as a f
             signum, _InterruptState.pending = _InterruptState.pending, None
             if self._raise_pending:
                 raise SignalInterrupt(signum)
-
-
-def deferred_interrupts(raise_pending: bool = True) -> AbstractContextManager[None]:
-    """Hold :func:`interrupt_on_signals` interrupts off a block that must complete.
-
-    Args:
-        raise_pending: Raise a signal that arrived during the block after it; else drop it
-            (the caller is already stopping on an earlier one).
-
-    """
-    return critical_section(raise_pending)

@@ -60,12 +60,7 @@ REMAPPED_TOPICS: dict[str, str] = {
 
 
 def parse_bool(name: str, text: str | bool) -> bool:
-    """Return a ``true``/``false`` launch argument as a bool.
-
-    Raises:
-        ValueError: Naming the argument, for any other text.
-
-    """
+    """Return a ``true``/``false`` launch argument as a bool (ValueError naming it else)."""
     if isinstance(text, bool):
         return text
     value = str(text).strip().lower()
@@ -104,11 +99,8 @@ class NodeLaunch:
     def ros_arguments(self, overrides_file: str | Path | None = None) -> list[str]:
         """Return the node's ``--ros-args`` (``ros2 run`` takes them after the executable).
 
-        Args:
-            overrides_file: Write the overrides to this parameter file, in the node's own
-                section (as ``launch_ros`` does), and pass it after the others instead of
-                ``-p`` arguments.
-
+        ``overrides_file``: write the overrides there, in the node's own section (as
+        ``launch_ros`` does), and pass it after the other files instead of ``-p`` arguments.
         """
         arguments = ['--ros-args']
         for path in self.params_files:
@@ -124,12 +116,7 @@ class NodeLaunch:
         return arguments
 
     def command(self, bin_directory: str | Path | None = None) -> list[str]:
-        """Return the executable and its ``--ros-args`` as a process's command line.
-
-        Args:
-            bin_directory: Directory of the executable (None: found on ``PATH``).
-
-        """
+        """Return the executable (in ``bin_directory``, else on ``PATH``) and its arguments."""
         executable = self.executable if bin_directory is None else str(
             Path(bin_directory) / self.executable
         )
@@ -168,12 +155,8 @@ def paper_demo(
 ) -> list[NodeLaunch]:
     """Return the paper demo's nodes: simulator, nominal controller, safety filter.
 
-    Args:
-        config: The parameter file.
-        filter_on: False: the safety filter passes u_nom through (``enabled: false``).
-        record: A recorder runs: the simulator waits for :data:`RECORDER_NODE`.
-        duration: Simulated duration, s (None: the file's).
-
+    ``filter_on`` False: the filter passes u_nom through; ``record``: the simulator waits for
+    :data:`RECORDER_NODE`; ``duration``: simulated duration, s (None: the file's).
     """
     files = (str(config),)
     sim_time = {'use_sim_time': True}
@@ -202,16 +185,8 @@ def safety_filter_alone(
 ) -> NodeLaunch:
     """Return the safety filter node of ``safety_filter.launch.py``.
 
-    Args:
-        config: The parameter file (``/**`` model section, ``safety_filter_node`` section).
-        use_sim_time: Check input stamps against ``/clock``.
-        enabled: False passes u_nom through.
-        remaps: Launch argument (a key of :data:`REMAPPED_TOPICS`) -> the topic to use;
-            topics not given or mapped to themselves are not remapped.
-
-    Raises:
-        ValueError: An unknown remapping argument.
-
+    ``remaps``: launch argument (a key of :data:`REMAPPED_TOPICS`) -> the topic to use; an
+    unknown argument raises ValueError.
     """
     remappings = _remappings(remaps, REMAPPED_TOPICS)
     return NodeLaunch(
@@ -259,22 +234,11 @@ def real_hand(
     (no ``use_sim_time``), the object's state estimated from the tracker's samples; the
     filter publishes its margins at 100 Hz (:data:`REAL_HAND_MARGINS_PERIOD`).
 
-    Args:
-        config: The parameter file (the hand's model; the controllers' sections).
-        simulate: Also start ``hand_sim_node`` in its hardware mode (a driver and a tracker
-            on the wall clock) in place of the real hand.
-        nominal: Start the package's nominal controller (False: a controller of one's own
-            publishes u_nom).
-        enabled: False: the safety filter passes u_nom through.
-        object_message: ``odometry`` (``/object/odom``) or ``pose`` (``/object/pose``).
-        command_message: ``joint_state`` or ``float64_multi_array`` (u* also on
-            ``/effort_controller/commands`` for a ros2_control effort controller).
-        remaps: Launch argument (a key of :data:`REAL_HAND_TOPICS`) -> the topic to use,
-            in every node started; topics not given or mapped to themselves stay.
-
-    Raises:
-        ValueError: An unknown remapping argument.
-
+    ``simulate``: also start ``hand_sim_node`` in its hardware mode in place of the hand;
+    ``nominal`` False: a controller of one's own publishes u_nom; ``object_message`` and
+    ``command_message``: ``input.object_message`` and ``command.message``; ``remaps``:
+    launch argument (a key of :data:`REAL_HAND_TOPICS`) -> the topic, in every node (an
+    unknown one raises ValueError).
     """
     remappings = _remappings(remaps, REAL_HAND_TOPICS)
     files = (str(config),)
@@ -314,12 +278,7 @@ def real_hand(
 def _remappings(
     remaps: Mapping[str, str] | None, table: Mapping[str, str]
 ) -> tuple[tuple[str, str], ...]:
-    """Return ``(topic, target)`` for each launch argument of ``table`` remapped elsewhere.
-
-    Raises:
-        ValueError: An argument ``table`` does not have.
-
-    """
+    """Return ``(topic, target)`` for each launch argument of ``table`` remapped elsewhere."""
     remaps = dict(remaps or {})
     unknown = sorted(set(remaps) - set(table))
     if unknown:
@@ -335,15 +294,7 @@ def recorder_command(
     storage: str = RECORDER_STORAGE,
     topic_names: Sequence[str] | None = None,
 ) -> list[str]:
-    """Return the ``ros2 bag record`` command recording the topic table to ``bag``.
-
-    Args:
-        bag: Bag directory to create (must not exist).
-        node_name: The recorder's node name (the simulator waits for it).
-        storage: ``mcap`` or ``sqlite3``.
-        topic_names: Topics (default: every topic of the table).
-
-    """
+    """Return the ``ros2 bag record`` command recording ``topic_names`` (None: the table)."""
     names = [spec.name for spec in topics.TOPICS] if topic_names is None else list(topic_names)
     return [
         'ros2', 'bag', 'record', '-s', storage, '-o', str(bag), '--node-name', node_name,
@@ -354,13 +305,7 @@ def recorder_command(
 def recorder_problem(
     record: bool, which: Callable[[str], str | None] | None = None
 ) -> str | None:
-    """Return why recording cannot run (None: it can, or is not asked for).
-
-    Args:
-        record: Whether recording is asked for.
-        which: Finds an executable on ``PATH`` (default ``shutil.which``).
-
-    """
+    """Return why recording cannot run (None: it can, or is not asked for)."""
     which = shutil.which if which is None else which
     if record and which('ros2') is None:
         return (

@@ -9,24 +9,79 @@ files are current.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 import re
 import sys
+from typing import Any
 
+from grasp_safety_filter.io.parameters import ParameterSpec
 from grasp_safety_filter.io.schemas import (
     COMMAND_PARAMETERS,
     GRASP_CHECK_PARAMETERS,
     HAND_SIM_PARAMETERS,
     MODEL_PARAMETERS,
     NOMINAL_CONTROLLER_PARAMETERS,
-    parameter_table_markdown,
     SAFETY_FILTER_PARAMETERS,
     STREAM_PARAMETERS,
 )
-from grasp_safety_filter.io.topics import topic_table_markdown
+from grasp_safety_filter.io.topics import TOPICS, TopicSpec
 
 #: The files with generated sections, relative to the repository's root.
 FILES = ('README.md', 'docs/parameters.md')
+
+
+def _markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
+    """Return a Markdown table (a ``|`` inside a cell escaped)."""
+    lines = [header, ['---'] * len(header)]
+    lines += [[cell.replace('|', '\\|') for cell in row] for row in rows]
+    return '\n'.join('| ' + ' | '.join(cells) + ' |' for cells in lines) + '\n'
+
+
+def _markdown_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, list):
+        return '[' + ', '.join(_markdown_value(item) for item in value) + ']'
+    if isinstance(value, float):
+        return f'{value:.6g}'
+    if isinstance(value, str):
+        return f'"{value}"'
+    return str(value)
+
+
+def parameter_table_markdown(specs: Iterable[ParameterSpec]) -> str:
+    """Return a table of parameters: name (``(ro)``: read-only), type, default, range, text."""
+    return _markdown_table(
+        ('Parameter', 'Type', 'Default', 'Admissible', 'Description'),
+        (
+            (
+                f'`{spec.name}`' + (' (ro)' if spec.read_only else ''),
+                spec.type.value,
+                f'`{_markdown_value(spec.default)}`',
+                spec.constraint_text() or 'any',
+                spec.description,
+            )
+            for spec in specs
+        ),
+    )
+
+
+def topic_table_markdown(specs: Iterable[TopicSpec] = TOPICS) -> str:
+    """Return a table of topics: name, type, publishers, QoS, description."""
+    return _markdown_table(
+        ('Topic', 'Type', 'Published by', 'QoS', 'Content'),
+        (
+            (
+                f'`{spec.name}`',
+                f'`{spec.msgtype}`',
+                ', '.join(f'`{p}`' for p in spec.publishers),
+                spec.qos.text,
+                spec.description,
+            )
+            for spec in specs
+        ),
+    )
 
 
 def parameter_tables() -> str:

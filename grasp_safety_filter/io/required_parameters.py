@@ -1,20 +1,16 @@
-"""Parameters that have no meaningful default: a node refuses to start unless they are given.
+"""Parameters without a meaningful default: a node refuses to start unless they are given.
 
-The initial grasp of ``hand_sim_node`` (``initial.joint_positions``,
-``initial.object_position``) is the hand's own: the schema's defaults are the paper's hand's
-and mean nothing on another one, so a scenario file without them (no ``hand_sim_node``
-section, or a section that leaves them out) is refused, by the ROS-free loader and by the
-node, with a message naming the section.
+They are the specs marked ``required``. The ``model.*`` ones describe the hand and the
+object, and every node needs them: their schema defaults are the paper's hand's, which would
+silently describe another hand (a 6 cm fingertip on a 12 mm one). The initial grasp of
+``hand_sim_node`` (``initial.joint_positions``, ``initial.object_position``) is the hand's
+own too, so a scenario file without it is refused, by the ROS-free loader and by the node,
+with a message naming the section.
 
 Every other parameter keeps its documented default when no file section gives it: the
 nominal controller's gains and the safety filter's settings are the paper's and do not
-depend on the hand's geometry, and a filter run on a real hand with only the shared
-``/**`` section (README, "Using your own hand") is the intended use.
-
-The ``model.*`` parameters that describe the hand and the object
-(:data:`grasp_safety_filter.io.schemas.REQUIRED_MODEL_PARAMETERS`, and the object's
-dimensions for its shape) are required by every node: their schema defaults are the paper's
-hand's, which would silently describe a different hand (a 6 cm fingertip on a 12 mm one).
+depend on the hand's geometry, and a filter run on a real hand with only the shared ``/**``
+section (README, "Using your own hand") is the intended use.
 """
 
 from __future__ import annotations
@@ -23,11 +19,17 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from grasp_safety_filter.io.parameters import ParameterError
+from grasp_safety_filter.io.schemas import NODE_SCHEMAS, REQUIRED_MODEL_PARAMETERS
 
-#: Per node, the parameters that must be given (by a file section or on the command line).
-REQUIRED_PARAMETERS: dict[str, tuple[str, ...]] = {
-    'hand_sim_node': ('initial.joint_positions', 'initial.object_position'),
-}
+
+def required_model_parameters(given: Mapping[str, Any]) -> tuple[str, ...]:
+    """:data:`REQUIRED_MODEL_PARAMETERS` and the object's dimensions for its given shape."""
+    shape = given.get('model.object.shape')
+    if shape == 'box':
+        return (*REQUIRED_MODEL_PARAMETERS, 'model.object.edge_lengths')
+    if shape in ('cube', 'sphere'):
+        return (*REQUIRED_MODEL_PARAMETERS, 'model.object.size')
+    return REQUIRED_MODEL_PARAMETERS
 
 
 def check_required_parameters(
@@ -36,10 +38,7 @@ def check_required_parameters(
     source: str,
     has_own_section: bool | None = None,
 ) -> None:
-    """Raise ParameterError unless every required parameter is given.
-
-    The model's (:func:`~grasp_safety_filter.io.schemas.required_model_parameters`) first,
-    then the node's own (:data:`REQUIRED_PARAMETERS`).
+    """Raise ParameterError unless every required parameter is given: the model's first.
 
     Args:
         node_name: The node's schema name, e.g. ``"hand_sim_node"``.
@@ -48,18 +47,16 @@ def check_required_parameters(
         source: Where they come from (file and node), prefixed to the message.
         has_own_section: Whether a file has a section for this very node (None: unknown).
     """
-    from grasp_safety_filter.io.schemas import required_model_parameters
-
     values = given if isinstance(given, Mapping) else dict.fromkeys(given)
-    names = set(values)
-    missing_model = [name for name in required_model_parameters(values) if name not in names]
+    missing_model = [name for name in required_model_parameters(values) if name not in values]
     if missing_model:
         quoted = ', '.join(f"'{name}'" for name in missing_model)
         raise ParameterError(
             f'{source}: expected {quoted} (they describe the hand and the object: no default, '
             "e.g. in the '/**' section), got none"
         )
-    missing = [name for name in REQUIRED_PARAMETERS.get(node_name, ()) if name not in names]
+    schema = NODE_SCHEMAS.get(node_name, ())
+    missing = [spec.name for spec in schema if spec.required and spec.name not in values]
     if not missing:
         return
     quoted = ', '.join(f"'{name}'" for name in missing)

@@ -38,10 +38,8 @@ from grasp_safety_filter.io.parameters import (
     validate_parameters,
 )
 
-#: Opens a section of ROS arguments.
+#: Open and close a section of ROS arguments.
 ROS_ARGS_FLAG = '--ros-args'
-
-#: Closes a section of ROS arguments.
 ROS_ARGS_END = '--'
 
 REMAP_FLAGS = ('-r', '--remap')
@@ -68,14 +66,7 @@ _NODE_NAME = re.compile(r'^[A-Za-z_][A-Za-z0-9_]*$')
 
 @dataclass(frozen=True)
 class ParameterRule:
-    """One ``-p [node_name:]name:=value`` rule.
-
-    Attributes:
-        name: Dotted parameter name.
-        value: The value, typed as YAML (as rcl does).
-        node: The node name the rule addresses; None: every node.
-        text: The rule as written, for messages.
-    """
+    """One ``-p [node_name:]name:=value`` rule (node None: every node; value YAML-typed)."""
 
     name: str
     value: Any
@@ -100,10 +91,7 @@ class RemapRule:
 class RosArguments:
     """What one argument list holds for names and parameters, in command-line order.
 
-    Attributes:
-        params_files: ``--params-file`` paths, as given.
-        parameter_rules: ``-p`` rules.
-        remap_rules: ``-r`` rules (and rcl's deprecated bare ``__node:=name`` outside sections).
+    ``remap_rules`` also holds rcl's deprecated bare ``__node:=name`` outside the sections.
     """
 
     params_files: tuple[str, ...] = ()
@@ -113,13 +101,10 @@ class RosArguments:
 
 @dataclass(frozen=True)
 class GivenParameter:
-    """A parameter value the arguments give a node, and where it comes from.
+    """A parameter value the arguments give a node (as given, YAML-typed), and its source.
 
-    Attributes:
-        value: As given (YAML-typed), not yet converted by the schema.
-        source: ``"parameter file 'x.yaml'"``, ``"-p 'enabled:=false'"``...
-        directory: Against which a relative path value (``is_path``) resolves: the file's
-            directory, or the current directory for a command-line value.
+    ``source``: ``"parameter file 'x.yaml'"``, ``"-p 'enabled:=false'"``...; ``directory``:
+    where a relative path value resolves (the file's, or the current one for a ``-p``).
     """
 
     value: Any
@@ -202,11 +187,8 @@ def remapped_fully_qualified_name(
     process's; a rule with a node prefix addresses the name the node was created with; a
     relative ``__ns`` is ignored.
 
-    Args:
-        node_name: The name the node is created with.
-        namespace: Its namespace argument ('' or None: the root; relative ones are made
-            absolute, as rcl does).
-        argument_sets: The process's arguments, then the node's own (lowest precedence first).
+    ``namespace``: the node's namespace argument ('' or None: the root); ``argument_sets``:
+    the process's arguments, then the node's own.
     """
     rules = [
         rule
@@ -236,18 +218,11 @@ def given_parameters(
     Each file's sections for the node and each ``-p`` rule are validated against the
     schema as they are read, so that a message names the file or rule at fault.
 
-    Args:
-        schema: The node's schema.
-        fully_qualified_name: Its name after remapping, e.g. ``"/safety_filter_node"``.
-        argument_sets: The process's arguments, then the node's own.
-        other_schemas: The package's other nodes, to tell where an unknown name belongs.
-        node_names: Names a file's sections may address; a section name close to one of
-            them but different is refused as misspelt.
-        working_directory: Base of relative command-line paths (default: the current one).
-
-    Returns:
-        ``{dotted name: GivenParameter}`` for every name the arguments set, schema
-        parameters and ROS's own (``use_sim_time``); defaults are left to the schema.
+    ``fully_qualified_name`` is the node's after remapping; ``argument_sets`` the process's
+    arguments, then the node's own; ``other_schemas`` tell where an unknown name belongs;
+    a file section whose name is close to one of ``node_names`` is refused as misspelt.
+    Returns every name the arguments set (schema parameters and ROS's own); the defaults
+    are left to the schema.
 
     Raises:
         ParameterError: A file is unreadable, has a misspelt section, or gives the node an

@@ -165,126 +165,88 @@ class TopicSpec:
     description: str
 
 
+# fmt: off
 TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec(
-        SCENARIO,
-        'std_msgs/msg/String',
-        (HAND_SIM_NODE,),
-        LATCHED_QOS,
+        SCENARIO, 'std_msgs/msg/String', (HAND_SIM_NODE,), LATCHED_QOS,
         'JSON, once at start-up: joint names and limits, contact names, friction coefficient '
         '(and torsional friction of soft fingers), fingertip workspace, time step, duration, '
         'integrator (layout: nodes.scenario).',
     ),
     TopicSpec(
-        JOINT_STATES,
-        'sensor_msgs/msg/JointState',
-        (HAND_SIM_NODE,),
-        STREAM_QOS,
+        JOINT_STATES, 'sensor_msgs/msg/JointState', (HAND_SIM_NODE,), STREAM_QOS,
         'Hand joints by name: position (rad), velocity (rad/s), applied effort (N·m); in '
         'hardware mode at hardware.rate, stamped with the wall clock, after '
         'hardware.extra_joints arm joints.',
     ),
     TopicSpec(
-        OBJECT_ODOM,
-        'nav_msgs/msg/Odometry',
-        (HAND_SIM_NODE,),
-        STREAM_QOS,
+        OBJECT_ODOM, 'nav_msgs/msg/Odometry', (HAND_SIM_NODE,), STREAM_QOS,
         'Object pose in the palm frame; twist in the object frame (REP 105). From the '
         "simulator (lockstep: exact, on every tick) or a tracker (input.sync 'latest'; the "
         "simulator's hardware mode emulates one: tracker.message 'odometry').",
     ),
     TopicSpec(
-        OBJECT_POSE,
-        'geometry_msgs/msg/PoseStamped',
-        (TRACKER, HAND_SIM_NODE),
-        STREAM_QOS,
+        OBJECT_POSE, 'geometry_msgs/msg/PoseStamped', (TRACKER, HAND_SIM_NODE), STREAM_QOS,
         'Object pose in the palm frame, stamped with its capture time, no twist: a tracker '
         "read with input.object_message 'pose' (the simulator's hardware mode emulates one: "
         "tracker.message 'pose').",
     ),
     TopicSpec(
-        OBJECT_TRUE_ODOM,
-        'nav_msgs/msg/Odometry',
-        (HAND_SIM_NODE,),
-        STREAM_QOS,
+        OBJECT_TRUE_ODOM, 'nav_msgs/msg/Odometry', (HAND_SIM_NODE,), STREAM_QOS,
         "Hardware mode only: the plant's exact object pose in the palm frame and twist in the "
         'object frame, stamped as each joint state: ground truth for bags and for the '
         "controllers' object estimate (no node subscribes to it).",
     ),
     TopicSpec(
-        CONTACTS,
-        'sensor_msgs/msg/JointState',
-        (HAND_SIM_NODE,),
-        STREAM_QOS,
+        CONTACTS, 'sensor_msgs/msg/JointState', (HAND_SIM_NODE,), STREAM_QOS,
         'Contact coordinates, rates, forces, required friction, penetration and, for soft '
         "fingers, torsion as '<contact>/<quantity>' entries (layout: "
         'messages.contacts_to_msg).',
     ),
     TopicSpec(
-        OBJECT_REFERENCE,
-        'trajectory_msgs/msg/MultiDOFJointTrajectory',
-        (PLANNER,),
-        STREAM_QOS,
+        OBJECT_REFERENCE, 'trajectory_msgs/msg/MultiDOFJointTrajectory', (PLANNER,), STREAM_QOS,
         "Desired object pose, twist and acceleration in the palm frame, joint 'object'.",
     ),
     TopicSpec(
-        OBJECT_REFERENCE_SAMPLE,
-        'nav_msgs/msg/Odometry',
-        (NOMINAL_CONTROLLER_NODE,),
-        STREAM_QOS,
+        OBJECT_REFERENCE_SAMPLE, 'nav_msgs/msg/Odometry', (NOMINAL_CONTROLLER_NODE,), STREAM_QOS,
         'The reference sample the nominal controller tracked on its tick, stamped as the '
         'tick: desired object pose in the palm frame, desired twist in the desired object '
         'frame (for tracking error; nothing waits on it).',
     ),
     TopicSpec(
-        EFFORT_NOMINAL,
-        'sensor_msgs/msg/JointState',
-        (NOMINAL_CONTROLLER_NODE,),
-        STREAM_QOS,
+        EFFORT_NOMINAL, 'sensor_msgs/msg/JointState', (NOMINAL_CONTROLLER_NODE,), STREAM_QOS,
         'Nominal joint torques by name, effort only (N·m).',
     ),
     TopicSpec(
-        EFFORT_COMMAND,
-        'sensor_msgs/msg/JointState',
-        (SAFETY_FILTER_NODE,),
-        STREAM_QOS,
+        EFFORT_COMMAND, 'sensor_msgs/msg/JointState', (SAFETY_FILTER_NODE,), STREAM_QOS,
         'Filtered joint torques u* by name, effort only (N·m).',
     ),
     TopicSpec(
-        EFFORT_CONTROLLER_COMMANDS,
-        'std_msgs/msg/Float64MultiArray',
-        (SAFETY_FILTER_NODE,),
+        EFFORT_CONTROLLER_COMMANDS, 'std_msgs/msg/Float64MultiArray', (SAFETY_FILTER_NODE,),
         STREAM_QOS,
         "u* as ros2_control's effort_controllers/JointGroupEffortController takes it on "
         '<controller>/commands: N·m in command.joints order, unstamped (command.message '
         "'float64_multi_array'; u* is on /hand/effort_command as well).",
     ),
     TopicSpec(
-        DIAGNOSTICS,
-        'diagnostic_msgs/msg/DiagnosticArray',
-        (SAFETY_FILTER_NODE, HAND_SIM_NODE),
+        DIAGNOSTICS, 'diagnostic_msgs/msg/DiagnosticArray', (SAFETY_FILTER_NODE, HAND_SIM_NODE),
         DIAGNOSTICS_QOS,
         'QP status, solve time, relaxation, smallest margins, input hold mode; '
         'simulator lockstep timeouts; hardware mode: command timeouts, refused commands, '
         'late driver periods.',
     ),
     TopicSpec(
-        MARGINS,
-        'sensor_msgs/msg/JointState',
-        (SAFETY_FILTER_NODE,),
-        STREAM_QOS,
+        MARGINS, 'sensor_msgs/msg/JointState', (SAFETY_FILTER_NODE,), STREAM_QOS,
         'Barrier values h per row (position; velocity dh/dt when known, else empty). The '
         'row names only in the first message, on a change and at least once a second; the '
         'others have no names: their rows are those last named (layout: margin_stream).',
     ),
     TopicSpec(
-        CLOCK,
-        'rosgraph_msgs/msg/Clock',
-        (HAND_SIM_NODE,),
-        CLOCK_QOS,
+        CLOCK, 'rosgraph_msgs/msg/Clock', (HAND_SIM_NODE,), CLOCK_QOS,
         'Simulation time, published when use_sim_time is set.',
     ),
 )
+# fmt: on
 
 
 def topic_spec(name: str) -> TopicSpec:
@@ -298,18 +260,3 @@ def topic_spec(name: str) -> TopicSpec:
         if spec.name == name:
             return spec
     raise KeyError(f'unknown topic {name!r}; known topics: {[s.name for s in TOPICS]}')
-
-
-def topic_table_markdown(specs: tuple[TopicSpec, ...] = TOPICS) -> str:
-    """Return a Markdown table of topics: name, type, publishers, QoS, description."""
-    lines = [
-        '| Topic | Type | Published by | QoS | Content |',
-        '| --- | --- | --- | --- | --- |',
-    ]
-    for spec in specs:
-        publishers = ', '.join(f'`{p}`' for p in spec.publishers)
-        lines.append(
-            f'| `{spec.name}` | `{spec.msgtype}` | {publishers} | {spec.qos.text} | '
-            f'{spec.description} |'
-        )
-    return '\n'.join(lines) + '\n'

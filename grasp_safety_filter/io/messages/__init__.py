@@ -48,7 +48,6 @@ from grasp_safety_filter.io.messages.diagnostics import (  # noqa: F401
     DiagnosticReport,
     diagnostics_from_msg,
     diagnostics_to_msg,
-    DiagnosticsData,
     format_diagnostic_value,
 )
 from grasp_safety_filter.io.messages.effort_arrays import (  # noqa: F401
@@ -59,7 +58,6 @@ from grasp_safety_filter.io.messages.effort_arrays import (  # noqa: F401
 from grasp_safety_filter.io.messages.errors import (  # noqa: F401
     bounded_text,
     FutureStampError,
-    MAX_NAME_TEXT,
     MAX_REPORT_TEXT,
     MessageError,
     name_list,
@@ -68,35 +66,9 @@ from grasp_safety_filter.io.messages.errors import (  # noqa: F401
     StaleInputError,
 )
 from grasp_safety_filter.io.messages.fields import (  # noqa: F401
-    array_field,
-    check_frame,
-    checked_names,
-    clock_from_msg,
-    clock_to_msg,
-    duration_to_msg,
-    finite_vector,
-    header_msg,
-    header_stamp_ns,
     match_names,
     matrix_from_quaternion_xyzw,
-    NANOSECONDS_PER_SECOND,
-    nanoseconds_to_seconds,
-    OBJECT_FRAME,
-    other_names,
-    PALM_FRAME,
-    quaternion_msg,
     quaternion_xyzw_from_matrix,
-    seconds_to_nanoseconds,
-    shaped_array,
-    Stamp,
-    stamp_nanoseconds,
-    time_from_msg,
-    time_msg_to_nanoseconds,
-    time_to_msg,
-    twist_from_msg,
-    twist_msg,
-    unit_quaternion,
-    vector3_msg,
 )
 from grasp_safety_filter.io.messages.joint_states import (  # noqa: F401
     effort_from_msg,
@@ -129,10 +101,20 @@ from grasp_safety_filter.io.messages.reference import (  # noqa: F401
     MAX_REFERENCE_POINTS,
     ObjectReference,
     reference_from_msg,
-    REFERENCE_JOINT,
     reference_to_msg,
     ReferenceTrajectory,
 )
 from grasp_safety_filter.io.messages.stamps import (  # noqa: F401
+    clock_from_msg,
+    clock_to_msg,
+    header_stamp_ns,
+    NANOSECONDS_PER_SECOND,
+    nanoseconds_to_seconds,
+    seconds_to_nanoseconds,
+    Stamp,
+    stamp_nanoseconds,
     StampGuard,
+    time_from_msg,
+    time_msg_to_nanoseconds,
+    time_to_msg,
 )

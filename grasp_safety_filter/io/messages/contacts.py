@@ -13,11 +13,13 @@ from grasp_safety_filter.io.messages.fields import (
     array_field,
     match_names,
     shaped_array,
-    time_from_msg,
     unique_names,
 )
 from grasp_safety_filter.io.messages.joint_states import joint_state_to_msg
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
+from grasp_safety_filter.io.messages.stamps import (
+    time_from_msg,
+)
 from grasp_safety_filter.model.grasp_state import GraspState
 
 CONTACT_QUANTITIES: tuple[str, ...] = (

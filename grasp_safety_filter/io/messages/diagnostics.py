@@ -12,11 +12,13 @@ import numpy as np
 from grasp_safety_filter.io.messages.errors import MessageError
 from grasp_safety_filter.io.messages.fields import (
     checked_names,
+)
+from grasp_safety_filter.io.messages.namespace import byte_value, MessageNamespace
+from grasp_safety_filter.io.messages.stamps import (
     header_msg,
     Stamp,
     time_from_msg,
 )
-from grasp_safety_filter.io.messages.namespace import byte_value, MessageNamespace
 
 
 class DiagnosticLevel(IntEnum):

@@ -11,14 +11,16 @@ import numpy as np
 from grasp_safety_filter.io.messages.errors import MessageError
 from grasp_safety_filter.io.messages.fields import (
     array_field,
-    header_msg,
     match_names,
-    nanoseconds_to_seconds,
-    Stamp,
-    time_msg_to_nanoseconds,
     unique_names,
 )
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
+from grasp_safety_filter.io.messages.stamps import (
+    header_msg,
+    nanoseconds_to_seconds,
+    Stamp,
+    time_msg_to_nanoseconds,
+)
 
 
 @dataclass(frozen=True)

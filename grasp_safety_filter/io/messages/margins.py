@@ -12,12 +12,14 @@ from grasp_safety_filter.io.messages.errors import MessageError
 from grasp_safety_filter.io.messages.fields import (
     array_field,
     checked_names,
-    header_msg,
     match_names,
+)
+from grasp_safety_filter.io.messages.namespace import MessageNamespace
+from grasp_safety_filter.io.messages.stamps import (
+    header_msg,
     Stamp,
     time_from_msg,
 )
-from grasp_safety_filter.io.messages.namespace import MessageNamespace
 
 
 @dataclass(frozen=True)

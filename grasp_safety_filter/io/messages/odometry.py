@@ -14,20 +14,22 @@ import numpy as np
 from grasp_safety_filter.io.messages.fields import (
     check_frame,
     finite_vector,
-    header_msg,
     matrix_from_quaternion_xyzw,
-    nanoseconds_to_seconds,
     OBJECT_FRAME,
     PALM_FRAME,
     quaternion_msg,
     shaped_array,
-    Stamp,
-    time_msg_to_nanoseconds,
     twist_from_msg,
     twist_msg,
     unit_quaternion,
 )
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
+from grasp_safety_filter.io.messages.stamps import (
+    header_msg,
+    nanoseconds_to_seconds,
+    Stamp,
+    time_msg_to_nanoseconds,
+)
 
 #: Covariance of the exact simulator state (a copy goes into each message).
 _ZERO_COVARIANCE = np.zeros(36)

@@ -11,21 +11,23 @@ import numpy as np
 from grasp_safety_filter.io.messages.errors import MessageError, name_list
 from grasp_safety_filter.io.messages.fields import (
     check_frame,
-    duration_to_msg,
     finite_vector,
-    header_msg,
     match_names,
     matrix_from_quaternion_xyzw,
     PALM_FRAME,
     quaternion_msg,
     shaped_array,
-    time_from_msg,
     twist_from_msg,
     twist_msg,
     unit_quaternion,
     vector3_msg,
 )
 from grasp_safety_filter.io.messages.namespace import MessageNamespace
+from grasp_safety_filter.io.messages.stamps import (
+    duration_to_msg,
+    header_msg,
+    time_from_msg,
+)
 
 REFERENCE_JOINT = 'object'
 

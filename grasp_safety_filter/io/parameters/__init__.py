@@ -31,11 +31,9 @@ from __future__ import annotations
 from grasp_safety_filter.io.parameters.files import (  # noqa: F401
     flatten_parameters,
     load_parameter_file,
-    MISSPELLING_EDITS,
     misspelt_node_sections,
     parameters_for_node,
     parse_parameter_value,
-    PARSED_FILES_KEPT,
 )
 from grasp_safety_filter.io.parameters.rclpy_glue import (  # noqa: F401
     declare_node_parameters,
@@ -47,14 +45,11 @@ from grasp_safety_filter.io.parameters.spec import (  # noqa: F401
     ParameterError,
     ParameterSpec,
     ParameterType,
-    ROS_BUILTIN_PARAMETERS,
     ROS_PARAMETERS_KEY,
-    ROS_QOS_OVERRIDES_PREFIX,
     suggestion,
     WILDCARD_NODE,
 )
 from grasp_safety_filter.io.parameters.validation import (  # noqa: F401
-    collect_checked,
     raise_parameter_errors,
     resolve_relative_paths,
     validate_parameters,

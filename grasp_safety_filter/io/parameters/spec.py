@@ -17,6 +17,9 @@ ROS_PARAMETERS_KEY = 'ros__parameters'
 #: Name of the wildcard section every node reads.
 WILDCARD_NODE = '/**'
 
+#: What the description of a required parameter says.
+REQUIRED_NOTE = '; required (the default is never used)'
+
 
 class ParameterError(ConfigError):
     """A parameter is missing, unknown, of the wrong type or out of range.
@@ -66,6 +69,8 @@ class ParameterSpec:
         is_path: A file path; a relative one resolves against the parameter file's directory.
         per_contact: A double that may also be given as a list, one per contact (each element
             within the bounds); declared with dynamic typing, since ROS types are static.
+        required: No meaningful default: a node refuses to start unless it is given
+            (:mod:`grasp_safety_filter.io.required_parameters`); the description says so.
     """
 
     name: str
@@ -80,6 +85,18 @@ class ParameterSpec:
     read_only: bool = False
     is_path: bool = False
     per_contact: bool = False
+    required: bool = False
+
+    def __post_init__(self) -> None:
+        if self.required and REQUIRED_NOTE not in self.description:
+            # Before a trailing [unit], where the docs and ros2 param describe show it.
+            text, bracket, unit = self.description.rpartition(' [')
+            marked = (
+                f'{text}{REQUIRED_NOTE} [{unit}'
+                if bracket and self.description.endswith(']')
+                else self.description + REQUIRED_NOTE
+            )
+            object.__setattr__(self, 'description', marked)
 
     def validate(self, value: Any) -> Any:
         """Return ``value`` converted to this parameter's Python type, or raise ParameterError.
@@ -248,6 +265,7 @@ def suggestion(name: str, candidates: Iterable[str]) -> str:
 
 
 #: Parameters rclpy declares on every node by itself; a file may set them for any node.
+# fmt: off
 ROS_BUILTIN_PARAMETERS: dict[str, ParameterSpec] = {
     'use_sim_time': ParameterSpec(
         'use_sim_time', ParameterType.BOOL, False, 'Use /clock instead of the system clock'
@@ -259,6 +277,7 @@ ROS_BUILTIN_PARAMETERS: dict[str, ParameterSpec] = {
         'Offer the ~/get_type_description service',
     ),
 }
+# fmt: on
 
 #: Prefix of the QoS override parameters rclpy declares per publisher/subscription.
 ROS_QOS_OVERRIDES_PREFIX = 'qos_overrides.'

@@ -18,64 +18,38 @@ to the model.
 controllers, ``COMMAND_PARAMETERS`` to the safety filter.
 
 Modules: :mod:`.common`, :mod:`.model`, :mod:`.hand_sim`, :mod:`.nominal`,
-:mod:`.safety_filter`, :mod:`.inputs`, :mod:`.nodes` (schemas, cross-parameter checks, loading) and
-:mod:`.docs` (the tables of docs/parameters.md); this package re-exports their public names.
+:mod:`.safety_filter`, :mod:`.inputs` and :mod:`.nodes` (schemas, cross-parameter checks,
+loading); this package re-exports what the rest of the package uses.
 """
 
 from __future__ import annotations
 
 from grasp_safety_filter.io.schemas.common import (  # noqa: F401
-    BOOL,
-    CUBE_FACES,
-    DOUBLE,
-    DOUBLE_ARRAY,
     EXPECTED_OUTCOMES,
-    FINGERTIP_WORKSPACE_A_MARGIN,
-    HALF_PI,
-    INTEGER,
-    MAX_OSQP_ITERATIONS,
-    MAX_PYRAMID_FACES,
-    NEAREST_FACE,
     NO_OUTCOME,
-    PAPER_FINGER_JOINT_POSITIONS,
-    PAPER_JOINT_NAMES,
     PAPER_OUTCOME,
-    REQUIRED_MODEL_PARAMETERS,
-    required_model_parameters,
-    STRING,
-    STRING_ARRAY,
-)
-from grasp_safety_filter.io.schemas.docs import (  # noqa: F401
-    parameter_table_markdown,
 )
 from grasp_safety_filter.io.schemas.hand_sim import (  # noqa: F401
     driver_substeps,
-    GRAVITY_COMPENSATION,
     HAND_SIM_PARAMETERS,
     hardware_parameter_errors,
-    TIMEOUT_TORQUES,
     ZERO_TORQUE,
 )
 from grasp_safety_filter.io.schemas.inputs import (  # noqa: F401
-    check_command_parameters,
-    check_stream_parameters,
-    COMMAND_MESSAGES,
     COMMAND_PARAMETERS,
     EXACT_SYNC,
     FLOAT64_MULTI_ARRAY_COMMAND,
-    joint_order_errors,
     JOINT_STATE_COMMAND,
     LATEST_SYNC,
     MODEL_JOINT_ORDER,
     model_joint_order,
-    OBJECT_MESSAGES,
     ODOMETRY_MESSAGE,
     POSE_MESSAGE,
     STREAM_PARAMETERS,
-    SYNC_POLICIES,
 )
 from grasp_safety_filter.io.schemas.model import (  # noqa: F401
     MODEL_PARAMETERS,
+    REQUIRED_MODEL_PARAMETERS,
 )
 from grasp_safety_filter.io.schemas.nodes import (  # noqa: F401
     check_hand_sim_parameters,
@@ -93,7 +67,6 @@ from grasp_safety_filter.io.schemas.nominal import (  # noqa: F401
     NOMINAL_CONTROLLER_PARAMETERS,
 )
 from grasp_safety_filter.io.schemas.safety_filter import (  # noqa: F401
-    SAFETY_FILTER_INPUT_PARAMETERS,
     SAFETY_FILTER_PARAMETERS,
     SAFETY_FILTER_QP_PARAMETERS,
 )

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 import math
-from typing import Any
 
 from grasp_safety_filter.io.parameters import (
     ParameterType,
@@ -49,31 +47,3 @@ EXPECTED_OUTCOMES = (NO_OUTCOME, PAPER_OUTCOME)
 
 #: Contact-face entry asking for the box face nearest to the fingertip at the first state.
 NEAREST_FACE = 'nearest'
-
-#: The model parameters that describe the hand and the object: a scenario must give them (the
-#: schema's defaults, the paper's hand's, only fix their ROS types and are never used).
-#: ``model.object.size`` (cube, sphere) or ``model.object.edge_lengths`` (box) depends on
-#: ``model.object.shape`` (:func:`required_model_parameters`).
-REQUIRED_MODEL_PARAMETERS = (
-    'model.urdf_file',
-    'model.joint_names',
-    'model.fingertip_frames',
-    'model.contact_names',
-    'model.object.shape',
-    'model.object.mass',
-    'model.friction_coefficient',
-    'model.fingertip_workspace.a_min',
-    'model.fingertip_workspace.a_max',
-    'model.fingertip_workspace.b_min',
-    'model.fingertip_workspace.b_max',
-)
-
-
-def required_model_parameters(given: Mapping[str, Any]) -> tuple[str, ...]:
-    """:data:`REQUIRED_MODEL_PARAMETERS` and the object's dimensions for its given shape."""
-    shape = given.get('model.object.shape')
-    if shape == 'box':
-        return (*REQUIRED_MODEL_PARAMETERS, 'model.object.edge_lengths')
-    if shape in ('cube', 'sphere'):
-        return (*REQUIRED_MODEL_PARAMETERS, 'model.object.size')
-    return REQUIRED_MODEL_PARAMETERS

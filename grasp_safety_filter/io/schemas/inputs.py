@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from grasp_safety_filter.io.messages import joint_order, MessageError
 from grasp_safety_filter.io.parameters import ParameterSpec, raise_parameter_errors
 from grasp_safety_filter.io.schemas.common import DOUBLE, STRING, STRING_ARRAY
 
@@ -32,47 +33,36 @@ ODOMETRY_MESSAGE = 'odometry'
 POSE_MESSAGE = 'pose'
 OBJECT_MESSAGES = (ODOMETRY_MESSAGE, POSE_MESSAGE)
 
+# fmt: off
 STREAM_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
-        'input.sync',
-        STRING,
-        EXACT_SYNC,
+        'input.sync', STRING, EXACT_SYNC,
         'How inputs make a tick: exact (joint state, object odometry and, for the filter, '
         'u_nom of one stamp: the lockstep simulator) or latest (every joint state is a '
         "tick, the object's state estimated at its stamp: a real hand's driver and tracker)",
-        choices=SYNC_POLICIES,
-        read_only=True,
+        choices=SYNC_POLICIES, read_only=True,
     ),
     ParameterSpec(
-        'input.object_message',
-        STRING,
-        ODOMETRY_MESSAGE,
+        'input.object_message', STRING, ODOMETRY_MESSAGE,
         "The object's pose input: odometry (nav_msgs/Odometry on /object/odom, pose and "
         'twist) or pose (geometry_msgs/PoseStamped on /object/pose, input.sync latest only)',
-        choices=OBJECT_MESSAGES,
-        read_only=True,
+        choices=OBJECT_MESSAGES, read_only=True,
     ),
     ParameterSpec(
-        'object_state.correction_time',
-        DOUBLE,
-        0.1,
+        'object_state.correction_time', DOUBLE, 0.1,
         "With input.sync latest: time constant of the tracker's correction of the object state "
         "the hand's joint velocities carry between its samples; 0: each tracker pose taken "
         'as it is [s]',
-        min_value=0.0,
-        read_only=True,
+        min_value=0.0, read_only=True,
     ),
     ParameterSpec(
-        'object_state.max_age',
-        DOUBLE,
-        0.5,
+        'object_state.max_age', DOUBLE, 0.5,
         'With input.sync latest: a tick whose newest object pose was captured longer ago than '
         'this is stale and rejected [s]',
-        min_value=0.0,
-        exclusive_min=True,
-        read_only=True,
+        min_value=0.0, exclusive_min=True, read_only=True,
     ),
 )
+# fmt: on
 """Both controllers' input streams (``nodes.stream_config.StreamConfig``)."""
 
 #: ``command.message`` values.
@@ -82,27 +72,24 @@ COMMAND_MESSAGES = (JOINT_STATE_COMMAND, FLOAT64_MULTI_ARRAY_COMMAND)
 #: ``command.joints`` default: the model's joint order.
 MODEL_JOINT_ORDER = 'model.joint_names'
 
+# fmt: off
 COMMAND_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec(
-        'command.message',
-        STRING,
-        JOINT_STATE_COMMAND,
+        'command.message', STRING, JOINT_STATE_COMMAND,
         'Form of u* for the hand: joint_state (sensor_msgs/JointState by joint name on '
         "/hand/effort_command) or float64_multi_array (also ros2_control's "
         'effort_controllers/JointGroupEffortController form on /effort_controller/commands: '
         'std_msgs/Float64MultiArray in command.joints order)',
-        choices=COMMAND_MESSAGES,
-        read_only=True,
+        choices=COMMAND_MESSAGES, read_only=True,
     ),
     ParameterSpec(
-        'command.joints',
-        STRING_ARRAY,
-        [MODEL_JOINT_ORDER],
+        'command.joints', STRING_ARRAY, [MODEL_JOINT_ORDER],
         "With float64_multi_array: the effort controller's joints parameter, every model joint "
         "once, in its order ('model.joint_names': in that order)",
         read_only=True,
     ),
 )
+# fmt: on
 """The safety filter's command output (``nodes.command_output.CommandOutput``)."""
 
 
@@ -139,19 +126,12 @@ def joint_order_errors(
 
     The sentinel :data:`MODEL_JOINT_ORDER` is always right.
     """
-    joints = list(joints)
-    if joints == [MODEL_JOINT_ORDER]:
-        return []
-    model = list(model_joints)
-    unknown = [name for name in joints if name not in model]
-    missing = [name for name in model if name not in joints]
-    twice = sorted({name for name in joints if joints.count(name) > 1})
-    if not (unknown or missing or twice):
-        return []
-    return [
-        f"parameter '{parameter}': expected every joint of 'model.joint_names' once; not model "
-        f'joints: {unknown}, missing: {missing}, twice: {twice}'
-    ]
+    try:
+        order = model_joint_order(joints, model_joints)
+        joint_order(f"parameter '{parameter}'", order, model_joints)
+    except MessageError as error:
+        return [str(error)]
+    return []
 
 
 def check_command_parameters(values: Mapping[str, Any], source: str = 'parameters') -> None:
