@@ -75,8 +75,13 @@ from grasp_safety_filter.control.filter_inputs import (
     MEASURED_STATE_FIELDS,
     raise_if_measured_not_finite,
 )
-from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
-from grasp_safety_filter.control.margins import Margins
+from grasp_safety_filter.control.filter_result import (
+    ACTIVE_TOLERANCE,
+    FilterResult,
+    FilterStatus,
+    Margins,
+    ResultAssembler,
+)
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_metric import INVERSE_INERTIA, write_inertia_factor
 from grasp_safety_filter.control.qp_solvers import (
@@ -86,7 +91,6 @@ from grasp_safety_filter.control.qp_solvers import (
     Solution,
     SolutionStatus,
 )
-from grasp_safety_filter.control.result_assembly import ACTIVE_TOLERANCE, ResultAssembler
 from grasp_safety_filter.control.row_checks import all_finite, inside
 from grasp_safety_filter.model.grasp_state import GraspState
 

@@ -11,11 +11,11 @@ import numpy as np
 import osqp
 
 from grasp_safety_filter.control.nominal import NominalController
+from grasp_safety_filter.control.qp_solvers import osqp_backend
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
 )
-from grasp_safety_filter.control.qp_solvers import osqp_backend
 from grasp_safety_filter.model.grasp_model import state_of
 from grasp_tools.bench.recorded_run import Scenario, Tick
 
