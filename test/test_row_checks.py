@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from grasp_safety_filter.control.filter_result import box_margins, residuals, violations
-from grasp_safety_filter.control.row_checks import all_finite, inside
+from grasp_safety_filter.control.filter_rows import all_finite, inside
 
 
 def _rows(rng, k=20, m=9):

@@ -15,19 +15,13 @@ from __future__ import annotations
 from collections.abc import ItemsView, Iterator, Mapping, ValuesView
 from dataclasses import dataclass, field
 from enum import Enum
-import itertools
 import math
 
 import numpy as np
 
-from grasp_safety_filter.control.constraints import (
-    ActuatorLimits,
-    ConstraintFamily,
-    ConstraintRows,
-    TorqueRateBound,
-)
+from grasp_safety_filter.control.constraints import ActuatorLimits, ConstraintRows
+from grasp_safety_filter.control.filter_rows import FilterRows, row_dot
 from grasp_safety_filter.control.qp_solvers import FEASIBILITY_TOLERANCE
-from grasp_safety_filter.control.row_checks import row_dot
 from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.grasp_state import GraspState
 
@@ -192,23 +186,14 @@ class ResultAssembler:
         names, index: The barrier rows' names then the actuator box's; their positions.
     """
 
-    def __init__(
-        self,
-        families: tuple[ConstraintFamily, ...],
-        actuator_limits: ActuatorLimits,
-        torque_rate: TorqueRateBound | None,
-    ) -> None:
-        """Lay out the rows: the families' in order, then the actuator box's.
-
-        ``torque_rate``: that family when enabled (one of ``families``), else None.
-        """
-        self.families = families
-        self.row_names: tuple[str, ...] = tuple(n for f in families for n in f.names)
-        sizes = [len(family.names) for family in families]
-        ends = list(itertools.accumulate(sizes))
-        self.slices = [slice(end - size, end) for size, end in zip(sizes, ends, strict=True)]
+    def __init__(self, rows: FilterRows, actuator_limits: ActuatorLimits) -> None:
+        """Lay out the rows: the families' stacked rows in order, then the actuator box's."""
+        self.families = rows.families
+        self.row_names = rows.names
+        self.slices = rows.slices
+        sizes = [len(family.names) for family in self.families]
         self._row_family = np.repeat(np.arange(len(sizes), dtype=np.intp), sizes)
-        self._torque_rate = torque_rate
+        self._torque_rate = rows.torque_rate
         self._u_min = actuator_limits.lower
         self._u_max = actuator_limits.upper
         self.names = (*self.row_names, *actuator_limits.names)
