@@ -16,7 +16,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from contextlib import nullcontext
-from functools import partial
 import itertools
 import math
 from typing import Any
@@ -136,14 +135,11 @@ class FilterRows:
         self.slices = [slice(end - size, end) for size, end in zip(sizes, ends, strict=True)]
         self._n_joints = len(joint_names)
         self._writers = tuple(
-            (
-                family.rows_into if hasattr(family, 'rows_into') else partial(_copy_rows, family),
-                rows.start,
-            )
+            (family.rows_into, rows.start)
             for family, rows in zip(self.families, self.slices, strict=True)
         )
         # Compiled writers on a packed state raise no numpy warning: no np.errstate (µs).
-        self._compiled = all(getattr(f, 'compiled_packed_rows', False) for f in self.families)
+        self._compiled = all(family.compiled_packed_rows for family in self.families)
 
     def write(self, state: GraspState, A: np.ndarray, lower: np.ndarray) -> None:
         """Write every family's rows at ``state`` into its block of ``A`` (K, m) and ``lower``.
@@ -182,16 +178,6 @@ def object_workspace_of(
         config.alpha1,
         config.alpha2,
     )
-
-
-def _copy_rows(
-    family: ConstraintFamily, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int
-) -> None:
-    """Copy a family's rows at ``state`` into rows ``start:`` of the stacked A and lower."""
-    block = family.rows(state)
-    rows = slice(start, start + len(family.names))
-    A[rows] = block.A
-    lower[rows] = block.lower
 
 
 def checked_torque(u_nom: object, joint_names: Sequence[str]) -> np.ndarray:
