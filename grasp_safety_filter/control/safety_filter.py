@@ -7,7 +7,7 @@ Every tick (paper eq. 28)::
                u_min <= u <= u_max
 
 (``qp.metric: inverse_inertia`` measures ``u - u_nom`` in ``W = (tr(M_h)/m) M_h^-1``
-instead, :mod:`~grasp_safety_filter.control.qp_metric`; the tick's M_h gives W.)
+instead, :mod:`~grasp_safety_filter.control.qp`; the tick's M_h gives W.)
 
 :meth:`SafetyFilter.solve` reads top-down:
 
@@ -79,8 +79,7 @@ from grasp_safety_filter.control.filter_rows import (
     object_workspace_of,
     raise_if_measured_not_finite,
 )
-from grasp_safety_filter.control.qp import SafetyQP
-from grasp_safety_filter.control.qp_metric import INVERSE_INERTIA, write_inertia_factor
+from grasp_safety_filter.control.qp import INVERSE_INERTIA, SafetyQP, write_inertia_factor
 from grasp_safety_filter.control.qp_solvers import (
     BACKENDS,
     FEASIBILITY_TOLERANCE,
