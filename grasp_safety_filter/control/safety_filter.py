@@ -9,7 +9,11 @@ Every tick (paper eq. 28)::
 (``qp.metric: inverse_inertia`` measures ``u - u_nom`` in ``W = (tr(M_h)/m) M_h^-1``
 instead, :mod:`~grasp_safety_filter.control.qp`; the tick's M_h gives W.)
 
-:meth:`SafetyFilter.solve` reads top-down:
+:meth:`SafetyFilter.solve` reads top-down, one module per step: the rows
+(:mod:`~grasp_safety_filter.control.filter_rows`, the families of
+:mod:`~grasp_safety_filter.control.constraints`), the problem and its solve
+(:mod:`~grasp_safety_filter.control.qp`, :mod:`~grasp_safety_filter.control.qp_solvers`),
+the result (:mod:`~grasp_safety_filter.control.filter_result`).
 
 1. **Rows.** Check u_nom (size, finite) and write every family's rows ``A u >= lower``
    (:meth:`SafetyFilter.assemble`); a non-finite measured entry
