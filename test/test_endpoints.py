@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 from rosbags.typesys import get_typestore, Stores
 
+from grasp_safety_filter.control.filter_result import ResultAssembler
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.reference import PaperReference, Pose, ReferenceSample
-from grasp_safety_filter.control.result_assembly import ResultAssembler
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from synthetic_state import synthetic_state, SyntheticHand
 
+from grasp_safety_filter.control.filter_result import ResultAssembler
 from grasp_safety_filter.control.qp_solvers import BACKENDS
-from grasp_safety_filter.control.result_assembly import ResultAssembler
 from grasp_safety_filter.control.safety_filter import (
     ACTIVE_TOLERANCE,
     SafetyFilter,

@@ -26,7 +26,7 @@ import pinocchio as pin
 import pytest
 from qp_reference import chebyshev_radius, hard_optimum, relaxed_optimum
 
-from grasp_safety_filter.control.qp_metric import write_inertia_factor
+from grasp_safety_filter.control.qp import write_inertia_factor
 from grasp_safety_filter.control.qp_solvers import (
     BACKENDS,
     Problem,

@@ -5,13 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from grasp_safety_filter.control.row_checks import (
-    all_finite,
-    box_margins,
-    inside,
-    residuals,
-    violations,
-)
+from grasp_safety_filter.control.filter_result import box_margins, residuals, violations
+from grasp_safety_filter.control.filter_rows import all_finite, inside
 
 
 def _rows(rng, k=20, m=9):

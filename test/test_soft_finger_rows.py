@@ -14,9 +14,10 @@ import pytest
 from scipy.optimize import nnls
 
 from grasp_safety_filter.control.constraints import FrictionPyramid
-from grasp_safety_filter.control.constraints.friction_cone import DIAMOND, INSCRIBED
-from grasp_safety_filter.control.constraints.pyramid_kernel import (
-    pyramid_rows,
+from grasp_safety_filter.control.constraints.friction_cone import (
+    DIAMOND,
+    INSCRIBED,
+    pyramid_rows_into,
     pyramid_rows_packed,
 )
 from grasp_safety_filter.model.affine import AffineMap
@@ -174,8 +175,9 @@ def test_packed_rows_are_the_rows_to_the_bit(torsion):
     rng = np.random.default_rng(9)
     augmented = rng.normal(size=(rows, m + 1))
     terms = np.concatenate((rng.normal(size=13), augmented.reshape(-1), rng.normal(size=4)))
-    A, lower = pyramid_rows(
-        family._negative_faces, augmented[:, :m].copy(), augmented[:, m].copy(), 0.01
+    A, lower = np.empty((len(family.names), m)), np.empty(len(family.names))
+    pyramid_rows_into(
+        family._negative_faces, augmented[:, :m].copy(), augmented[:, m].copy(), 0.01, A, lower, 0
     )
     A_packed, lower_packed = np.full((len(family.names) + 3, m), np.nan), np.zeros(
         len(family.names) + 3

@@ -76,8 +76,8 @@ class SafetyFilterConfig:
         polish: OSQP solution polishing.
         solver: The QP backend (a key of
             :data:`~grasp_safety_filter.control.qp_solvers.BACKENDS`).
-        metric: The QP cost's metric (:data:`~grasp_safety_filter.control.qp_metric.
-            QP_METRICS`): ``"identity"`` (the paper's) or ``"inverse_inertia"``.
+        metric: The QP cost's metric (:data:`~grasp_safety_filter.control.qp.QP_METRICS`):
+            ``"identity"`` (the paper's) or ``"inverse_inertia"``.
     """
 
     no_slip_enabled: bool = True

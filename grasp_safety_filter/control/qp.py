@@ -16,9 +16,9 @@ normalised by its row's norm, ``d_r = ||A_r||`` (1 for a row with ``||A_r|| < 1e
 own unit (N, rad/s²): weights w_r are then comparable across families and against the
 torque deviation. The actuator box stays hard in both problems.
 
-With the inverse-inertia metric (``qp.metric``, :mod:`~grasp_safety_filter.control.qp_metric`)
-the cost is ``1/2 (u - u_nom)^T W (u - u_nom)`` with ``W = (R R^T)^-1`` (R the metric factor,
-written every tick), and the norm of the distances is W's: ``d_r = ||R^T A_r||`` (the row's
+With the inverse-inertia metric (``qp.metric``, below) the cost is
+``1/2 (u - u_nom)^T W (u - u_nom)`` with ``W = (R R^T)^-1`` (R the metric factor, written
+every tick), and the norm of the distances is W's: ``d_r = ||R^T A_r||`` (the row's
 dual norm), so ``s_r`` is the distance in the metric ``||du||_W = sqrt(du^T W du)`` by which
 row r is given up (N·m-equivalent: W is dimensionless and the identity for equal, uncoupled
 joint inertias). Scaling W by any factor scales both terms of the relaxed cost alike: the
@@ -35,14 +35,37 @@ In the solver's form ``min 1/2 x^T P x + q^T x  s.t.  lower <= C x <= upper``::
 ``d``) kept as a structural nonzero, even when its value is 0, so the pattern never changes
 from one tick to the next: a solver set up once (OSQP) only receives new values of
 ``C.data``, ``q`` and ``lower`` (:attr:`C_data` etc., updated in place).
+
+The metric. ``qp.metric`` chooses the cost of the correction ``du = u - u_nom``:
+
+- ``identity`` (the paper's, eq. 28): ``1/2 ||du||^2``.
+- ``inverse_inertia``: ``1/2 du^T W du`` with ``W = c M_h^-1``, ``c = tr(M_h) / m``. For the
+  free hand ``M_h ddq = u - h``, so ``du^T M_h^-1 du = ddq_c^T M_h ddq_c`` with ``ddq_c =
+  M_h^-1 du`` the joint acceleration the correction causes: the correction is measured by
+  the kinetic-energy norm of the motion it excites. A correction that pushes a light joint
+  (a fingertip's) costs more than one of the same torque on a heavy joint, so the filter
+  does not spend it on internal finger motion (null(J_h) of a redundant hand) that the
+  2-norm finds cheap. The scalar c (the mean joint inertia, kg m^2) makes W dimensionless
+  and equal to the identity for a hand of equal, uncoupled joint inertias; it does not move
+  the optimum (hard or relaxed, see above).
+
+Every form of the QP reads the metric through one factor: the lower-triangular Cholesky
+factor R of ``W^-1 = M_h / c = R R^T``. With ``x = R^-1 u``, ``du^T W du = ||x - x_nom||^2``:
+the problem stays a least-distance problem in x with rows ``(A R) x >= lower``. The solvers
+(OSQP, daqp) take a general cost: they get ``W = (R R^T)^-1`` and keep the box as bounds
+on u; the relaxed problem's slacks are normalised by the rows' dual norms ``||R^T A_r||``.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg.lapack
 import scipy.sparse as sp
 
-from grasp_safety_filter.control.qp_metric import metric_matrix, metric_row_norms
+#: ``qp.metric`` values: the paper's 2-norm, and the inverse-inertia metric.
+IDENTITY = 'identity'
+INVERSE_INERTIA = 'inverse_inertia'
+QP_METRICS: tuple[str, ...] = (IDENTITY, INVERSE_INERTIA)
 
 #: Threshold below which a row is treated as independent of u when normalising its slack.
 ROW_NORM_FLOOR = 1e-9
@@ -250,3 +273,47 @@ class SafetyQP:
             self.lower.copy(),
             self.upper.copy(),
         )
+
+
+def write_inertia_factor(M_h: np.ndarray, out: np.ndarray) -> None:
+    """Write R, ``R R^T = M_h / c`` with ``c = tr(M_h) / m``, lower triangular, into ``out``.
+
+    Args:
+        M_h: Hand joint-space inertia, shape (m, m), symmetric positive definite, kg m^2.
+        out: Shape (m, m), overwritten (zeros above the diagonal).
+
+    Raises:
+        ValueError: M_h is not finite, or not positive definite.
+    """
+    m = M_h.shape[0]
+    scale = float(np.trace(M_h)) / m
+    if not (np.isfinite(M_h).all() and scale > 0.0):
+        raise ValueError(f'M_h: expected a finite positive definite ({m}, {m}) matrix')
+    factor, info = scipy.linalg.lapack.dpotrf(M_h / scale, lower=1, clean=1)
+    if info != 0:
+        raise ValueError(f'M_h: expected a positive definite matrix, Cholesky failed ({info})')
+    out[:] = factor
+
+
+def metric_matrix(R: np.ndarray) -> np.ndarray:
+    """Return the cost matrix ``W = (R R^T)^-1 = R^-T R^-1``, shape (m, m), symmetric.
+
+    By ``dtrtri`` and one product: LAPACK's ``dpotri`` and a triangular solve with a matrix
+    right-hand side took up to 15 ms of CPU time now and then (measured, 16 joints,
+    OpenBLAS), ``dtrtri`` under 0.1 ms.
+    """
+    inverse, info = scipy.linalg.lapack.dtrtri(R, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f'metric factor singular (dtrtri info {info})')
+    W = inverse.T @ inverse
+    return 0.5 * (W + W.T)
+
+
+def metric_row_norms(A: np.ndarray, R: np.ndarray | None) -> np.ndarray:
+    """Return ``||A_r||`` (identity) or ``||R^T A_r|| = sqrt(A_r W^-1 A_r^T)``, shape (k,).
+
+    The dual norm of a row: its value divided by the norm is the distance, in the metric,
+    from a torque to the row's boundary.
+    """
+    rows = A if R is None else A @ R
+    return np.sqrt(np.einsum('ij,ij->i', rows, rows))

@@ -14,6 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
+from grasp_safety_filter.control.filter_rows import all_finite
 from grasp_safety_filter.control.pose_error import (
     acceleration_from_euler,
     euler_accelerations_from_acceleration,
@@ -22,7 +23,6 @@ from grasp_safety_filter.control.pose_error import (
     matrix_from_euler,
     twist_from_euler,
 )
-from grasp_safety_filter.control.row_checks import all_finite
 from grasp_safety_filter.model.compiled import kernel
 
 #: The paper's reference amplitude (Section IV): 0.25 m along palm z, 2 rad of yaw.

@@ -7,9 +7,13 @@ Every tick (paper eq. 28)::
                u_min <= u <= u_max
 
 (``qp.metric: inverse_inertia`` measures ``u - u_nom`` in ``W = (tr(M_h)/m) M_h^-1``
-instead, :mod:`~grasp_safety_filter.control.qp_metric`; the tick's M_h gives W.)
+instead, :mod:`~grasp_safety_filter.control.qp`; the tick's M_h gives W.)
 
-:meth:`SafetyFilter.solve` reads top-down:
+:meth:`SafetyFilter.solve` reads top-down, one module per step: the rows
+(:mod:`~grasp_safety_filter.control.filter_rows`, the families of
+:mod:`~grasp_safety_filter.control.constraints`), the problem and its solve
+(:mod:`~grasp_safety_filter.control.qp`, :mod:`~grasp_safety_filter.control.qp_solvers`),
+the result (:mod:`~grasp_safety_filter.control.filter_result`).
 
 1. **Rows.** Check u_nom (size, finite) and write every family's rows ``A u >= lower``
    (:meth:`SafetyFilter.assemble`); a non-finite measured entry
@@ -51,7 +55,6 @@ than letting a contact roll towards the fingertip's edge.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from contextlib import nullcontext
 import time
 from typing import Any
 
@@ -64,21 +67,23 @@ from grasp_safety_filter.control.constraints import (
     ObjectWorkspaceBarrier,
 )
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
-from grasp_safety_filter.control.filter_families import (
-    enabled_families,
-    object_workspace_of,
-    row_writers,
-    rows_compiled,
+from grasp_safety_filter.control.filter_result import (
+    ACTIVE_TOLERANCE,
+    FilterResult,
+    FilterStatus,
+    Margins,
+    ResultAssembler,
 )
-from grasp_safety_filter.control.filter_inputs import (
+from grasp_safety_filter.control.filter_rows import (
+    all_finite,
     checked_torque,
+    FilterRows,
+    inside,
     MEASURED_STATE_FIELDS,
+    object_workspace_of,
     raise_if_measured_not_finite,
 )
-from grasp_safety_filter.control.filter_result import FilterResult, FilterStatus
-from grasp_safety_filter.control.margins import Margins
-from grasp_safety_filter.control.qp import SafetyQP
-from grasp_safety_filter.control.qp_metric import INVERSE_INERTIA, write_inertia_factor
+from grasp_safety_filter.control.qp import INVERSE_INERTIA, SafetyQP, write_inertia_factor
 from grasp_safety_filter.control.qp_solvers import (
     BACKENDS,
     FEASIBILITY_TOLERANCE,
@@ -86,8 +91,6 @@ from grasp_safety_filter.control.qp_solvers import (
     Solution,
     SolutionStatus,
 )
-from grasp_safety_filter.control.result_assembly import ACTIVE_TOLERANCE, ResultAssembler
-from grasp_safety_filter.control.row_checks import all_finite, inside
 from grasp_safety_filter.model.grasp_state import GraspState
 
 __all__ = [
@@ -102,7 +105,6 @@ __all__ = [
 ]
 
 _FALLBACK = frozenset((FilterStatus.FALLBACK_LAST_GOOD, FilterStatus.FALLBACK_NOMINAL))
-_NO_CONTEXT = nullcontext()
 
 
 class SafetyFilter:
@@ -165,16 +167,18 @@ class SafetyFilter:
         self.actuator_limits = ActuatorLimits(joint_names, u_min, u_max)
         self.joint_names = self.actuator_limits.joint_names
         m = len(self.joint_names)
-        chosen, self.contact_names, self.torque_rate = enabled_families(
+        self._rows = FilterRows(
             config, self.joint_names, contact_names, q_min, q_max, mu, workspace, object_workspace,
             torsional_friction,
         )
-        self.families: tuple[ConstraintFamily, ...] = tuple(f for f, _ in chosen)
-        self._results = ResultAssembler(self.families, self.actuator_limits, self.torque_rate)
-        self.row_names = self._results.row_names
+        self.contact_names = self._rows.contact_names
+        self.torque_rate = self._rows.torque_rate
+        self.families: tuple[ConstraintFamily, ...] = self._rows.families
+        self.row_names = self._rows.names
+        self._results = ResultAssembler(self._rows, self.actuator_limits)
         k = len(self.row_names)
         sizes = [len(family.names) for family in self.families]
-        weights = np.repeat(np.array([weight for _, weight in chosen], dtype=float), sizes)
+        weights = np.repeat(np.array(self._rows.weights, dtype=float), sizes)
 
         self._u_min = self.actuator_limits.lower
         self._u_max = self.actuator_limits.upper
@@ -191,9 +195,6 @@ class SafetyFilter:
             metric_factor=self.hard_qp.metric_factor,
         )
         self.relaxed_problem = self.problem.with_slack(weights)
-        starts = [rows.start for rows in self._results.slices]
-        self._row_writers = tuple(zip(row_writers(self.families), starts, strict=True))
-        self._rows_compiled = rows_compiled(self.families)
         self.backend = BACKENDS[config.solver](self.problem, weights, config.solver_settings())
         self._last_good_u: np.ndarray | None = None
 
@@ -341,17 +342,8 @@ class SafetyFilter:
 
     def _assemble_rows(self, state: GraspState) -> bool:
         """Write every family's rows into the hard QP; False if they are not all finite."""
-        if state.n_joints != self.n_joints or state.n_contacts != len(self.contact_names):
-            raise ValueError(
-                f'state: expected {self.n_joints} joints and {len(self.contact_names)} '
-                f'contacts, got {state.n_joints} and {state.n_contacts}'
-            )
-        A, lower = self.problem.A, self.problem.lower
-        # Compiled writers on a packed state raise no numpy warning: no np.errstate (µs).
-        quiet = self._rows_compiled and getattr(state, 'packed_terms', None) is not None
-        with _NO_CONTEXT if quiet else np.errstate(all='ignore'):
-            for write, start in self._row_writers:
-                write(state, A, lower, start)
+        lower = self.problem.lower
+        self._rows.write(state, self.problem.A, lower)
         metric_ok = True
         if self.problem.metric_factor is not None:
             try:

@@ -8,6 +8,9 @@
   object surface, a margin inside a box face's edges (ZCBF).
 - :class:`ActuatorLimits` (``actuator_limits``): the joint torque box.
 - :class:`TorqueRateBound` (``torque_rate``): a bounded torque step per tick (not safety).
+
+One module per family, named after it; ``base`` holds their common form and checks,
+``box_barrier`` the ZCBF rows that joint limits and the two workspaces share.
 """
 
 from __future__ import annotations
@@ -19,10 +22,10 @@ import numpy as np
 from grasp_safety_filter.control.constraints.actuator_limits import ActuatorLimits
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
-    BoxBarrier,
     ConstraintFamily,
     ConstraintRows,
 )
+from grasp_safety_filter.control.constraints.box_barrier import BoxBarrier
 from grasp_safety_filter.control.constraints.fingertip_workspace import (
     FingertipWorkspaceBarrier,
 )

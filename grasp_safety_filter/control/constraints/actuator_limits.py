@@ -12,6 +12,7 @@ from grasp_safety_filter.control.constraints.base import (
     check_limits_ordered,
     ConstraintRows,
     finite_vector,
+    rows_of,
     validate_names,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -32,6 +33,7 @@ class ActuatorLimits:
 
     family = 'actuator_limits'
     state_fields: tuple[str, ...] = ()
+    compiled_packed_rows = False
 
     def __init__(
         self,
@@ -67,7 +69,15 @@ class ActuatorLimits:
 
     def rows(self, state: GraspState | None = None) -> ConstraintRows:
         """Rows ``u_j >= u_min,j`` and ``-u_j >= -u_max,j`` (independent of the state)."""
-        return ConstraintRows(self._A, self._lower_rows, self.names)
+        return rows_of(self, state, len(self.joint_names))
+
+    def rows_into(
+        self, state: GraspState | None, A: np.ndarray, lower: np.ndarray, start: int
+    ) -> None:
+        """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``."""
+        block = slice(start, start + len(self.names))
+        A[block] = self._A
+        lower[block] = self._lower_rows
 
     def values(self, state: GraspState | None, u: np.ndarray) -> BarrierValues:
         """Margins ``(u_j - u_min,j, u_max,j - u_j)`` per joint, N·m."""

@@ -2,14 +2,9 @@
 
 Each family turns one grasp constraint into rows that are affine in the joint torque u
 (shape (m,), N·m) and reports its barrier values h (its margins, > 0 inside the safe set).
-Two families of relative degree two (joint limits, fingertip workspace) share the zeroing
-control barrier function (ZCBF) construction of the paper's Section III, implemented once in
-:class:`BoxBarrier`: for a coordinate x with ``h = sign (x - bound)``,
-
-    B = h_dot + alpha_1(h)
-    h_ddot(u) + alpha_1'(h) h_dot + alpha_2(B) >= 0
-
-which keeps ``B >= 0`` and hence ``h >= 0`` forward invariant (paper, Theorem 1).
+Here: the rows' and values' types, what the filter needs from a family
+(:class:`ConstraintFamily`), and the checks every family makes of its arguments and of the
+state fields and row blocks it reads and writes.
 """
 
 from __future__ import annotations
@@ -20,14 +15,6 @@ from typing import Any, NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
-from grasp_safety_filter.control.class_k import ClassKFunction
-from grasp_safety_filter.control.constraints.box_kernel import (
-    box_barrier_rows,
-    box_barrier_rows_into,
-    box_barrier_rows_packed,
-)
-from grasp_safety_filter.control.constraints.shape_checks import check_block, CheckedBlock
-from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 
 
@@ -61,22 +48,6 @@ class BarrierValues(NamedTuple):
     names: tuple[str, ...]
 
 
-def planar_box(lower: np.ndarray, upper: np.ndarray) -> dict[str, np.ndarray]:
-    """:class:`BoxBarrier`'s ``index``, ``sign`` and ``bound`` for one 2-D box per contact.
-
-    ``lower`` and ``upper`` have shape (n, 2): contact i's coordinates ``(x_i, y_i)`` (at
-    ``2 i`` and ``2 i + 1`` of the flattened coordinates) stay in its box. Four rows per
-    contact, contact-major: ``x_min, x_max, y_min, y_max``.
-    """
-    n = lower.shape[0]
-    first = 2 * np.arange(n)
-    return {
-        'index': np.column_stack((first, first, first + 1, first + 1)).ravel(),
-        'sign': np.tile([1.0, -1.0, 1.0, -1.0], n),
-        'bound': np.column_stack((lower[:, 0], upper[:, 0], lower[:, 1], upper[:, 1])).ravel(),
-    }
-
-
 def box_rows(u_min: np.ndarray, u_max: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return a box as rows ``B u >= c``: ``u_j >= u_min,j``, ``-u_j >= -u_max,j`` per joint.
 
@@ -106,9 +77,9 @@ def box_lower(u_min: np.ndarray, u_max: np.ndarray) -> np.ndarray:
 class ConstraintFamily(Protocol):
     """What the safety filter needs from a constraint family.
 
-    A family may also have ``rows_into(state, A, lower, start)``, writing :meth:`rows`
-    into rows ``start:`` of the filter's stacked ``A`` (K, m) and ``lower`` (K,) with no
-    array of its own; the filter then calls it instead of :meth:`rows`. A family whose
+    :meth:`rows_into` is the family's one computation of its rows: it writes them into rows
+    ``start:`` of the filter's stacked ``A`` (K, m) and ``lower`` (K,), with no array of its
+    own; :meth:`rows` returns the same rows as new arrays (:func:`rows_of`). A family whose
     ``rows_into`` runs compiled code only on a packed state (``state.packed_terms``), so
     that no numpy floating-point warning can come from it, says so with a true
     ``compiled_packed_rows``.
@@ -117,19 +88,34 @@ class ConstraintFamily(Protocol):
         family: Family name, the first component of every row name (e.g. ``"no_slip"``).
         names: Row names, fixed at construction.
         state_fields: The :class:`GraspState` fields the rows read (for error reports).
+        compiled_packed_rows: Whether ``rows_into`` on a packed state is compiled code only.
     """
 
     family: str
     names: tuple[str, ...]
     state_fields: tuple[str, ...]
+    compiled_packed_rows: bool
 
     def rows(self, state: GraspState) -> ConstraintRows:
         """Return the family's rows ``A u >= lower`` at this state."""
         ...
 
+    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
+        """Write the family's rows at this state into rows ``start:`` of ``A`` and ``lower``."""
+        ...
+
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Barrier values h at this state (and torque u where h depends on it)."""
         ...
+
+
+def rows_of(family: ConstraintFamily, state: GraspState | None, n_joints: int) -> ConstraintRows:
+    """Return a family's rows at ``state`` as new arrays, written by its ``rows_into``."""
+    k = len(family.names)
+    A = np.empty((k, n_joints))
+    lower = np.empty(k)
+    family.rows_into(state, A, lower, 0)
+    return ConstraintRows(A, lower, family.names)
 
 
 def validate_names(names: Sequence[str], parameter: str) -> tuple[str, ...]:
@@ -224,181 +210,55 @@ def check_limits_ordered(
         )
 
 
-class BoxBarrier:
-    """Relative-degree-two ZCBF rows keeping selected coordinates inside bounds.
+def check_rows(state_value: np.ndarray, rows: int, field: str) -> None:
+    """Raise ValueError if a state array does not have ``rows`` leading entries."""
+    if state_value.shape[0] != rows:
+        raise ValueError(
+            f"state.{field}: expected {rows} rows for this filter's joints/contacts, "
+            f'got shape {state_value.shape}'
+        )
 
-    Row r selects coordinate ``x[index[r]]`` with sign ``s_r = +1`` (lower bound) or
-    ``-1`` (upper bound) and bound ``c_r``; its barrier and constraint are::
 
-        h_r = s_r (x[index[r]] - c_r)          h_dot_r = s_r x_dot[index[r]]
-        B_r = h_dot_r + alpha_1(h_r)
-        s_r x_ddot[index[r]](u) + alpha_1'(h_r) h_dot_r + alpha_2(B_r) >= 0
+def check_block(
+    A: np.ndarray, lower: np.ndarray, start: int, count: int, n_joints: int, family: str
+) -> None:
+    """Raise ValueError unless rows ``start:start + count`` fit in ``A`` (K, m) and ``lower``.
 
-    Subclasses say which coordinates (:meth:`coordinates`) and name the rows.
+    The compiled writers index without bounds checks: a block that does not fit would be
+    written past the arrays or, read from a packed buffer, with the wrong row width.
+    """
+    if (
+        A.ndim != 2
+        or A.shape[1] != n_joints
+        or lower.shape != (A.shape[0],)
+        or start < 0
+        or start + count > A.shape[0]
+    ):
+        raise ValueError(
+            f'{family}: expected rows {start}:{start + count} of A (K, {n_joints}) and lower '
+            f'(K,), got A {A.shape} and lower {lower.shape}'
+        )
 
-    Attributes:
-        family: Family name (first component of the row names).
-        names: Row names.
-        alpha1, alpha2: The extended class-K functions.
+
+class CheckedBlock:
+    """:func:`check_block` for a packed state's rows, done once for the same buffers.
+
+    A filter writes into the same stacked ``A`` and ``lower`` from the same ``start`` on
+    every tick; they (by identity) and the packed layout are checked the first time only.
     """
 
-    family: str = ''
-    state_fields: tuple[str, ...] = ()
-    #: The packed terms (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout`
-    #: names) of x, x_dot and ``[matrix | offset]`` of x_ddot, which :meth:`rows_into`
-    #: reads straight from a packed state; None: it reads :meth:`coordinates`.
-    packed_fields: tuple[str, str, str] | None = None
+    __slots__ = ('_last',)
 
-    def __init__(
-        self,
-        index: np.ndarray,
-        sign: np.ndarray,
-        bound: np.ndarray,
-        names: tuple[str, ...],
-        alpha1: ClassKFunction,
-        alpha2: ClassKFunction,
+    def __init__(self) -> None:
+        """Nothing checked yet."""
+        self._last: tuple[Any, Any, Any, int] = (None, None, None, -1)
+
+    def check(
+        self, A: np.ndarray, lower: np.ndarray, start: int, count: int, layout: Any, family: str
     ) -> None:
-        for parameter, alpha in (('alpha1', alpha1), ('alpha2', alpha2)):
-            if not isinstance(alpha, ClassKFunction):
-                raise ValueError(
-                    f"'{parameter}': expected a ClassKFunction, got {type(alpha).__name__}"
-                )
-        self.alpha1 = alpha1
-        self.alpha2 = alpha2
-        self.names = names
-        self._index = np.ascontiguousarray(index, dtype=np.intp)
-        self._sign = np.ascontiguousarray(sign, dtype=float)
-        self._h_offset = -self._sign * np.asarray(bound, dtype=float)
-        self._alpha_parameters = (
-            alpha1.kind == 'cubic',
-            float(alpha1.gain),
-            alpha2.kind == 'cubic',
-            float(alpha2.gain),
-        )
-        self._last_h: tuple[GraspState | None, np.ndarray] = (None, self._h_offset)
-        self._packed_starts: tuple[Any, tuple[int, int, int, int]] = (None, (0, 0, 0, 0))
-        self._block = CheckedBlock()
-
-    @property
-    def compiled_packed_rows(self) -> bool:
-        """Whether :meth:`rows_into` reads a packed state in compiled code only."""
-        return self.packed_fields is not None
-
-    def coordinates(self, state: GraspState) -> tuple[np.ndarray, np.ndarray, AffineMap]:
-        """Return the constrained coordinates x, their rates x_dot and ``u ↦ x_ddot``."""
-        raise NotImplementedError
-
-    def barrier(self, state: GraspState) -> tuple[np.ndarray, np.ndarray]:
-        """``(h, h_dot)`` per row, shape (k,) each."""
-        x, x_dot, _ = self.coordinates(state)
-        return self._sign * x[self._index] + self._h_offset, self._sign * x_dot[self._index]
-
-    def rows(self, state: GraspState) -> ConstraintRows:
-        """Rows ``s x_ddot(u) + alpha_1'(h) h_dot + alpha_2(h_dot + alpha_1(h)) >= 0``.
-
-        In the common form: ``A = s * x_ddot.matrix[index]`` and
-        ``lower = -(s * x_ddot.offset[index] + alpha_1'(h) h_dot + alpha_2(B))``, in one
-        compiled pass (:func:`~grasp_safety_filter.control.constraints.box_kernel.
-        box_barrier_rows`).
-        """
-        x, x_dot, acceleration = self.coordinates(state)
-        A, lower, h = box_barrier_rows(
-            self._index,
-            self._sign,
-            self._h_offset,
-            x,
-            x_dot,
-            acceleration.matrix,
-            acceleration.offset,
-            self._alpha_parameters,
-        )
-        self._last_h = (state, h)
-        return ConstraintRows(A, lower, self.names)
-
-    def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
-        """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``.
-
-        From a packed state (``state.packed_terms``), the compiled rows read x, x_dot and
-        x_ddot in its buffer (:attr:`packed_fields`), with no array made per field.
-        """
-        h = np.empty(self._index.shape[0])
-        packed = getattr(state, 'packed_terms', None) if self.packed_fields else None
-        if packed is not None:
-            terms, layout = packed
-            x_start, x_dot_start, x_ddot_start, d = self._packed_field_starts(state, layout)
-            self._block.check(A, lower, start, h.shape[0], layout, self.family)
-            box_barrier_rows_packed(
-                self._index,
-                self._sign,
-                self._h_offset,
-                terms,
-                x_start,
-                x_dot_start,
-                x_ddot_start,
-                d,
-                self._alpha_parameters,
-                A,
-                lower,
-                start,
-                h,
-            )
-        else:
-            x, x_dot, acceleration = self.coordinates(state)
-            check_block(A, lower, start, h.shape[0], acceleration.matrix.shape[1], self.family)
-            box_barrier_rows_into(
-                self._index,
-                self._sign,
-                self._h_offset,
-                x,
-                x_dot,
-                acceleration.matrix,
-                acceleration.offset,
-                self._alpha_parameters,
-                A,
-                lower,
-                start,
-                h,
-            )
-        self._last_h = (state, h)
-
-    def packed_rows_arguments(self, state: GraspState, layout: Any) -> tuple[Any, ...]:
-        """``(index, sign, h_offset, (x_start, x_dot_start, x_ddot_start, d), alpha_parameters)``.
-
-        :func:`box_barrier_rows_packed`'s arguments for a packed layout, its shapes checked
-        once per layout (ValueError naming the field).
-        """
-        starts = self._packed_field_starts(state, layout)
-        return self._index, self._sign, self._h_offset, starts, self._alpha_parameters
-
-    def remember_barrier(self, state: GraspState, h: np.ndarray) -> None:
-        """Keep the barrier values h written with the rows at ``state``, for :meth:`values`."""
-        self._last_h = (state, h)
-
-    def _packed_field_starts(
-        self, state: GraspState, layout: Any
-    ) -> tuple[int, int, int, int]:
-        """Where :attr:`packed_fields` start in a layout's buffer, and x's length d.
-
-        The shapes are checked once per layout.
-        """
-        known, starts = self._packed_starts
-        if layout is not known:
-            # raises ValueError if the fields do not fit the family
-            coordinates, _, _ = self.coordinates(state)
-            x, x_dot, x_ddot = self.packed_fields
-            starts = (
-                layout.start(x),
-                layout.start(x_dot),
-                layout.start(x_ddot),
-                coordinates.shape[0],
-            )
-            self._packed_starts = (layout, starts)
-        return starts
-
-    def values(self, state: GraspState, u: np.ndarray | None = None) -> BarrierValues:
-        """Barrier values ``h`` per row (independent of u: relative degree two)."""
-        last_state, h = self._last_h
-        if state is not last_state:  # states are immutable: reuse h of the last rows() call
-            x, _, _ = self.coordinates(state)
-            h = self._sign * x[self._index] + self._h_offset
-        return BarrierValues(h, self.names)
+        """:func:`check_block` with the layout's number of joints, unless just passed."""
+        last = self._last
+        if last[0] is A and last[1] is lower and last[2] is layout and last[3] == start:
+            return
+        check_block(A, lower, start, count, layout.n_joints, family)
+        self._last = (A, lower, layout, start)

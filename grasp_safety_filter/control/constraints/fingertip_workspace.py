@@ -9,12 +9,11 @@ from numpy.typing import ArrayLike
 
 from grasp_safety_filter.control.class_k import ClassKFunction
 from grasp_safety_filter.control.constraints.base import (
-    BoxBarrier,
+    check_rows,
     finite_vector,
-    planar_box,
     validate_names,
 )
-from grasp_safety_filter.control.constraints.shape_checks import check_rows
+from grasp_safety_filter.control.constraints.box_barrier import BoxBarrier, planar_box
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 

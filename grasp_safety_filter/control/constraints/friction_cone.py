@@ -4,26 +4,20 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 import math
-from typing import Any
 
 import numpy as np
 
 from grasp_safety_filter.control.constraints.base import (
     BarrierValues,
-    ConstraintRows,
-    finite_scalar,
-    validate_names,
-)
-from grasp_safety_filter.control.constraints.pyramid_kernel import (
-    pyramid_rows,
-    pyramid_rows_into,
-    pyramid_rows_packed,
-)
-from grasp_safety_filter.control.constraints.shape_checks import (
     check_block,
     check_rows,
     CheckedBlock,
+    ConstraintRows,
+    finite_scalar,
+    rows_of,
+    validate_names,
 )
+from grasp_safety_filter.model.compiled import kernel
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: The l_s-face pyramid inscribed in the circular cone (the paper's).
@@ -227,18 +221,9 @@ class FrictionPyramid:
         """Rows ``h_ij(u) >= eps`` as ``A u >= lower``.
 
         With ``f_c(u) = F u + f_0`` and ``Lambda`` the face normals:
-        ``A = -Lambda F`` and ``lower = eps + Lambda f_0``
-        (:func:`~grasp_safety_filter.control.constraints.pyramid_kernel.pyramid_rows`).
+        ``A = -Lambda F`` and ``lower = eps + Lambda f_0`` (:meth:`rows_into`, on new arrays).
         """
-        contact_force = state.contact_force
-        check_rows(contact_force.offset, self._force_rows, 'contact_force')
-        A, lower = pyramid_rows(
-            self._negative_faces,
-            contact_force.matrix,
-            contact_force.offset,
-            self.normal_force_margin,
-        )
-        return ConstraintRows(A, lower, self.names)
+        return rows_of(self, state, state.contact_force.matrix.shape[1])
 
     def rows_into(self, state: GraspState, A: np.ndarray, lower: np.ndarray, start: int) -> None:
         """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``.
@@ -250,7 +235,10 @@ class FrictionPyramid:
         if packed is not None:
             terms, layout = packed
             if layout is not self._packed_layout:
-                self.packed_rows_arguments(state, layout)  # checks the shapes once
+                # contact_force's shape, checked once per layout
+                check_rows(state.contact_force.offset, self._force_rows, 'contact_force')
+                self._packed_layout = layout
+                self._force_start = layout.start('contact_force_augmented')
             self._block.check(A, lower, start, len(self.names), layout, self.family)
             pyramid_rows_packed(
                 self._negative_faces,
@@ -275,20 +263,6 @@ class FrictionPyramid:
             start,
         )
 
-    def packed_rows_arguments(
-        self, state: GraspState, layout: Any
-    ) -> tuple[np.ndarray, int, float]:
-        """``(negative_faces, force_start, normal_force_margin)`` for a packed layout.
-
-        :func:`pyramid_rows_packed`'s arguments besides the buffers; ``contact_force``'s
-        shape is checked once per layout (ValueError naming it).
-        """
-        if layout is not self._packed_layout:
-            check_rows(state.contact_force.offset, self._force_rows, 'contact_force')
-            self._packed_layout = layout
-            self._force_start = layout.start('contact_force_augmented')
-        return self._negative_faces, self._force_start, self.normal_force_margin
-
     def values(self, state: GraspState, u: np.ndarray) -> BarrierValues:
         """Margins ``h_ij`` (N) at the contact forces ``f_c(u)`` the torque u produces."""
         n = len(self.contact_names)
@@ -306,3 +280,101 @@ class FrictionPyramid:
         else:  # per contact (f_x, f_y, f_n, tau), as the rows read them
             forces = np.column_stack((forces[:3 * n].reshape(n, 3), forces[3 * n:]))[..., None]
         return BarrierValues(np.matmul(self._negative_faces, forces).reshape(-1), self.names)
+
+
+@kernel
+def pyramid_rows_into(
+    negative_faces: np.ndarray,
+    force_matrix: np.ndarray,
+    force_offset: np.ndarray,
+    normal_force_margin: float,
+    A: np.ndarray,
+    lower: np.ndarray,
+    start: int,
+) -> None:
+    """Write the pyramid rows at rows ``start:`` of ``A`` (K, m) and ``lower`` (K,).
+
+    With ``N_i`` the negated face normals of contact i (rows × w)::
+
+        A[i, j] = N_i[j] F_i,     lower[i, j] = eps - N_i[j] f_0,i
+
+    rows contact-major, face by face, in one compiled loop instead of batched numpy
+    products. ``F_i`` is rows ``3i .. 3i + 2`` of F (per contact ``(f_x, f_y, f_n)``) and,
+    for soft fingers (w = 4), row ``3n + i`` (the torque tau_i about the contact normal).
+
+    Args:
+        negative_faces: ``N``, (n, rows per contact, w), w = 3 (point) or 4 (soft finger).
+        force_matrix: ``F``, (w n, m), N (and N·m for the torques) per N·m.
+        force_offset: ``f_0``, (w n,), N (N·m).
+        normal_force_margin: ``eps``, N.
+        A: The stacked rows' matrix, K ≥ start + n rows per contact.
+        lower: The stacked rows' lower bounds.
+        start: The first row written.
+    """
+    n, faces = negative_faces.shape[0], negative_faces.shape[1]
+    torsion = negative_faces.shape[2] == 4
+    m = force_matrix.shape[1]
+    for i in range(n):
+        t = 3 * n + i  # tau_i's row (soft fingers)
+        for j in range(faces):
+            r = start + i * faces + j
+            N0, N1, N2 = negative_faces[i, j, 0], negative_faces[i, j, 1], negative_faces[i, j, 2]
+            if torsion:
+                N3 = negative_faces[i, j, 3]
+                for c in range(m):
+                    A[r, c] = (
+                        N0 * force_matrix[3 * i, c]
+                        + N1 * force_matrix[3 * i + 1, c]
+                        + N2 * force_matrix[3 * i + 2, c]
+                        + N3 * force_matrix[t, c]
+                    )
+                lower[r] = normal_force_margin - (
+                    N0 * force_offset[3 * i]
+                    + N1 * force_offset[3 * i + 1]
+                    + N2 * force_offset[3 * i + 2]
+                    + N3 * force_offset[t]
+                )
+                continue
+            for c in range(m):
+                A[r, c] = (
+                    N0 * force_matrix[3 * i, c]
+                    + N1 * force_matrix[3 * i + 1, c]
+                    + N2 * force_matrix[3 * i + 2, c]
+                )
+            lower[r] = normal_force_margin - (
+                N0 * force_offset[3 * i]
+                + N1 * force_offset[3 * i + 1]
+                + N2 * force_offset[3 * i + 2]
+            )
+
+
+@kernel
+def pyramid_rows_packed(
+    negative_faces: np.ndarray,
+    terms: np.ndarray,
+    force_start: int,
+    normal_force_margin: float,
+    A: np.ndarray,
+    lower: np.ndarray,
+    start: int,
+) -> None:
+    """:func:`pyramid_rows_into` with ``[F | f_0]`` read from a packed buffer.
+
+    ``F`` and ``f_0`` are views of ``terms`` (no copy), so the rows are the same arithmetic.
+
+    Args:
+        negative_faces: ``N``, (n, rows per contact, w), w = 3 (point) or 4 (soft finger).
+        terms: The grasp state's packed terms
+            (:class:`~grasp_safety_filter.model.packed_terms.PackedLayout`).
+        force_start: Where ``[F | f_0]`` (w n, m + 1) starts in ``terms``.
+        normal_force_margin: ``eps``, N.
+        A: The stacked rows' matrix (K, m), K ≥ start + n rows per contact.
+        lower: The stacked rows' lower bounds.
+        start: The first row written.
+    """
+    rows = negative_faces.shape[2] * negative_faces.shape[0]
+    m = A.shape[1]
+    force = terms[force_start:force_start + rows * (m + 1)].reshape((rows, m + 1))
+    pyramid_rows_into(
+        negative_faces, force[:, :m], force[:, m], normal_force_margin, A, lower, start
+    )

@@ -8,12 +8,12 @@ import numpy as np
 
 from grasp_safety_filter.control.class_k import ClassKFunction
 from grasp_safety_filter.control.constraints.base import (
-    BoxBarrier,
     check_limits_ordered,
+    check_rows,
     finite_vector,
     validate_names,
 )
-from grasp_safety_filter.control.constraints.shape_checks import check_rows
+from grasp_safety_filter.control.constraints.box_barrier import BoxBarrier
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_safety_filter.model.grasp_state import GraspState
 

@@ -13,6 +13,7 @@ from grasp_safety_filter.control.constraints.base import (
     ConstraintRows,
     finite_scalar,
     finite_vector,
+    rows_of,
     validate_names,
 )
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -40,6 +41,7 @@ class TorqueRateBound:
 
     family = 'torque_rate'
     state_fields: tuple[str, ...] = ()
+    compiled_packed_rows = False
 
     def __init__(
         self, joint_names: Sequence[str], max_step: float, max_rate: float = 0.0
@@ -65,7 +67,6 @@ class TorqueRateBound:
         )
         self._A = box_matrix(m)
         self._A.setflags(write=False)
-        self._vacuous = ConstraintRows(np.zeros((2 * m, m)), np.zeros(2 * m), self.names)
         self.previous: np.ndarray | None = None
         self.previous_time: float | None = None
 
@@ -98,14 +99,26 @@ class TorqueRateBound:
         return None if elapsed < 0.0 else min(self.max_step, self.max_rate * elapsed)
 
     def rows(self, state: GraspState | None = None) -> ConstraintRows:
-        """Rows ``u_j >= u_prev,j - du_max`` and ``-u_j >= -u_prev,j - du_max``."""
-        if self.previous is None:
-            return self._vacuous
-        step = self.step_bound(None if state is None else state.t)
+        """Rows ``u_j >= u_prev,j - du_max`` and ``-u_j >= -u_prev,j - du_max`` (new arrays)."""
+        return rows_of(self, state, len(self.joint_names))
+
+    def rows_into(
+        self, state: GraspState | None, A: np.ndarray, lower: np.ndarray, start: int
+    ) -> None:
+        """Write :meth:`rows` into rows ``start:`` of the stacked ``A`` and ``lower``.
+
+        Vacuous rows ``0 u >= 0`` without a previous torque or when time went back.
+        """
+        block = slice(start, start + len(self.names))
+        step = None
+        if self.previous is not None:
+            step = self.step_bound(None if state is None else state.t)
         if step is None:
-            return self._vacuous
-        lower = box_lower(self.previous - step, self.previous + step)
-        return ConstraintRows(self._A, lower, self.names)
+            A[block] = 0.0
+            lower[block] = 0.0
+        else:
+            A[block] = self._A
+            lower[block] = box_lower(self.previous - step, self.previous + step)
 
     def values(self, state: GraspState | None, u: np.ndarray) -> BarrierValues:
         """Margins ``du_max -+ (u_j - u_prev,j)`` per joint (N·m); 0 u >= 0 rows give 0."""

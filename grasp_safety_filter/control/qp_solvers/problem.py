@@ -4,7 +4,7 @@ In the style of qpsolvers (S. Caron): the problem is data, a backend maps it to 
 :class:`Solution`, and the solution measures its own residuals against the problem.
 
 The hard problem, over the m joint torques u, with the metric H (the identity, the
-paper's; or ``W = (R R^T)^-1`` of :mod:`~grasp_safety_filter.control.qp_metric`, R the
+paper's; or ``W = (R R^T)^-1`` of :mod:`~grasp_safety_filter.control.qp`, R the
 problem's ``metric_factor``) and ``u_nom = -g``::
 
     min_u    1/2 (u - u_nom)^T H (u - u_nom)
@@ -28,8 +28,7 @@ from enum import Enum
 
 import numpy as np
 
-from grasp_safety_filter.control.qp import ROW_NORM_FLOOR
-from grasp_safety_filter.control.qp_metric import metric_matrix, metric_row_norms
+from grasp_safety_filter.control.qp import metric_matrix, metric_row_norms, ROW_NORM_FLOOR
 
 #: A row ``A u >= lower`` counts as satisfied when ``A u - lower >= -FEASIBILITY_TOLERANCE``
 #: (in the row's unit: N for no slip, rad/s² for the barriers).

@@ -7,7 +7,7 @@ from grasp_safety_filter.control.constraints.friction_cone import (
     INSCRIBED,
     MAX_FRICTION_MARGIN,
 )
-from grasp_safety_filter.control.qp_metric import QP_METRICS
+from grasp_safety_filter.control.qp import QP_METRICS
 from grasp_safety_filter.io.parameters import (
     ParameterSpec,
 )
