@@ -12,7 +12,6 @@ from typing import Any, TYPE_CHECKING
 import numpy as np
 
 from grasp_safety_filter.analysis.report import print_summary, verdict_document
-from grasp_safety_filter.analysis.verdict import paper_verdict as _paper_verdict
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.parameters import ParameterError, parse_parameter_value
 from grasp_safety_filter.io.paths import config_path
@@ -21,10 +20,6 @@ from grasp_safety_filter.model.quaternion import rotation_matrix
 
 if TYPE_CHECKING:
     from grasp_safety_filter.analysis.bag_scenario import BagScenario
-
-#: The paper's verdict on a run (:func:`grasp_safety_filter.analysis.verdict.paper_verdict`),
-#: where scripts and tests have imported it from.
-paper_verdict = _paper_verdict
 
 
 def model_report_main(argv: list[str] | None = None) -> int:

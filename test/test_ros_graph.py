@@ -33,7 +33,7 @@ from ros_graph import (
     with_overrides,
 )
 
-from grasp_safety_filter.cli import paper_verdict
+from grasp_safety_filter.analysis.verdict import paper_verdict
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import read_bag
 from grasp_safety_filter.io.launch_arguments import NodeLaunch, paper_demo, RECORDER_NODE

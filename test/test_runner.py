@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from grasp_safety_filter.cli import demo_main, paper_verdict
+from grasp_safety_filter.analysis.verdict import paper_verdict
+from grasp_safety_filter.cli import demo_main
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import read_bag
 from grasp_safety_filter.io.messages import header_stamp_ns
