@@ -211,7 +211,6 @@ def _demo(argv: list[str] | None) -> int:
         try:
             options = RunOptions(
                 args.config, mode, args.duration, args.dt, args.integrator, args.storage,
-                dict(args.overrides),
                 dict(args.overrides), args.animate,
             )  # fmt: skip
         except ConfigError as error:
