@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from grasp_safety_filter.analysis.figures import FIGURE_FILES
+from grasp_safety_filter.analysis.figures import ANIMATION, FIGURE_FILES
 from grasp_safety_filter.io.files import OutputError
 from grasp_safety_filter.run_types import MODES
 
@@ -25,7 +25,9 @@ ANALYSIS_DIRECTORY = 'analysis'
 #: ``grasp-analyze`` next to a run that has a summary).
 OUTPUT_SUBDIRECTORIES = (*MODES, ANALYSIS_DIRECTORY)
 #: Every name this package writes into an output directory.
-OUTPUT_NAMES = (BAG_DIRECTORY, SUMMARY_FILE, VERDICT_FILE, *FIGURE_FILES, *OUTPUT_SUBDIRECTORIES)
+OUTPUT_NAMES = (
+    BAG_DIRECTORY, SUMMARY_FILE, VERDICT_FILE, *FIGURE_FILES, ANIMATION, *OUTPUT_SUBDIRECTORIES
+)
 #: Files of a bag directory written by this package's recorder (rosbags) or ``ros2 bag``.
 BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-journal', '.db3-wal', '.db3-shm')
 

@@ -74,11 +74,16 @@ def test_the_filtered_run_holds_on_a_hands_streams(tmp_path):
     assert share > 0.75, share
     assert len(set(commands) - set(states)) < 0.05 * len(commands)
     assert len(bag[topics.EFFORT_CONTROLLER_COMMANDS]) > 0.9 * len(commands)
-    # The tracker: its 100 Hz on the wall clock, never faster; a driver period the loaded
-    # machine skipped merges two samples (the rates on an idle machine: grasp-bench-realtime).
+    # The tracker: 100 Hz on the wall clock, never faster. It samples the states the driver
+    # publishes: when the loaded machine makes the driver catch up late periods, one state
+    # stands for them and the samples due meanwhile are one (tracker.py), so it keeps 100 Hz
+    # or one sample per published state, whichever is fewer (idle rates: grasp-bench-realtime).
     samples = [m.header_stamp_ns(msg) for _, msg in bag[topics.OBJECT_ODOM]]
-    rate = (len(samples) - 1) / ((samples[-1] - samples[0]) * 1e-9)
-    assert 85.0 < rate < 105.0, rate
+    span = (samples[-1] - samples[0]) * 1e-9
+    rate = (len(samples) - 1) / span
+    assert rate < 105.0, rate
+    published = sum(samples[0] <= stamp <= samples[-1] for stamp in states)
+    assert len(samples) - 1 >= 0.85 * min(100.0 * span, published - 1), (rate, published)
 
 
 def test_without_the_filter_the_nominal_controller_loses_the_grasp(tmp_path):
