@@ -60,7 +60,8 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_check import check_initial_grasp
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.base_node import EndpointNode
+from grasp_safety_filter.nodes.spin_node import spin_node
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
 from hand_sim_node.hardware import HardwareEndpoint

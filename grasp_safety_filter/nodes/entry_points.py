@@ -1,7 +1,7 @@
 """Console entry points of the three node processes: quiet on Ctrl-C from their first instant.
 
 A node process spends its first few tenths of a second importing rclpy, Pinocchio and numpy
-before :func:`~grasp_safety_filter.nodes.base_node.spin_node` takes SIGINT and SIGTERM
+before :func:`~grasp_safety_filter.nodes.spin_node.spin_node` takes SIGINT and SIGTERM
 over. A signal in that time (``ros2 launch`` started and stopped at once) would end it with
 a ``KeyboardInterrupt`` traceback; through these entry points it exits 0 without a word,
 as it does later. This module imports nothing heavy itself.
@@ -29,7 +29,7 @@ def run_node(name: str, args: list[str] | None = None) -> None:
     dropped where Python can only report it (a weakref callback of the import system). So
     the signals are only recorded: a request that came during the import ends the process
     quietly once the import is done, before anything is started; a later one is seen by
-    :func:`~grasp_safety_filter.nodes.base_node.spin_node`, which keeps the same record.
+    :func:`~grasp_safety_filter.nodes.spin_node.spin_node`, which keeps the same record.
     """
     termination = record_termination_requests()
     module = importlib.import_module(NODE_MODULES[name])

@@ -1,50 +1,22 @@
 """The nominal controller's message-level endpoint: state in, ``/hand/effort_nominal`` out.
 
-Pure Python, shared by the rclpy node (:mod:`grasp_safety_filter.nodes.nominal_controller_node`)
-and the ROS-free runner. With ``input.sync: exact`` (the lockstep simulator) a tick runs when
-a joint state and an object odometry with the same stamp t are in hand::
+Pure Python, shared by the rclpy node (:mod:`~grasp_safety_filter.nodes.nominal_controller_node`)
+and the ROS-free runner. A tick::
 
-    /hand/joint_states (t) + /object/odom (t)
+    /hand/joint_states + object state, one stamp t
         ──▶ GraspModel.state ──▶ reference sample r(t) ──▶ NominalController.compute
         ──▶ /hand/effort_nominal stamped t (u_nom by joint name, N·m)
-        ──▶ /object/reference_sample stamped t (the r(t) it tracked, nav_msgs/Odometry)
+        ──▶ /object/reference_sample stamped t (the r(t) it tracked, as /object/odom)
 
-With ``input.sync: latest`` (a real hand's driver and tracker) each joint state is a tick;
-the object's state is the estimate at its stamp
-(:class:`~grasp_safety_filter.nodes.object_stream.ObjectStream`), and u_nom is stamped as the
-joint state (the safety filter pairs them by stamp). Joints the model does not have are
-ignored in joint states.
-
-The reference is the paper's ``r(t)`` around the first object pose received
-(``reference.source: paper``), or the planner's ``/object/reference``
-(``reference.source: topic``, a ``MultiDOFJointTrajectory`` of the joint ``object``, its
-points held piecewise constant; older than ``reference.timeout``, or before the first one,
-the last pose is held with zero feed-forward and a WARN ``nominal_controller`` status goes
-to ``/diagnostics`` on that tick).
-
-Grasp check: until a received state passes the start-up grasp check
-(:mod:`grasp_safety_filter.nodes.grasp_watch`: gap or penetration per contact within
-``grasp_check.gap_tolerance``, contact on its face, inside the fingertip workspace, joints
-strictly inside their limits, M_h, J_h, G), the controller does not start the planner's
-motion: it publishes ``u_nom = g(q)``, gravity compensation at the measured joint positions
-(the hand keeps its posture; with the filter off, no motion and no squeeze go to the hand;
-the filter itself sends its fallback then), with an ERROR ``nominal_controller`` status
-naming each failing contact or joint (``grasp.*`` values). The reference (paper: around
-the object pose) and the null-space posture are taken at the first valid state. The change
-is logged once (:meth:`NominalControllerEndpoint.take_log`). Only the first state is
-checked: at run time, lost contacts are the safety filter's to report and hold.
-
-Each tick that computes ``u_nom`` from the reference also publishes the sample it used on
-``/object/reference_sample`` (desired pose in the palm frame, desired twist in the desired
-object frame, as ``/object/odom``), so a bag holds the object's pose and its reference at the
-same stamps (the analysis reports the tracking error). Gravity-compensation ticks before a
-valid grasp track nothing and publish none.
-
-An input that does not parse (non-finite values, wrong lengths, missing joint names, a
-non-unit quaternion, a wrong frame), or a joint state with no current object estimate,
-yields a WARN status naming the problem (at most one a second, with the count since the
-last) and no command: the safety filter then holds its last safe command. Before its first
-tick, :meth:`NominalControllerEndpoint.watchdog` says every second what it waits for.
+With ``input.sync: exact`` a joint state and an odometry of one stamp make a tick; with
+``latest`` each joint state does, the object's state estimated at its stamp
+(:class:`~grasp_safety_filter.nodes.object_stream.ObjectStream`). The reference is the
+paper's ``r(t)`` around the first object pose (``reference.source: paper``) or the planner's
+``/object/reference`` (``topic``; stale or absent: the last pose held, WARN). Until a state
+passes the start-up grasp check (:mod:`~grasp_safety_filter.nodes.grasp_watch`) it sends
+``u_nom = g(q)`` and an ERROR naming what fails; the reference and the null-space posture are
+taken at the first valid state. Input that does not parse gets a WARN (once a second) and no
+command. The whole behaviour, for users: ``docs/ros_nodes.md``.
 """
 
 from __future__ import annotations

@@ -41,11 +41,12 @@ from grasp_safety_filter.io.topics import (
     OBJECT_REFERENCE_SAMPLE,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.base_node import EndpointNode
 from grasp_safety_filter.nodes.grasp_watch import GAP_TOLERANCE_PARAMETER, GraspCheckConfig
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.object_stream import StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing
+from grasp_safety_filter.nodes.spin_node import spin_node
 from grasp_safety_filter.nodes.tick_kernels import load_nominal_kernels
 
 #: Steady-clock period of the check whether a "waiting for a first tick" report is due, s.

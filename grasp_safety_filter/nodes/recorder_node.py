@@ -35,7 +35,7 @@ from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder
 from grasp_safety_filter.io.interrupts import record_termination_requests
 from grasp_safety_filter.io.messages import rclpy_message_class
-from grasp_safety_filter.nodes.base_node import make_executor
+from grasp_safety_filter.nodes.spin_node import make_executor
 
 #: The recorder's default node name (what ``start.wait_for_recorder`` names).
 RECORDER_NODE_NAME = 'grasp_recorder'

@@ -61,7 +61,7 @@ from grasp_safety_filter.io.topics import (
     OBJECT_ODOM,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.nodes.base_node import EndpointNode, spin_node
+from grasp_safety_filter.nodes.base_node import EndpointNode
 from grasp_safety_filter.nodes.command_output import CommandConfig
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
 from grasp_safety_filter.nodes.object_stream import StreamConfig
@@ -71,6 +71,7 @@ from grasp_safety_filter.nodes.publication_rate import (
     PublicationRateConfig,
 )
 from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
+from grasp_safety_filter.nodes.spin_node import spin_node
 from grasp_safety_filter.nodes.tick_kernels import load_filter_kernels
 
 #: Parameter switching the filter off (u* = u_nom) for the paper's unfiltered run.

@@ -43,7 +43,7 @@ def _start(name: str) -> tuple[Any, Any, Any]:
     from rclpy.signals import SignalHandlerOptions
 
     from grasp_safety_filter.io.interrupts import record_termination_requests
-    from grasp_safety_filter.nodes.base_node import make_executor
+    from grasp_safety_filter.nodes.spin_node import make_executor
 
     termination = record_termination_requests()
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
