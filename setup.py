@@ -67,6 +67,7 @@ setup(
             'ros-jazzy-sensor-msgs',
             'ros-jazzy-std-msgs',
             'ros-jazzy-trajectory-msgs',
+            'ros-jazzy-visualization-msgs',
         ],
         # grasp-bench's comparison: the same QPs through cvxpy (OSQP, Clarabel) and daqp.
         'bench': ['cvxpy>=1.4', 'qpsolvers>=4.0'],
@@ -96,6 +97,7 @@ setup(
                 'grasp_safety_filter.nodes.entry_points:nominal_controller_node'
             ),
             'safety_filter_node = grasp_safety_filter.nodes.entry_points:safety_filter_node',
+            'grasp_markers_node = grasp_safety_filter.nodes.entry_points:grasp_markers_node',
         ],
     },
 )

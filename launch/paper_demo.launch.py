@@ -21,6 +21,8 @@ Launch arguments:
   topic, so the bag holds it from t = 0. Without a ``ros2`` executable the launch stops
   with a message instead of running without a bag.
 - ``bag``: the bag directory to create (must not exist; default ``grasp_demo_bag``).
+- ``viz`` (``true``/``false``, default ``false``): also start ``grasp_markers_node``, the
+  grasp as markers on ``/grasp/markers`` (fixed frame: the palm frame), recorded with the rest.
 
 The simulator exits when the run ends, which shuts the whole launch down (the recorder
 closes the bag on SIGINT). What is started, with which parameters, is decided in
@@ -61,6 +63,7 @@ def _actions(context):
         filter_on=parse_bool('filter', value('filter')),
         record=record,
         duration=float(duration) if duration else None,
+        viz=parse_bool('viz', value('viz')),
     )
     actions = []
     if record:
@@ -96,6 +99,12 @@ def generate_launch_description():
             ),
             DeclareLaunchArgument(
                 'bag', default_value='grasp_demo_bag', description='Bag directory to create'
+            ),
+            DeclareLaunchArgument(
+                'viz',
+                default_value='false',
+                choices=['true', 'false'],
+                description='Start grasp_markers_node: the grasp on /grasp/markers (RViz)',
             ),
             OpaqueFunction(function=_actions),
         ]

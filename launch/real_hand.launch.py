@@ -21,6 +21,8 @@ Launch arguments:
 - ``nominal`` (``true``/``false``, default ``true``): start the package's nominal controller;
   ``false`` when a controller of one's own publishes u_nom.
 - ``filter`` (``true``/``false``, default ``true``): ``false`` passes u_nom through.
+- ``viz`` (``true``/``false``, default ``false``): also start ``grasp_markers_node``, the grasp
+  as markers on ``/grasp/markers`` (fixed frame: the palm frame) for RViz or Foxglove.
 - ``object_message`` (``odometry``/``pose``): the tracker's ``nav_msgs/Odometry`` on
   ``object_odom`` or ``geometry_msgs/PoseStamped`` on ``object_pose`` (palm frame).
 - ``command_message`` (``joint_state``/``float64_multi_array``): u* by joint name on
@@ -54,6 +56,7 @@ def _actions(context):
         object_message=value('object_message'),
         command_message=value('command_message'),
         remaps={name: value(name) for name in REAL_HAND_TOPICS},
+        viz=parse_bool('viz', value('viz')),
     )
     return [
         Node(
@@ -69,6 +72,7 @@ def generate_launch_description():
         'sim': ('false', 'Start hand_sim_node in its hardware mode in place of the real hand'),
         'nominal': ('true', "Start the package's nominal controller (false: your own)"),
         'filter': ('true', 'Filter u_nom (false: pass it through unchanged)'),
+        'viz': ('false', 'Start grasp_markers_node: the grasp on /grasp/markers (RViz, Foxglove)'),
     }
     arguments = [
         DeclareLaunchArgument(

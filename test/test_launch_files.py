@@ -295,6 +295,19 @@ def test_overrides_file_holds_the_node_section(tmp_path):
     assert launch_arguments.PACKAGE == 'grasp_safety_filter'
 
 
+@pytest.mark.parametrize(
+    ('launch_file', 'sim_time'), [('paper_demo.launch.py', True), ('real_hand.launch.py', False)]
+)
+def test_viz_adds_the_grasp_markers_node_on_the_graphs_clock(monkeypatch, launch_file, sim_time):
+    plain = {n.kwargs['name'] for n in kind(launch(monkeypatch, launch_file), 'Node')}
+    nodes = kind(launch(monkeypatch, launch_file, viz='true'), 'Node')
+    names = {n.kwargs['name'] for n in nodes}
+    assert names - plain == {'grasp_markers_node'}
+    (markers,) = [n for n in nodes if n.kwargs['name'] == 'grasp_markers_node']
+    assert markers.kwargs['executable'] == 'grasp_markers_node'
+    assert markers.kwargs['parameters'] == [str(config_path()), {'use_sim_time': sim_time}]
+
+
 # ----------------------------------------------------------------------------------------
 # real_hand.launch.py
 

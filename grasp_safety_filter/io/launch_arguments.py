@@ -32,6 +32,7 @@ import yaml
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.parameters import ROS_PARAMETERS_KEY
 from grasp_safety_filter.io.schemas import (
+    GRASP_MARKERS_NODE,
     HAND_SIM_NODE,
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
@@ -152,11 +153,13 @@ def paper_demo(
     filter_on: bool = True,
     record: bool = False,
     duration: float | None = None,
+    viz: bool = False,
 ) -> list[NodeLaunch]:
     """Return the paper demo's nodes: simulator, nominal controller, safety filter.
 
     ``filter_on`` False: the filter passes u_nom through; ``record``: the simulator waits for
-    :data:`RECORDER_NODE`; ``duration``: simulated duration, s (None: the file's).
+    :data:`RECORDER_NODE`; ``duration``: simulated duration, s (None: the file's); ``viz``:
+    also ``grasp_markers_node`` (the grasp on ``/grasp/markers``).
     """
     files = (str(config),)
     sim_time = {'use_sim_time': True}
@@ -165,7 +168,7 @@ def paper_demo(
         sim_overrides['duration'] = float(duration)
     if record:
         sim_overrides[WAIT_FOR_RECORDER] = RECORDER_NODE
-    return [
+    nodes = [
         NodeLaunch(HAND_SIM_NODE, HAND_SIM_NODE, files, sim_overrides, ends_launch=True),
         NodeLaunch(NOMINAL_CONTROLLER_NODE, NOMINAL_CONTROLLER_NODE, files, dict(sim_time)),
         NodeLaunch(
@@ -175,6 +178,9 @@ def paper_demo(
             {**sim_time, 'enabled': bool(filter_on)},
         ),
     ]
+    if viz:
+        nodes.append(NodeLaunch(GRASP_MARKERS_NODE, GRASP_MARKERS_NODE, files, dict(sim_time)))
+    return nodes
 
 
 def safety_filter_alone(
@@ -227,6 +233,7 @@ def real_hand(
     object_message: str = 'odometry',
     command_message: str = 'joint_state',
     remaps: Mapping[str, str] | None = None,
+    viz: bool = False,
 ) -> list[NodeLaunch]:
     """Return the nodes of ``real_hand.launch.py``: the controllers on a hand's streams.
 
@@ -238,7 +245,8 @@ def real_hand(
     ``nominal`` False: a controller of one's own publishes u_nom; ``object_message`` and
     ``command_message``: ``input.object_message`` and ``command.message``; ``remaps``:
     launch argument (a key of :data:`REAL_HAND_TOPICS`) -> the topic, in every node (an
-    unknown one raises ValueError).
+    unknown one raises ValueError); ``viz``: also ``grasp_markers_node`` (it draws the
+    tracker's pose: with ``object_message`` ``pose``, none).
     """
     remappings = _remappings(remaps, REAL_HAND_TOPICS)
     files = (str(config),)
@@ -272,6 +280,9 @@ def real_hand(
     nodes.append(
         NodeLaunch(SAFETY_FILTER_NODE, SAFETY_FILTER_NODE, files, filter_overrides, remappings)
     )
+    if viz:
+        wall = {'use_sim_time': False}
+        nodes.append(NodeLaunch(GRASP_MARKERS_NODE, GRASP_MARKERS_NODE, files, wall, remappings))
     return nodes
 
 

@@ -20,6 +20,7 @@ from grasp_safety_filter.io.schemas import (
     COMMAND_PARAMETERS,
     GRASP_CHECK_PARAMETERS,
     HAND_SIM_PARAMETERS,
+    MARKER_PARAMETERS,
     MODEL_PARAMETERS,
     NOMINAL_CONTROLLER_PARAMETERS,
     SAFETY_FILTER_PARAMETERS,
@@ -95,6 +96,7 @@ def parameter_tables() -> str:
             'Input streams of both controllers (`nominal_controller_node`, `safety_filter_node`)',
             STREAM_PARAMETERS,
         ),
+        ('`grasp_markers_node`', MARKER_PARAMETERS),
     )
     return '\n\n'.join(
         f'## {title}\n\n{parameter_table_markdown(specs).strip()}' for title, specs in sections

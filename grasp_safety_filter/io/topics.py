@@ -23,6 +23,7 @@ QoS choices:
   ``diagnostic_aggregator`` and ``rqt_robot_monitor`` subscribe with.
 - ``/clock``: best effort, volatile, keep last 1, as rclcpp's ``ClockQoS`` and the
   subscription rclpy's time source creates: only the newest time matters.
+- ``/grasp/markers``: reliable, volatile, keep last 1: a viewer draws the newest scene only.
 - ``/grasp/scenario``: reliable, transient local, keep last 1 (a latched topic). It is
   published once at start-up; a late joiner (``ros2 bag record`` started after the
   simulator, an analysis tool) still receives it.
@@ -43,6 +44,7 @@ from rosbags.interfaces import (
 )
 
 from grasp_safety_filter.io.schemas import (
+    GRASP_MARKERS_NODE,
     HAND_SIM_NODE,
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
@@ -66,6 +68,7 @@ DIAGNOSTICS = '/diagnostics'
 MARGINS = '/safety_filter/margins'
 CLOCK = '/clock'
 SCENARIO = '/grasp/scenario'
+MARKERS = '/grasp/markers'
 
 # The planner is whatever the user connects to /object/reference.
 PLANNER = 'planner'
@@ -143,6 +146,7 @@ STREAM_QOS = TopicQos(reliability='reliable', durability='volatile', depth=10)
 DIAGNOSTICS_QOS = TopicQos(reliability='reliable', durability='volatile', depth=10)
 CLOCK_QOS = TopicQos(reliability='best_effort', durability='volatile', depth=1)
 LATCHED_QOS = TopicQos(reliability='reliable', durability='transient_local', depth=1)
+NEWEST_QOS = TopicQos(reliability='reliable', durability='volatile', depth=1)
 
 
 @dataclass(frozen=True)
@@ -240,6 +244,12 @@ TOPICS: tuple[TopicSpec, ...] = (
         'Barrier values h per row (position; velocity dh/dt when known, else empty). The '
         'row names only in the first message, on a change and at least once a second; the '
         'others have no names: their rows are those last named (layout: margin_stream).',
+    ),
+    TopicSpec(
+        MARKERS, 'visualization_msgs/msg/MarkerArray', (GRASP_MARKERS_NODE,), NEWEST_QOS,
+        'The grasp in the palm frame for RViz or Foxglove (fixed frame: the palm): links, '
+        'fingertips, object, contact points, normals, forces, friction cones coloured by '
+        "beta/mu, the safety filter's active rows (layout: view.markers).",
     ),
     TopicSpec(
         CLOCK, 'rosgraph_msgs/msg/Clock', (HAND_SIM_NODE,), CLOCK_QOS,

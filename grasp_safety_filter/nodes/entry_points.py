@@ -18,6 +18,7 @@ NODE_MODULES: dict[str, str] = {
     'hand_sim_node': 'hand_sim_node.node',
     'nominal_controller_node': 'grasp_safety_filter.nodes.nominal_controller_node',
     'safety_filter_node': 'grasp_safety_filter.nodes.safety_filter_node',
+    'grasp_markers_node': 'grasp_safety_filter.nodes.grasp_markers_node',
 }
 
 
@@ -51,3 +52,8 @@ def nominal_controller_node(args: list[str] | None = None) -> None:
 def safety_filter_node(args: list[str] | None = None) -> None:
     """Run ``safety_filter_node``."""
     run_node('safety_filter_node', args)
+
+
+def grasp_markers_node(args: list[str] | None = None) -> None:
+    """``grasp_markers_node``: the grasp as RViz/Foxglove markers."""
+    run_node('grasp_markers_node', args)

@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 import numpy as np
 
-from grasp_safety_filter.view.scene import GraspScene, Shape
+from grasp_safety_filter.view.scene import friction_cone, GraspScene, Shape
 
 #: The two views of the setup figure: name, elevation and azimuth, degrees.
 VIEWS = (('isometric', 30.0, -135.0), ('top', 90.0, -90.0))
@@ -66,23 +66,6 @@ def _equal_axes(axes: Axes, points: np.ndarray) -> float:
     axes.set_ylabel('y (m)')
     axes.set_zlabel('z (m)')
     return half
-
-
-def friction_cone(
-    p_contact: np.ndarray, normal: np.ndarray, mu: float, height: float
-) -> np.ndarray:
-    """Return a friction cone's surface (3, 2, 17): apex at the contact, about the normal, m.
-
-    The cone of the forces on the object the contact can transmit, ``|f_t| <= mu f_n``,
-    ``height`` long along the normal (into the object).
-    """
-    e1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    e2 = np.cross(normal, e1)
-    angle = np.linspace(0.0, 2.0 * np.pi, 17)
-    rim = normal[:, None] + mu * (np.outer(e1, np.cos(angle)) + np.outer(e2, np.sin(angle)))
-    along = np.array([0.0, height])
-    return p_contact[:, None, None] + rim[:, None, :] * along[None, :, None]
 
 
 def draw_scene(

@@ -79,6 +79,23 @@ class GraspScene:
         return np.vstack([self.chain.reshape(-1, 3), self.p_contact_in_palm, *extents])
 
 
+def friction_cone(
+    p_contact: np.ndarray, normal: np.ndarray, mu: float, height: float, segments: int = 16
+) -> np.ndarray:
+    """Return a friction cone's surface (3, 2, segments + 1): apex at the contact, m.
+
+    The cone of the forces on the object the contact can transmit, ``|f_t| <= mu f_n``,
+    ``height`` long along the normal (into the object); its rim closed (last = first).
+    """
+    e1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    angle = np.linspace(0.0, 2.0 * np.pi, segments + 1)
+    rim = normal[:, None] + mu * (np.outer(e1, np.cos(angle)) + np.outer(e2, np.sin(angle)))
+    along = np.array([0.0, height])
+    return p_contact[:, None, None] + rim[:, None, :] * along[None, :, None]
+
+
 def _shape_of(geometry: Any) -> tuple[str, np.ndarray] | None:
     """Return a coal geometry's kind and size, or None for kinds a scene does not carry."""
     kind = type(geometry).__name__.lower()

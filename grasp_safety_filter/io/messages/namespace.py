@@ -32,6 +32,11 @@ MESSAGE_TYPES: dict[str, str] = {
     'KeyValue': 'diagnostic_msgs/msg/KeyValue',
     'Clock': 'rosgraph_msgs/msg/Clock',
     'String': 'std_msgs/msg/String',
+    'ColorRGBA': 'std_msgs/msg/ColorRGBA',
+    'CompressedImage': 'sensor_msgs/msg/CompressedImage',
+    'Marker': 'visualization_msgs/msg/Marker',
+    'MarkerArray': 'visualization_msgs/msg/MarkerArray',
+    'MeshFile': 'visualization_msgs/msg/MeshFile',
 }
 
 
@@ -46,7 +51,8 @@ class MessageNamespace:
         PoseWithCovariance, TwistWithCovariance, JointState, Odometry, PoseStamped,
         Float64MultiArray, MultiArrayLayout,
         MultiDOFJointTrajectory, MultiDOFJointTrajectoryPoint, DiagnosticArray,
-        DiagnosticStatus, KeyValue, Clock, String: The message classes.
+        DiagnosticStatus, KeyValue, Clock, String, ColorRGBA, CompressedImage, Marker,
+        MarkerArray, MeshFile: The message classes.
         sequences_as_lists: Float arrays are Python lists (rclpy), else float64 numpy
             arrays (rosbags).
         byte_as_bytes: ``byte`` fields are ``bytes`` of length 1 (rclpy), else ``int``.
@@ -76,6 +82,11 @@ class MessageNamespace:
     KeyValue: Any
     Clock: Any
     String: Any
+    ColorRGBA: Any
+    CompressedImage: Any
+    Marker: Any
+    MarkerArray: Any
+    MeshFile: Any
     sequences_as_lists: bool
     byte_as_bytes: bool
 

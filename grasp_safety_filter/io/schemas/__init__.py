@@ -47,6 +47,7 @@ from grasp_safety_filter.io.schemas.inputs import (  # noqa: F401
     POSE_MESSAGE,
     STREAM_PARAMETERS,
 )
+from grasp_safety_filter.io.schemas.markers import MARKER_PARAMETERS  # noqa: F401
 from grasp_safety_filter.io.schemas.model import (  # noqa: F401
     MODEL_PARAMETERS,
     REQUIRED_MODEL_PARAMETERS,
@@ -55,6 +56,7 @@ from grasp_safety_filter.io.schemas.nodes import (  # noqa: F401
     check_hand_sim_parameters,
     check_model_parameters,
     check_node_parameters,
+    GRASP_MARKERS_NODE,
     HAND_SIM_NODE,
     load_node_parameters,
     NODE_SCHEMAS,

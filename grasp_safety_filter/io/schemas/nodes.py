@@ -26,6 +26,7 @@ from grasp_safety_filter.io.schemas.inputs import (
     COMMAND_PARAMETERS,
     STREAM_PARAMETERS,
 )
+from grasp_safety_filter.io.schemas.markers import MARKER_PARAMETERS
 from grasp_safety_filter.io.schemas.model import MODEL_PARAMETERS
 from grasp_safety_filter.io.schemas.nominal import (
     GRASP_CHECK_PARAMETERS,
@@ -36,6 +37,7 @@ from grasp_safety_filter.io.schemas.safety_filter import SAFETY_FILTER_PARAMETER
 HAND_SIM_NODE = 'hand_sim_node'
 NOMINAL_CONTROLLER_NODE = 'nominal_controller_node'
 SAFETY_FILTER_NODE = 'safety_filter_node'
+GRASP_MARKERS_NODE = 'grasp_markers_node'
 
 NODE_SCHEMAS: dict[str, NodeSchema] = {
     HAND_SIM_NODE: NodeSchema.from_sections(HAND_SIM_NODE, MODEL_PARAMETERS, HAND_SIM_PARAMETERS),
@@ -52,6 +54,9 @@ NODE_SCHEMAS: dict[str, NodeSchema] = {
         SAFETY_FILTER_PARAMETERS,
         STREAM_PARAMETERS,
         COMMAND_PARAMETERS,
+    ),
+    GRASP_MARKERS_NODE: NodeSchema.from_sections(
+        GRASP_MARKERS_NODE, MODEL_PARAMETERS, MARKER_PARAMETERS
     ),
 }
 
@@ -162,6 +167,7 @@ _NODE_CHECKS: dict[str, tuple[Callable[[Mapping[str, Any], str], None], ...]] = 
         check_stream_parameters,
         check_command_parameters,
     ),
+    GRASP_MARKERS_NODE: (check_model_parameters,),
 }
 
 
