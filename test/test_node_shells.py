@@ -27,6 +27,7 @@ CONSOLE_SCRIPTS = {
     'hand_sim_node': 'hand_sim_node.node:main',
     'nominal_controller_node': 'grasp_safety_filter.nodes.nominal_controller_node:main',
     'safety_filter_node': 'grasp_safety_filter.nodes.safety_filter_node:main',
+    'grasp_markers_node': 'grasp_safety_filter.nodes.grasp_markers_node:main',
 }
 
 
@@ -36,6 +37,7 @@ PURE_MODULES = (
     'grasp_safety_filter.nodes.scenario',
     'grasp_safety_filter.nodes.nominal_controller',
     'grasp_safety_filter.nodes.safety_filter',
+    'grasp_safety_filter.nodes.grasp_markers',
     'hand_sim_node.endpoint',
     'hand_sim_node.hardware',
     'hand_sim_node.start_up',

@@ -138,6 +138,7 @@ class EndpointNode(Node):
         *,
         sensor: bool = False,
         newest_only: bool = False,
+        raw: bool = False,
     ) -> Any:
         """Subscribe to a topic of the table with its type and QoS.
 
@@ -146,7 +147,9 @@ class EndpointNode(Node):
         and best-effort publishers alike (many trackers publish best effort, as rclcpp's
         ``SensorDataQoS``), where a reliable one matches reliable publishers only.
         ``newest_only``: that, and a history of one: a node that falls behind a driver's
-        stream takes its newest state next, not the states queued before it.
+        stream takes its newest state next, not the states queued before it. ``raw``: the
+        callback gets the serialised message (``bytes``): a node that reads one message in
+        many (``rclpy.serialization.deserialize_message`` then) skips the others' conversion.
 
         The callback is wrapped by :func:`guarded_callback`: an exception it raises is
         logged (ERROR, throttled) and reported on ``/diagnostics`` (when this node
@@ -160,7 +163,7 @@ class EndpointNode(Node):
             qos = dataclasses.replace(qos, depth=1)
         guarded = guarded_callback(topic, callback, self._report_callback_error, self.context.ok)
         return self.create_subscription(
-            rclpy_message_class(spec.msgtype), topic, guarded, qos.to_rclpy()
+            rclpy_message_class(spec.msgtype), topic, guarded, qos.to_rclpy(), raw=raw
         )
 
     def add_publisher(self, topic: str) -> None:

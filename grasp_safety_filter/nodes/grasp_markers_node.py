@@ -5,10 +5,11 @@ config/paper_scenario.yaml`` (the model section is the controllers'; ``use_sim_t
 theirs).
 
 Subscribes to ``/hand/joint_states`` and ``/object/odom`` (newest only, best effort: they
-match any publisher), ``/hand/contacts`` (the simulator's forces) and ``/diagnostics`` (the
-filter's active rows); publishes ``/grasp/markers`` (``visualization_msgs/MarkerArray``, palm
-frame) at most ``markers.rate`` times a second of steady time. Set the viewer's fixed frame to
-the palm frame (``model.palm_frame``): no TF is needed. Everything else is
+match any publisher; kept serialised, the newest converted when drawn), ``/hand/contacts``
+(the simulator's forces) and ``/diagnostics`` (the filter's active rows); publishes
+``/grasp/markers`` (``visualization_msgs/MarkerArray``, palm frame) at most ``markers.rate``
+times a second of steady time. Set the viewer's fixed frame to the palm frame
+(``model.palm_frame``): no TF is needed. Everything else is
 :class:`~grasp_safety_filter.nodes.grasp_markers.GraspMarkersEndpoint`.
 
 Live parameters: ``markers.rate`` and ``markers.force_scale``; the model is read-only.
@@ -20,7 +21,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from rclpy.clock import Clock, ClockType
+from rclpy.serialization import deserialize_message
 
+from grasp_safety_filter.io.messages import rclpy_message_class
 from grasp_safety_filter.io.schemas import GRASP_MARKERS_NODE
 from grasp_safety_filter.io.topics import (
     CONTACTS,
@@ -28,6 +31,7 @@ from grasp_safety_filter.io.topics import (
     JOINT_STATES,
     MARKERS,
     OBJECT_ODOM,
+    topic_spec,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode
@@ -48,9 +52,21 @@ class GraspMarkersNode(EndpointNode):
             model, self.msgs, MarkerConfig.from_parameters(self.parameters)
         )
         endpoint = self.endpoint
-        self.subscribe(JOINT_STATES, endpoint.on_joint_states, newest_only=True)
-        self.subscribe(OBJECT_ODOM, endpoint.on_odom, newest_only=True)
-        self.subscribe(CONTACTS, endpoint.on_contacts, newest_only=True)
+        # The streams are kept serialised and only the newest is converted, when drawn: a
+        # 1 kHz driver then costs this node a reference per message, not a message object.
+        self._streams = {
+            JOINT_STATES: endpoint.on_joint_states,
+            OBJECT_ODOM: endpoint.on_odom,
+            CONTACTS: endpoint.on_contacts,
+        }
+        self._newest: dict[str, bytes] = {}
+        for topic in self._streams:
+            self.subscribe(
+                topic,
+                lambda data, topic=topic: self._newest.__setitem__(topic, data),
+                newest_only=True,
+                raw=True,
+            )
         self.subscribe(DIAGNOSTICS, endpoint.on_diagnostics)
         # Steady time: markers keep coming when a simulator's clock stops, as a viewer expects.
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
@@ -69,6 +85,10 @@ class GraspMarkersNode(EndpointNode):
         )
 
     def _publish_markers(self) -> None:
+        for topic, handle in self._streams.items():
+            data = self._newest.pop(topic, None)
+            if data is not None:
+                handle(deserialize_message(data, rclpy_message_class(topic_spec(topic).msgtype)))
         markers = self.endpoint.markers()
         if markers is not None:
             self.publisher(MARKERS).publish(markers)
