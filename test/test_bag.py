@@ -22,7 +22,9 @@ from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import bag_topics, BagRecorder, iter_bag, read_bag
 from grasp_safety_filter.io.interrupts import interrupt_on_signals, signal_name, SignalInterrupt
 from grasp_safety_filter.io.messages import ContactData, DiagnosticReport, ObjectReference
+from grasp_safety_filter.io.messages.markers import MarkerArrayBuilder
 from grasp_safety_filter.io.readme_tables import topic_table_markdown
+from grasp_safety_filter.view.markers import MarkerSpec
 
 REPO = Path(__file__).resolve().parent.parent
 JOINTS = [f'finger{i}_joint{j}' for i in (1, 2, 3) for j in (1, 2, 3)]
@@ -69,6 +71,12 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
         ),
         (topics.MARGINS, m.margins_to_msg(msgs, t, ['a', 'b'], rng.normal(size=2))),
         (
+            topics.MARKERS,
+            MarkerArrayBuilder(msgs, 'palm').build(
+                t, [MarkerSpec('contacts', 0, 'sphere_list', points=rng.normal(size=(3, 3)))]
+            ),
+        ),
+        (
             topics.DIAGNOSTICS,
             m.diagnostics_to_msg(
                 msgs, t, DiagnosticReport.create('safety_filter', 0, 'ok', {'k': k})
@@ -78,6 +86,8 @@ def tick_messages(recorder: BagRecorder, k: int, rng: np.random.Generator):
 
 
 def stamp_ns(msg) -> int:
+    if hasattr(msg, 'markers'):  # a MarkerArray: its markers' stamp
+        return m.header_stamp_ns(msg.markers[0])
     if hasattr(msg, 'header'):
         return m.header_stamp_ns(msg)
     if hasattr(msg, 'clock'):
@@ -336,7 +346,8 @@ def test_topic_table_names_are_unique_and_types_exist_in_the_jazzy_typestore():
 
 def test_every_node_and_conversion_type_is_in_the_table():
     published = {p for spec in topics.TOPICS for p in spec.publishers}
-    assert {'hand_sim_node', 'nominal_controller_node', 'safety_filter_node'} <= published
+    nodes = {'hand_sim_node', 'nominal_controller_node', 'safety_filter_node'}
+    assert nodes | {'grasp_markers_node'} <= published
     expected_types = {
         'sensor_msgs/msg/JointState',
         'nav_msgs/msg/Odometry',
@@ -346,6 +357,7 @@ def test_every_node_and_conversion_type_is_in_the_table():
         'diagnostic_msgs/msg/DiagnosticArray',
         'rosgraph_msgs/msg/Clock',
         'std_msgs/msg/String',
+        'visualization_msgs/msg/MarkerArray',
     }
     assert {spec.msgtype for spec in topics.TOPICS} == expected_types
 
