@@ -56,13 +56,14 @@ def test_bag_has_every_topic_with_its_type_and_increasing_stamps(which, request)
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert recorded == {spec.name: spec.msgtype for spec in topics.TOPICS}
     # The paper demo has no planner, no tracker of its own (the simulator's exact odometry;
-    # the ground truth beside a tracker is the hardware mode's) and no ros2_control effort
-    # controller; every other topic has data.
+    # the ground truth beside a tracker is the hardware mode's), no ros2_control effort
+    # controller and no marker node; every other topic has data.
     assert {t for t, n in counts.items() if n == 0} == {
         topics.OBJECT_REFERENCE,
         topics.OBJECT_POSE,
         topics.OBJECT_TRUE_ODOM,
         topics.EFFORT_CONTROLLER_COMMANDS,
+        topics.MARKERS,
     }
     for topic, values in stamps(result.bag).items():
         assert values == sorted(values), f'{topic}: header stamps go back in time'
