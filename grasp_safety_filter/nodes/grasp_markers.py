@@ -22,8 +22,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key
 from grasp_safety_filter.io.messages import (
     contacts_from_msg,
@@ -88,6 +86,7 @@ class GraspMarkersEndpoint:
         self._received: dict[str, Any] = {}  # the newest message, by topic
         self._parsed: dict[str, Any] = {}  # the newest that parsed
         self._active: tuple[str, ...] = ()
+        self._drawn: Any = None  # the last array, while nothing new came
 
     def on_joint_states(self, msg: Any) -> None:
         """Keep the newest joint state."""
@@ -123,14 +122,19 @@ class GraspMarkersEndpoint:
         for report in reports:
             if report.name == FILTER_DIAGNOSTIC and Key.ACTIVE in report.values:
                 text = report.values[Key.ACTIVE]
-                self._active = tuple(row for row in text.split(',') if row)
+                active = tuple(row for row in text.split(',') if row)
+                if active != self._active:
+                    self._active, self._drawn = active, None
 
     def markers(self) -> Any | None:
         """Return the newest state's ``MarkerArray``; None before a joint state and a pose.
 
         A state the model refuses (a degenerate contact) is not drawn: None, and
-        ``last_error`` says why. The array's markers are updated by the next call.
+        ``last_error`` says why. Nothing new since the last call: that array again (its
+        markers are updated in place by the next drawing).
         """
+        if self._drawn is not None and not self._received:
+            return self._drawn
         joints, pose = self._parse(JOINT_STATES), self._parse(OBJECT_ODOM)
         contacts = self._parse(CONTACTS)
         if joints is None or pose is None:
@@ -142,8 +146,9 @@ class GraspMarkersEndpoint:
             scene = self.builder.scene(
                 joints.t, joints.position, pose.p_object_in_palm, pose.R_object_to_palm, force
             )
-        except (ValueError, np.linalg.LinAlgError) as error:
+        except ValueError as error:
             self.last_error = f'state not drawn: {error}'
+            self._drawn = None
             return None
         specs = scene_markers(
             scene,
@@ -152,4 +157,5 @@ class GraspMarkersEndpoint:
             self._active,
             self.config.force_scale,
         )
-        return self.messages.build(joints.stamp_ns, specs)
+        self._drawn = self.messages.build(joints.stamp_ns, specs)
+        return self._drawn

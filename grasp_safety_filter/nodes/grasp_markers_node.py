@@ -60,6 +60,7 @@ class GraspMarkersNode(EndpointNode):
             CONTACTS: endpoint.on_contacts,
         }
         self._newest: dict[str, bytes] = {}
+        self._classes = {t: rclpy_message_class(topic_spec(t).msgtype) for t in self._streams}
         for topic in self._streams:
             self.subscribe(
                 topic,
@@ -88,7 +89,7 @@ class GraspMarkersNode(EndpointNode):
         for topic, handle in self._streams.items():
             data = self._newest.pop(topic, None)
             if data is not None:
-                handle(deserialize_message(data, rclpy_message_class(topic_spec(topic).msgtype)))
+                handle(deserialize_message(data, self._classes[topic]))
         markers = self.endpoint.markers()
         if markers is not None:
             self.publisher(MARKERS).publish(markers)

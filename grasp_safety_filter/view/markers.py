@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 
 from matplotlib import colormaps
 import numpy as np
-import pinocchio as pin
 
+from grasp_safety_filter.io.messages import quaternion_xyzw_from_matrix
 from grasp_safety_filter.view.scene import friction_cone, GraspScene, Shape
 
 #: Normals and friction cones are this share of the object's largest half extent long.
@@ -83,8 +83,8 @@ def _solid(ns: str, index: int, shape: Shape, rgba: tuple[float, ...]) -> Marker
         radius, half = shape.size
         length = 2.0 * (half + radius) if shape.kind == 'capsule' else 2.0 * half
         kind, scale = 'cylinder', np.array([2.0 * radius, 2.0 * radius, length])
-    quaternion = pin.Quaternion(shape.R_shape_to_palm).coeffs()  # (x, y, z, w)
-    return MarkerSpec(ns, index, kind, shape.p_shape_in_palm, np.array(quaternion), scale, rgba)
+    quaternion = quaternion_xyzw_from_matrix(shape.R_shape_to_palm)
+    return MarkerSpec(ns, index, kind, shape.p_shape_in_palm, quaternion, scale, rgba)
 
 
 def _named(rows: Sequence[str]) -> set[str]:

@@ -151,14 +151,13 @@ class SceneBuilder:
         frames, (n, 3), N.
 
         Raises:
-            ValueError: The model refuses the state (shapes, a degenerate contact).
+            ValueError: The model refuses the configuration (shapes, a degenerate contact).
         """
         model, hand = self.model, self.model.hand
         q = np.asarray(q, dtype=float)
-        m = model.n_joints
-        state = model.state(
-            t, q, np.zeros(m), p_object_in_palm, R_object_to_palm, np.zeros(6)
-        )
+        # Geometry only (no dynamics): the model's contact geometry and Pinocchio's fingertips.
+        contacts = model.contact_geometry(q, p_object_in_palm, R_object_to_palm)
+        p_fingertip, R_fingertip, _ = hand.fingertip_placements(q)
         data = self._pin_data
         q_pin = np.empty(self._pin_model.nq)
         q_pin[hand.pinocchio_index] = q
@@ -190,14 +189,10 @@ class SceneBuilder:
         fingertips = tuple(
             Shape('sphere', np.array([tip.radius]), R, p, name)
             for tip, R, p, name in zip(
-                hand.fingertips,
-                state.R_fingertip_to_palm,
-                state.p_fingertip_in_palm,
-                model.contact_names,
-                strict=True,
+                hand.fingertips, R_fingertip, p_fingertip, model.contact_names, strict=True
             )
         )
-        R_contact = np.asarray(state.R_contact_to_palm)
+        R_contact = np.array([c.R_contact_to_palm for c in contacts])
         force = None
         if force_in_contact is not None:
             force = np.einsum('nij,nj->ni', R_contact, np.asarray(force_in_contact, dtype=float))
@@ -208,7 +203,7 @@ class SceneBuilder:
             joints,
             fingertips,
             self._object(p_object_in_palm, R_object_to_palm),
-            np.array(state.p_contact_in_palm),
+            np.array([c.p_contact_in_palm for c in contacts]),
             R_contact[:, :, 2].copy(),
             force,
             tuple(model.contact_names),
