@@ -7,12 +7,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from grasp_safety_filter.io.parameters import ParameterError, suggestion
-from grasp_safety_filter.io.schemas import NODE_SCHEMAS
+from grasp_safety_filter.io.parameters import ParameterError
+from grasp_safety_filter.io.schemas import node_overrides, override_errors
 from hand_sim_node.event_log import EventLog
 
 #: The filter off (``u* = u_nom``) or on; also the subdirectories of a ``--mode both`` output.
 MODES = ('nominal', 'filtered')
+
+__all__ = ['MODES', 'Recording', 'RunOptions', 'RunResult', 'node_overrides']
 
 
 @dataclass(frozen=True)
@@ -26,8 +28,12 @@ class RunOptions:
         time_step: Overrides ``time_step`` (s), if given.
         integrator: Overrides ``integrator`` (``"ode3"`` or ``"rk4"``), if given.
         storage: Bag storage, ``"mcap"`` (default, as ``ros2 bag record``) or ``"sqlite3"``.
-        overrides: ``{dotted name: value}`` replacing the scenario file's parameters, for
-            every node that declares the name (e.g. ``{"barrier.alpha1.gain": 10.0}``).
+        overrides: ``{key: value}`` replacing the scenario file's parameters. A key is a
+            dotted name, for every node that declares it (e.g.
+            ``{"barrier.alpha1.gain": 10.0}``), or ``NODE/NAME``, for that node only (e.g.
+            ``{"hand_sim_node/model.friction_coefficient": 0.6}``: a plant whose μ is not
+            the controllers' model's); for its node ``NODE/NAME`` beats ``NAME``. What
+            applies to one node: :func:`node_overrides`.
         animate: Also draw the run's ``animation.gif``.
     """
 
@@ -43,11 +49,9 @@ class RunOptions:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f'mode: expected one of {list(MODES)}, got {self.mode!r}')
-        for name in self.overrides:
-            if not any(schema.get(name) for schema in NODE_SCHEMAS.values()):
-                known = sorted({n for schema in NODE_SCHEMAS.values() for n in schema.names})
-                hint = suggestion(name, known)
-                raise ParameterError(f"override '{name}': no node declares it{hint}")
+        errors = override_errors(self.overrides)
+        if errors:
+            raise ParameterError('; '.join(errors))
 
 
 @dataclass(frozen=True)

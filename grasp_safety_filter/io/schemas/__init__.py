@@ -18,8 +18,9 @@ to the model.
 controllers, ``COMMAND_PARAMETERS`` to the safety filter.
 
 Modules: :mod:`.common`, :mod:`.model`, :mod:`.hand_sim`, :mod:`.nominal`,
-:mod:`.safety_filter`, :mod:`.inputs` and :mod:`.nodes` (schemas, cross-parameter checks,
-loading); this package re-exports what the rest of the package uses.
+:mod:`.safety_filter`, :mod:`.inputs`, :mod:`.nodes` (schemas, cross-parameter checks,
+loading) and :mod:`.overrides` (overrides for every node or for one, ``NODE/NAME``); this
+package re-exports what the rest of the package uses.
 """
 
 from __future__ import annotations
@@ -67,6 +68,10 @@ from grasp_safety_filter.io.schemas.nominal import (  # noqa: F401
     GRASP_CHECK_GAP_TOLERANCE,
     GRASP_CHECK_PARAMETERS,
     NOMINAL_CONTROLLER_PARAMETERS,
+)
+from grasp_safety_filter.io.schemas.overrides import (  # noqa: F401
+    node_overrides,
+    override_errors,
 )
 from grasp_safety_filter.io.schemas.safety_filter import (  # noqa: F401
     SAFETY_FILTER_PARAMETERS,
