@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Callable, Sequence
-import dataclasses
 import json
 from pathlib import Path
 import shutil
@@ -44,7 +43,7 @@ from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
     load_node_parameters,
-    NODE_SCHEMAS,
+    node_overrides,
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
 )
@@ -141,13 +140,10 @@ def build_endpoints(
     """
     params = {
         node: load_node_parameters(
-            options.config,
-            node,
-            overrides={k: v for k, v in options.overrides.items() if NODE_SCHEMAS[node].get(k)},
+            options.config, node, overrides=node_overrides(options.overrides, node)
         )
         for node in (HAND_SIM_NODE, NOMINAL_CONTROLLER_NODE, SAFETY_FILTER_NODE)
     }
-    sim_config = SimConfig.from_parameters(params[HAND_SIM_NODE])
     overrides = {
         name: value
         for name, value in (
@@ -158,8 +154,11 @@ def build_endpoints(
         if value is not None
     }
     # The runner is the lockstep graph: a file's hardware mode (lockstep false) runs in
-    # lockstep here, and its scenario says so.
-    sim_config = dataclasses.replace(sim_config, lockstep=True, **overrides)
+    # lockstep here, and its scenario says so. One SimConfig of the values in force: its
+    # checks across them (command_delay against time_step, lockstep) see the run's.
+    sim_config = SimConfig.from_parameters(
+        {**params[HAND_SIM_NODE], 'lockstep': True, **overrides}
+    )
     sim = HandSimEndpoint(
         GraspModel.from_parameters(params[HAND_SIM_NODE]),
         sim_config,
@@ -190,7 +189,7 @@ def build_endpoints(
 
 def scenario_hand(options: RunOptions) -> tuple[list[Finger], GraspModel]:
     """Return the scenario hand's joints by finger and its model."""
-    overrides = {k: v for k, v in options.overrides.items() if NODE_SCHEMAS[HAND_SIM_NODE].get(k)}
+    overrides = node_overrides(options.overrides, HAND_SIM_NODE)
     params = load_node_parameters(options.config, HAND_SIM_NODE, overrides=overrides)
     return fingers_from_parameters(params), GraspModel.from_parameters(params)
 

@@ -54,17 +54,19 @@ class ScenarioFile:
 def load_scenario_file(path: Path, overrides: Mapping[str, Any] | None = None) -> ScenarioFile:
     """Read a scenario file as ``hand_sim_node`` does (model built, grasp not checked).
 
+    ``overrides``: ``{key: value}`` of any node; those that apply to ``hand_sim_node``
+    (:func:`~grasp_safety_filter.io.schemas.node_overrides`) do.
+
     Raises:
         ConfigError: The file, its URDF or a parameter is wrong.
 
     """
-    from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters, NODE_SCHEMAS
+    from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters, node_overrides
     from grasp_safety_filter.model.grasp_model import GraspModel
     from grasp_safety_filter.nodes.scenario import scenario_document
     from hand_sim_node.config import SimConfig
 
-    schema = NODE_SCHEMAS[HAND_SIM_NODE]
-    own = {name: value for name, value in (overrides or {}).items() if name in schema}
+    own = node_overrides(overrides or {}, HAND_SIM_NODE)
     params = load_node_parameters(path, HAND_SIM_NODE, overrides=own)
     model = GraspModel.from_parameters(params)
     document = scenario_document(model, SimConfig.from_parameters(params))

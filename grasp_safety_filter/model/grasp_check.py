@@ -362,7 +362,9 @@ def load_initial_grasp(
 
     Args:
         config: The scenario parameter file.
-        overrides: ``{name: value}`` of any node; those ``hand_sim_node`` declares apply.
+        overrides: ``{key: value}`` of any node; those that apply to ``hand_sim_node``
+            (its names, and ``hand_sim_node/NAME``: :func:`~grasp_safety_filter.io.schemas.
+            node_overrides`) do.
 
     Returns:
         The model and the validated ``hand_sim_node`` parameters.
@@ -371,10 +373,9 @@ def load_initial_grasp(
         ConfigError: The file, an override, the URDF or the initial grasp is wrong (a
             ``ParameterError``, ``HandModelError`` or ``GraspConfigError``).
     """
-    from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters, NODE_SCHEMAS
+    from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters, node_overrides
 
-    schema = NODE_SCHEMAS[HAND_SIM_NODE]
-    own = {name: value for name, value in (overrides or {}).items() if name in schema}
+    own = node_overrides(overrides or {}, HAND_SIM_NODE)
     params = load_node_parameters(config, HAND_SIM_NODE, overrides=own)
     model = GraspModel.from_parameters(params)
     check_initial_grasp(model, params)
