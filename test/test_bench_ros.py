@@ -70,3 +70,17 @@ def test_overrides_go_to_the_nodes_that_declare_them():
     assert arguments['nominal_controller_node'] == []
     with pytest.raises(ValueError, match=r'diagnostic\.period'):
         override_arguments(['diagnostic.period=0.0'])
+
+
+def test_node_scoped_overrides_go_to_their_node_only():
+    mu = 'model.friction_coefficient'
+    arguments = override_arguments([f'{mu}=0.9', f'hand_sim_node/{mu}=0.5'])
+    assert arguments['hand_sim_node'] == ['-p', f'{mu}:=0.5']
+    assert arguments['safety_filter_node'] == ['-p', f'{mu}:=0.9']
+    assert arguments['nominal_controller_node'] == ['-p', f'{mu}:=0.9']
+    with pytest.raises(ValueError, match=r"unknown node 'hand_sim'"):
+        override_arguments([f'hand_sim/{mu}=0.5'])
+    with pytest.raises(ValueError, match=r"'hand_sim_node' does not declare 'barrier"):
+        override_arguments(['hand_sim_node/barrier.alpha1.gain=1.0'])
+    with pytest.raises(ValueError, match=r'no node of the graph'):
+        override_arguments(['grasp_markers_node/markers.rate=1.0'])

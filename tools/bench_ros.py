@@ -224,7 +224,8 @@ def bench_ros_main(argv: list[str] | None = None) -> int:
         action='append',
         default=[],
         metavar='NAME=VALUE',
-        help='give the nodes that declare it this parameter (-p NAME:=VALUE), repeatable',
+        help='give the nodes that declare it this parameter (-p NAME:=VALUE), or with '
+        'NODE/NAME=VALUE that node only; repeatable',
     )
     parser.add_argument('--json', type=Path, help='also write the figures to this file')
     parser.add_argument('--echo', action='store_true', help=argparse.SUPPRESS)

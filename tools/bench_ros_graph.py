@@ -31,8 +31,9 @@ from grasp_safety_filter.io.parameters import (
 )
 from grasp_safety_filter.io.schemas import (
     HAND_SIM_NODE,
-    NODE_SCHEMAS,
+    node_overrides,
     NOMINAL_CONTROLLER_NODE,
+    override_errors,
     SAFETY_FILTER_NODE,
 )
 from grasp_safety_filter.io.topics import (
@@ -168,22 +169,31 @@ class _Monitor:
 
 
 def override_arguments(overrides: Sequence[str]) -> dict[str, list[str]]:
-    """Per node, the ``-p NAME:=VALUE`` arguments of the overrides it declares.
+    """Per node, the ``-p NAME:=VALUE`` arguments of the overrides that apply to it.
+
+    ``NAME=VALUE`` goes to every node that declares ``NAME``, ``NODE/NAME=VALUE`` to ``NODE``
+    only (and beats ``NAME`` there): :func:`~grasp_safety_filter.io.schemas.node_overrides`.
 
     Raises:
-        ParameterError: An override is not ``NAME=VALUE`` or no node declares ``NAME``.
+        ParameterError: An override is not ``NAME=VALUE`` or no node of the graph takes it.
     """
-    arguments: dict[str, list[str]] = {name: [] for name in GRAPH_NODES}
+    given: dict[str, str] = {}
     for override in overrides:
         name, equals, value = override.partition('=')
-        owners = [node for node in GRAPH_NODES if NODE_SCHEMAS[node].get(name) is not None]
-        if not equals or not owners:
-            raise ParameterError(
-                f'--set {override!r}: expected NAME=VALUE with a parameter of one of the nodes'
-            )
-        for node in owners:
-            arguments[node] += ['-p', f'{name}:={value}']
-    return arguments
+        errors = override_errors([name]) if equals else ['expected NAME=VALUE or NODE/NAME=VALUE']
+        if not errors and not any(node_overrides({name: value}, node) for node in GRAPH_NODES):
+            errors = [f'no node of the graph ({", ".join(GRAPH_NODES)}) declares it']
+        if errors:
+            raise ParameterError(f'--set {override!r}: {"; ".join(errors)}')
+        given[name] = value
+    return {
+        node: [
+            argument
+            for name, value in node_overrides(given, node).items()
+            for argument in ('-p', f'{name}:={value}')
+        ]
+        for node in GRAPH_NODES
+    }
 
 
 def graph_run(
