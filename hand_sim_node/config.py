@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.io.parameters import flatten_parameters, ParameterError
+from grasp_safety_filter.io.schemas import command_delay_steps as whole_steps
 from grasp_safety_filter.io.schemas import HAND_SIM_PARAMETERS
 from grasp_safety_filter.nodes.scenario import MAX_STEPS
 
@@ -36,6 +37,7 @@ _SCALAR_FIELDS: dict[str, str] = {
     'velocity_gain': 'stabilization.velocity_gain',
     'lockstep': 'lockstep',
     'command_timeout': 'command_timeout',
+    'command_delay': 'command_delay',
     'publish_clock': 'publish_clock',
 }
 """SimConfig field -> ROS parameter name."""
@@ -65,6 +67,9 @@ class SimConfig:
             lockstep endpoint); False: the hardware mode (:mod:`hand_sim_node.hardware`,
             configured by :class:`~hand_sim_node.hardware_config.HardwareConfig`).
         command_timeout: Node only: lockstep wait before a diagnostic, s.
+        command_delay: Lockstep: the plant applies the command stamped t_k from
+            t_k + command_delay on, s; a whole number of ``time_step``
+            (:attr:`command_delay_steps`), 0 with ``lockstep`` false.
         publish_clock: Node only, lockstep: publish /clock.
 
     Raises:
@@ -84,6 +89,7 @@ class SimConfig:
     velocity_gain: float = _default('velocity_gain')
     lockstep: bool = _default('lockstep')
     command_timeout: float = _default('command_timeout')
+    command_delay: float = _default('command_delay')
     publish_clock: bool = _default('publish_clock')
 
     def __post_init__(self) -> None:
@@ -110,6 +116,13 @@ class SimConfig:
                 f"parameter 'time_step': expected <= duration ({self.duration} s), got "
                 f'{self.time_step}'
             )
+        whole_steps(self.command_delay, self.time_step)  # raises unless a whole number
+        if self.command_delay > 0 and not self.lockstep:
+            raise ParameterError(
+                "parameters 'command_delay' and 'lockstep': the hardware mode (lockstep false) "
+                'has no command delay; expected command_delay = 0 with lockstep false, got '
+                f'{self.command_delay!r} s (the lockstep mode takes one)'
+            )
         if self.duration / self.time_step > MAX_STEPS:
             raise ParameterError(
                 f"parameter 'duration': expected at most {MAX_STEPS:g} steps of time_step "
@@ -120,6 +133,11 @@ class SimConfig:
     def n_steps(self) -> int:
         """Number of steps of a full run, ``round(duration / time_step)``."""
         return max(1, round(self.duration / self.time_step))
+
+    @property
+    def command_delay_steps(self) -> int:
+        """Steps of ``time_step`` from a command's tick to the plant applying it, ``>= 0``."""
+        return whole_steps(self.command_delay, self.time_step)
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> SimConfig:

@@ -20,7 +20,9 @@ stamp equals the current state's stamp; otherwise the endpoint reports it on
 ``/diagnostics`` (status ``hand_sim``, WARN) and does not step. As a hand driver does, it
 clips an applied command to the model's effort limits (the URDF's), and says so in a WARN
 ``hand_sim`` status stamped t_k (``effort.clipped``: the joints; ``effort.max_excess`` and
-``effort.excess.<joint>``: by how much, N·m). If no command arrives
+``effort.excess.<joint>``: by how much, N·m). With ``command_delay`` the plant applies
+the command stamped t_k from t_k + ``command_delay`` on (:mod:`hand_sim_node.command_delay`;
+the clip status is the command's, at t_k). If no command arrives
 within ``command_timeout`` s of wall time, :meth:`HandSimEndpoint.timeout` reports it and
 publishes the current state again (same stamp), which recovers a command or state lost
 while the graph was still connecting. The run ends after ``duration`` (the state at
@@ -77,6 +79,7 @@ from grasp_safety_filter.nodes.scenario import (
     scenario_document,
     scenario_to_text,
 )
+from hand_sim_node.command_delay import CommandDelay
 from hand_sim_node.config import SimConfig
 from hand_sim_node.contact_events import ContactEventTracker
 from hand_sim_node.plant import Plant, PlantConfig
@@ -161,6 +164,7 @@ class HandSimEndpoint:
         )
         self._joint_names = list(model.joint_names)
         self._applied_effort = np.zeros(model.n_joints)
+        self._delay = CommandDelay(sim_config.command_delay_steps)
         self._started = False
         self._reported_end = False
         self._waiting_since: float | None = None
@@ -225,6 +229,7 @@ class HandSimEndpoint:
         if self._contact_events is not None:
             self._contact_events.reset()
         self._applied_effort = np.zeros(self.model.n_joints)
+        self._delay.reset()
         self._started = True
         self._reported_end = False
         self._waiting_since = float(now)
@@ -298,7 +303,7 @@ class HandSimEndpoint:
     # ------------------------------------------------------------------------- internals
     def _step(self, effort: np.ndarray) -> list[Outgoing]:
         applied, clipped = self._clip_to_limits(effort)
-        self.plant.step(applied)
+        self.plant.step(self._delay(applied))
         report = self.plant.last_report
         contacts = ContactData.from_grasp_state(report.grasp_state, report.contact_force)
         outgoing = [] if clipped is None else [clipped]

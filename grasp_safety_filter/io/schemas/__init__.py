@@ -31,6 +31,7 @@ from grasp_safety_filter.io.schemas.common import (  # noqa: F401
     PAPER_OUTCOME,
 )
 from grasp_safety_filter.io.schemas.hand_sim import (  # noqa: F401
+    command_delay_steps,
     driver_substeps,
     HAND_SIM_PARAMETERS,
     hardware_parameter_errors,

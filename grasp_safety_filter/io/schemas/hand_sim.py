@@ -2,7 +2,8 @@
 
 ``hardware.*`` and ``tracker.*`` configure the hardware mode (``lockstep: false``): a hand's
 driver and an object tracker emulated on the wall clock (:mod:`hand_sim_node.hardware`).
-:func:`hardware_parameter_errors` checks them against each other and ``time_step``.
+:func:`hardware_parameter_errors` checks them against each other and ``time_step``;
+:func:`command_delay_steps` the lockstep mode's ``command_delay`` against ``time_step``.
 """
 
 from __future__ import annotations
@@ -117,6 +118,14 @@ HAND_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
         min_value=0.0, exclusive_min=True,
     ),
     ParameterSpec(
+        'command_delay', DOUBLE, 0.0,
+        'Lockstep: actuator or communication delay; the plant applies the command stamped t_k '
+        'from t_k + command_delay on, a whole number of time_step (0: from t_k); until the '
+        'first delayed command is due it applies the first command it received. The hardware '
+        'mode (lockstep false) takes none: 0 [s]',
+        min_value=0.0, read_only=True,
+    ),
+    ParameterSpec(
         'publish_clock', BOOL, True,
         'Publish the simulation time on /clock (for nodes with use_sim_time)',
         read_only=True,
@@ -218,6 +227,24 @@ def driver_substeps(rate: float, time_step: float) -> int:
             f'1/hardware.rate to be a whole number of time_step, got hardware.rate = {rate!r} '
             f'Hz (period {1.0 / rate!r} s) and time_step = {time_step!r} s ({steps:.9g} '
             'steps); e.g. hardware.rate = 1/(n time_step)'
+        )
+    return whole
+
+
+def command_delay_steps(delay: float, time_step: float) -> int:
+    """Return the steps of ``time_step`` s in ``command_delay`` (``delay`` s, >= 0).
+
+    Raises:
+        ParameterError: ``delay`` is not a whole number of ``time_step`` to
+            :data:`PERIOD_TOLERANCE`, naming both parameters.
+    """
+    steps = delay / time_step
+    whole = round(steps)
+    if abs(steps - whole) > PERIOD_TOLERANCE * max(steps, 1.0):
+        raise ParameterError(
+            f"parameters 'command_delay' and 'time_step': expected the delay to be a whole "
+            f'number of time_step, got command_delay = {delay!r} s and time_step = '
+            f'{time_step!r} s ({steps:.9g} steps); e.g. command_delay = n time_step'
         )
     return whole
 
