@@ -232,16 +232,17 @@ def interrupt_on_signals(
 
     Installs the handlers (and the hook that re-delivers an interrupt Python could not
     raise) on entry and restores the previous ones on exit; a signal still being sent again
-    then is raised as the block ends, not left to the restored handlers. Must be entered
-    from the main thread (Python delivers signals there only).
+    then is raised as the block ends, not left to the restored handlers. Off the main
+    thread (a run on a campaign's worker) it does nothing: Python delivers signals to the
+    main thread only, and the thread's owner handles them.
 
     Raises:
-        RuntimeError: Entered from another thread.
         SignalInterrupt: On leaving the outermost block, for a signal held until then.
 
     """
     if not _in_main_thread():
-        raise RuntimeError('interrupt_on_signals: must be entered from the main thread')
+        yield
+        return
     if _InterruptState.left_to_parent:
         signals = [s for s in signals if s not in TERMINATION_SIGNALS]
     _Redelivery.start()
