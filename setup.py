@@ -22,6 +22,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.urdf')),
+        ('share/' + package_name + '/config/campaigns', glob('config/campaigns/*.yaml')),
     ],
     # Runtime dependencies for a pip install without ROS; under colcon they come from
     # package.xml (rosdep), osqp and daqp from pip.
@@ -38,6 +39,8 @@ setup(
         'rosbags>=0.10',
         'pyyaml>=6.0',
         'matplotlib>=3.6',
+        'distributed>=2024.1',  # grasp-campaign's engine: local cores or a Dask cluster
+        'tqdm>=4.60',  # grasp-campaign's progress bar
     ],
     extras_require={
         'test': [
@@ -90,6 +93,7 @@ setup(
             'grasp-bench-ros = grasp_tools.bench_ros:bench_ros_main',
             'grasp-bench-realtime = grasp_tools.bench.real_time:main',
             'grasp-record = grasp_safety_filter.console:record',
+            'grasp-campaign = grasp_safety_filter.console:campaign',
             'grasp-model-report = grasp_safety_filter.cli:model_report_main',
             'hand_sim_node = grasp_safety_filter.nodes.entry_points:hand_sim_node',
             (

@@ -170,7 +170,9 @@ def _demo(argv: list[str] | None) -> int:
         metavar='NAME=VALUE',
         type=parse_override,
         help='override a parameter of every node that declares it, e.g. '
-        'barrier.alpha1.gain=10.0 (YAML value, repeatable)',
+        'barrier.alpha1.gain=10.0, or of one node with NODE/NAME=VALUE, e.g. '
+        'hand_sim_node/model.friction_coefficient=0.6 (the plant only: a model mismatch) '
+        '(YAML value, repeatable)',
     )
     parser.add_argument(
         '--force', action='store_true',

@@ -1,4 +1,4 @@
-"""Console entry points of ``grasp-demo``, ``grasp-analyze``, ``grasp-record``: signals at once.
+"""Console entry points of the ``grasp-*`` tools that run or record: signals at once.
 
 A tool spends its first second importing numpy, Pinocchio, rosbags and matplotlib. A
 SIGINT in that time would end it with a ``KeyboardInterrupt`` traceback and a SIGTERM
@@ -52,15 +52,17 @@ class _HeldUnraisables:
         self.reports.append(where + '\n' + ''.join(exception))
 
 
-def _run(prog: str, function: str, argv: list[str] | None) -> int:
+def _run(
+    prog: str, function: str, argv: list[str] | None, module: str = 'grasp_safety_filter.cli'
+) -> int:
     held = _HeldUnraisables()
     sys.unraisablehook = held
     status: int | None = None
     try:
         with interrupt_on_signals():
-            from grasp_safety_filter import cli
+            import importlib
 
-            status = int(getattr(cli, function)(argv))
+            status = int(getattr(importlib.import_module(module), function)(argv))
     except KeyboardInterrupt as interrupt:
         print(
             f'\n{prog}: interrupted by {signal_name(interrupt)} while starting: nothing written',
@@ -86,6 +88,11 @@ def demo(argv: list[str] | None = None) -> int:
 def analyze(argv: list[str] | None = None) -> int:
     """Run ``grasp-analyze`` (:func:`grasp_safety_filter.cli.analyze_main`)."""
     return _run('grasp-analyze', 'analyze_main', argv)
+
+
+def campaign(argv: list[str] | None = None) -> int:
+    """Run ``grasp-campaign`` (:func:`grasp_safety_filter.campaign.command.main`)."""
+    return _run('grasp-campaign', 'main', argv, 'grasp_safety_filter.campaign.command')
 
 
 def record(argv: list[str] | None = None) -> int:
