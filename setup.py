@@ -94,7 +94,7 @@ setup(
             'grasp-bench-realtime = grasp_tools.bench.real_time:main',
             'grasp-record = grasp_safety_filter.console:record',
             'grasp-campaign = grasp_safety_filter.console:campaign',
-            'grasp-model-report = grasp_safety_filter.cli:model_report_main',
+            'grasp-model-report = grasp_safety_filter.model_report:main',
             'hand_sim_node = grasp_safety_filter.nodes.entry_points:hand_sim_node',
             (
                 'nominal_controller_node = '

@@ -179,3 +179,55 @@ def test_a_campaign_stopped_halfway_resumes_to_the_same_table(tmp_path, local_ta
     assert after[: len(before)] == before  # nothing lost or rewritten
     assert len(after) == len(set(after)) == RUNS  # nothing run twice
     assert_same_table(outcome_table(out), local_table)
+
+
+def test_a_killed_scheduler_stops_the_campaign_and_the_same_command_resumes(
+    tmp_path, local_table
+):
+    out = tmp_path / 'out'
+    path = campaign_file(tmp_path)
+    env = {**os.environ, 'DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT': '5s'}
+    scheduler = subprocess.Popen(
+        [sys.executable, '-m', 'distributed.cli.dask_scheduler', '--port', '0',
+         '--no-dashboard', '--scheduler-file', str(tmp_path / 'scheduler.json')],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 60
+        while not (tmp_path / 'scheduler.json').is_file():
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+        time.sleep(0.5)  # the file is written whole before the scheduler listens
+        address = json.loads((tmp_path / 'scheduler.json').read_text())['address']
+        worker = subprocess.Popen(
+            [sys.executable, '-m', 'distributed.cli.dask_worker', address, '--nthreads', '1',
+             '--nworkers', '2', '--no-dashboard'],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+        )  # fmt: skip
+        process = subprocess.Popen(
+            command(path, out, '--scheduler', address),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        )  # fmt: skip
+        deadline = time.monotonic() + 300
+        while not (out / 'results.jsonl').is_file() or len(finished_keys(out)) < RUNS // 2:
+            assert process.poll() is None, process.communicate()
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+        scheduler.kill()
+        _, stderr = process.communicate(timeout=120)
+        worker.kill()
+        worker.wait(timeout=60)
+    finally:
+        scheduler.kill()
+    assert process.returncode == 1, stderr
+    assert 'the same command resumes' in stderr
+    before = finished_keys(out)
+    assert RUNS // 2 <= len(before) < RUNS
+    rows = [json.loads(line) for line in (out / 'results.jsonl').read_text().splitlines()]
+    assert not any(row['error'] for row in rows)  # a cancelled run is no result
+    result = subprocess.run(command(path, out), capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    after = finished_keys(out)
+    assert after[: len(before)] == before
+    assert len(after) == len(set(after)) == RUNS
+    assert_same_table(outcome_table(out), local_table)

@@ -26,7 +26,7 @@ ENTRY_POINTS = {
     'node entry points': 'grasp_safety_filter.nodes.entry_points',
     'grasp-demo, grasp-analyze, grasp-record, grasp-campaign': 'grasp_safety_filter.console',
     'grasp-campaign': 'grasp_safety_filter.campaign.command',
-    'grasp-model-report': 'grasp_safety_filter.cli',
+    'grasp-model-report': 'grasp_safety_filter.model_report',
     "the simulator node's MuJoCo plant": 'hand_sim_node.mujoco_plant',
     'launch files': 'grasp_safety_filter.io.launch_arguments',
 }

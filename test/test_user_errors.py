@@ -20,7 +20,8 @@ from typing import Any
 import pytest
 import yaml
 
-from grasp_safety_filter.cli import demo_main, model_report_main
+from grasp_safety_filter.cli import demo_main
+from grasp_safety_filter.model_report import main as model_report_main
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIG_DIR = REPO / 'config'

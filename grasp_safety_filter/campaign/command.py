@@ -2,8 +2,8 @@
 
 Run again with the same ``--out``, it resumes: finished runs are read from
 ``DIR/results.jsonl`` and only the others run. Exit status 0 when every run finished
-(whatever they held), 130 when stopped by a signal, 1 when the scheduler was lost,
-2 for an invalid campaign file.
+(whatever they held), 130 when stopped by a signal, 1 when the scheduler was not reached or
+was lost, 2 for an invalid campaign file.
 """
 
 from __future__ import annotations
@@ -110,7 +110,11 @@ def _execute(campaign: Campaign, runs: list[Any], store: ResultStore, args: Any)
         file=sys.stderr,
     )
     start = time.perf_counter()
-    with tqdm(total=len(keys), initial=already, unit='run', disable=None, file=sys.stderr) as bar:
+    # On a terminal the bar moves; in a batch job's log it is a line every 30 s.
+    interval = 0.5 if sys.stderr.isatty() else 30.0
+    with tqdm(
+        total=len(keys), initial=already, unit='run', mininterval=interval, file=sys.stderr
+    ) as bar:
         lost = [0, 0]
 
         def progress(row: dict[str, Any]) -> None:
@@ -133,7 +137,11 @@ def _execute(campaign: Campaign, runs: list[Any], store: ResultStore, args: Any)
             return INTERRUPTED
         except OSError as error:  # the scheduler cannot be reached or was lost
             bar.close()
-            print(f'{PROG}: scheduler lost: {error}; the same command resumes', file=sys.stderr)
+            print(
+                f'{PROG}: the scheduler was not reached or was lost ({error}): '
+                f'{len(store.rows(runs))} of {len(runs)} runs finished; the same command resumes',
+                file=sys.stderr,
+            )
             return 1
     elapsed = time.perf_counter() - start
     print(

@@ -15,7 +15,8 @@ failed, like a run that raised.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from concurrent.futures import CancelledError
+import contextlib
 import logging
 import os
 import signal
@@ -24,6 +25,20 @@ from typing import Any
 from grasp_safety_filter.campaign.run import execute_run, failed_outcome, identity
 from grasp_safety_filter.campaign.spec import RunSpec
 from grasp_safety_filter.campaign.store import ResultStore
+
+
+#: Dask settings of the local cluster's workers. Dask's statistical profiler samples the
+#: running thread every 10 ms and takes the GIL to do it: off, a run's CPU drops by about
+#: a tenth (docs/campaigns.md). A cluster's workers: DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED.
+LOCAL_WORKER_CONFIG = {
+    'distributed.worker.profile.enabled': False,
+    'distributed.admin.system-monitor.interval': '2s',
+}
+
+
+class SchedulerLostError(ConnectionError):
+    """The scheduler went away with runs pending: they are not results, and run again later."""
+
 
 Progress = Callable[[dict[str, Any]], None]
 """Called with each finished run's row."""
@@ -36,13 +51,14 @@ def default_workers() -> int:
     )
 
 
-@contextmanager
+@contextlib.contextmanager
 def dask_client(scheduler: str | None = None, workers: int | None = None) -> Iterator[Any]:
     """Yield a Dask client: of the scheduler at ``scheduler``, or of a local cluster.
 
     The local cluster has ``workers`` single-threaded worker processes (default: one per
     core) and no dashboard; it is shut down on exit. Call from the main thread.
     """
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -53,13 +69,14 @@ def dask_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     # whole process group, and it is this process's to stop the campaign and the cluster.
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        cluster = LocalCluster(
-            n_workers=workers or default_workers(),
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=logging.ERROR,
-        )
+        with dask.config.set(LOCAL_WORKER_CONFIG):  # handed to the worker processes
+            cluster = LocalCluster(
+                n_workers=workers or default_workers(),
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+            )
     finally:
         signal.signal(signal.SIGINT, previous)
     with cluster, Client(cluster) as client:
@@ -92,6 +109,9 @@ def execute(
             run = futures[future]
             try:
                 row = future.result()
+            except CancelledError:
+                # The client cancels every future when it loses the scheduler: not a result.
+                raise SchedulerLostError('runs cancelled: the scheduler was lost') from None
             except Exception as error:  # the worker died (KilledWorker) or could not load it
                 row = {**identity(run), **failed_outcome(f'{type(error).__name__}: {error}')}
             store.append(row)
@@ -99,5 +119,6 @@ def execute(
             if progress is not None:
                 progress(row)
     finally:
-        client.cancel(list(futures))
+        with contextlib.suppress(Exception):  # a lost scheduler cannot be told
+            client.cancel(list(futures))
     return done

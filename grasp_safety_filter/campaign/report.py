@@ -193,7 +193,7 @@ def _levels(values: Sequence[Any]) -> list[tuple[str, Any]]:
     distinct = sorted(set(values), key=str)
     numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in distinct)
     if len(distinct) <= MAX_LEVELS or not numeric:
-        return [(str(v), lambda x, v=v: x == v) for v in distinct]
+        return [(_label(v), lambda x, v=v: x == v) for v in distinct]
     edges = np.quantile(np.asarray(values, dtype=float), np.linspace(0.0, 1.0, BINS + 1))
     levels = []
     for i in range(BINS):
@@ -206,6 +206,10 @@ def _levels(values: Sequence[Any]) -> list[tuple[str, Any]]:
         )
         levels.append((f'{lo:.3g} – {hi:.3g}', test))
     return levels
+
+
+def _label(value: Any) -> str:
+    return f'{value:.4g}' if isinstance(value, float) else str(value)
 
 
 def _plots(
@@ -223,35 +227,32 @@ def _plots(
         if len(set(map(str, values))) < 2:
             continue
         levels = _levels(values)
+        counts = {
+            (label, mode): (_held(inside), len(inside))
+            for label, test in levels
+            for mode in modes
+            for inside in [
+                [r for r in rows if r['mode'] == mode and r.get(column) is not None
+                 and test(r[column])]
+            ]
+        }  # fmt: skip
         table = [f'| `{column}` | ' + ' | '.join(modes) + ' |', '| --- |' + ' --- |' * len(modes)]
+        table += [
+            f'| {label} | ' + ' | '.join(rate_text(*counts[label, mode]) for mode in modes) + ' |'
+            for label, _ in levels
+        ]
         figure, axes = plt.subplots(figsize=(6.0, 3.2))
         for offset, mode in enumerate(modes):
-            rates, lows, highs = [], [], []
-            for _, test in levels:
-                mine = [r for r in rows if r['mode'] == mode and r.get(column) is not None]
-                inside = [r for r in mine if test(r[column])]
-                held = _held(inside)
-                low, high = wilson_interval(held, len(inside))
-                rate = held / len(inside) if inside else math.nan
-                rates.append(rate)
-                lows.append(rate - low)
-                highs.append(high - rate)
+            held = np.array([counts[label, mode] for label, _ in levels], dtype=float)
+            with np.errstate(invalid='ignore', divide='ignore'):
+                rates = held[:, 0] / held[:, 1]
+            bounds = np.array([wilson_interval(int(k), int(n)) for k, n in held])
             x = np.arange(len(levels)) + 0.1 * (offset - (len(modes) - 1) / 2)
-            axes.errorbar(x, rates, yerr=[lows, highs], fmt='o', capsize=3, label=mode)
-        for index, (label, test) in enumerate(levels):
-            cells = []
-            for mode in modes:
-                inside = [
-                    r
-                    for r in rows
-                    if r['mode'] == mode and r.get(column) is not None and test(r[column])
-                ]
-                cells.append(rate_text(_held(inside), len(inside)))
-            table.append(f'| {label} | ' + ' | '.join(cells) + ' |')
-            del index
+            errors = [rates - bounds[:, 0], bounds[:, 1] - rates]
+            axes.errorbar(x, rates, yerr=errors, fmt='o', capsize=3, label=mode)
         axes.set_xticks(range(len(levels)), [label for label, _ in levels], fontsize=7)
         axes.set_ylim(-0.05, 1.05)
-        axes.set_ylabel('held')
+        axes.set_ylabel('held (95 % interval)')
         axes.set_xlabel(column)
         axes.legend(fontsize=8)
         figure.tight_layout()
