@@ -108,19 +108,32 @@ def test_a_bad_campaign_is_refused_naming_the_problem(tmp_path, change, message)
         load_campaign(write(tmp_path, BASE.replace(old, new)))
 
 
-def summary(completed=True, violations=None, friction=0.1) -> dict:
+def summary(completed=True, violations=None, friction=0.1, events=None) -> dict:
     families = ('fingertip_workspace', 'joint_limits', 'slip', 'separation', 'object_face')
     record = {family: {'count': 0, 'first_t': None} for family in families}
     for family, t in (violations or {}).items():
         record[family] = {'count': 3, 'first_t': t}
-    return {
+    document = {
         'completed': completed,
         't_end': 1.0,
+        'duration_requested': 1.0,
         'stop_reason': None if completed else 'slip',
         'violations': record,
         'min_margin': {'fingertip_workspace': 0.2, 'joint_limits': 0.3, 'friction': friction},
         'filter': {'steps': 1000, 'relaxed_steps': 4, 'failed_steps': 0},
         'object_tracking': {'position_error_m': {'rms': 0.01}},
+    }
+    if events is not None:  # MuJoCo's measured contact events
+        document['plant'] = 'mujoco'
+        document['contact_events'] = events
+    return document
+
+
+def mujoco_events(lost=None, dropped=None) -> dict:
+    return {
+        'contact_lost': {'finger1': lost, 'finger2': None},
+        'object_dropped': dropped,
+        'slip_distance': {'finger1': 0.002, 'finger2': 0.0005},
     }
 
 
@@ -131,6 +144,16 @@ def summary(completed=True, violations=None, friction=0.1) -> dict:
         (summary(completed=False), False, '', None),
         (summary(violations={'slip': 0.4, 'joint_limits': 0.2}), False, 'joint_limits', 0.2),
         (summary(violations={'object_face': 0.9}), False, 'object_face', 0.9),
+        # MuJoCo: slip (beta > mu from its forces) is reported; a lost contact decides.
+        (summary(violations={'slip': 0.3}, events=mujoco_events()), True, 'slip', 0.3),
+        (summary(events=mujoco_events(lost=0.7)), False, '', None),
+        (summary(events=mujoco_events(dropped=0.8)), False, '', None),
+        (
+            summary(violations={'joint_limits': 0.5}, events=mujoco_events()),
+            False,
+            'joint_limits',
+            0.5,
+        ),
     ],
 )
 def test_a_run_holds_only_to_its_end_with_nothing_violated(case, held, first, first_t):
@@ -139,6 +162,7 @@ def test_a_run_holds_only_to_its_end_with_nothing_violated(case, held, first, fi
     assert outcome['first_violation'] == first
     assert outcome['first_violation_t'] == first_t
     assert outcome['orientation_error_rms'] is None
+    assert outcome['max_slip'] == (0.002 if 'contact_events' in case else None)
 
 
 @pytest.mark.parametrize(('held', 'runs'), [(0, 10), (10, 10), (97, 100), (1, 3), (500, 1000)])

@@ -26,7 +26,6 @@ from grasp_safety_filter.campaign.run import execute_run, failed_outcome, identi
 from grasp_safety_filter.campaign.spec import RunSpec
 from grasp_safety_filter.campaign.store import ResultStore
 
-
 #: Dask settings of the local cluster's workers. Dask's statistical profiler samples the
 #: running thread every 10 ms and takes the GIL to do it: off, a run's CPU drops by about
 #: a tenth (docs/campaigns.md). A cluster's workers: DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED.

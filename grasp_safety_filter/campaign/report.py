@@ -124,8 +124,10 @@ def write_report(
         f'{", ".join(campaign.modes)}, {campaign.samples} samples (seed {campaign.seed}). '
         f'Finished: {len(rows)} of {len(runs)} runs; {len(errors)} raised (not counted).',
         '',
-        'Held: the run reached its duration with no slip, separation, joint-limit, '
-        'fingertip-workspace or object-face violation. Rates with 95 % Wilson intervals.',
+        "Held: grasp-analyze's verdict. On the rigid plant the run reached its duration "
+        'with no slip, separation, joint-limit, fingertip-workspace or object-face violation; '
+        'on MuJoCo with no contact lost, the object not dropped and no joint limit passed. '
+        'Rates with 95 % Wilson intervals.',
         '',
         '## Held, per mode',
         '',

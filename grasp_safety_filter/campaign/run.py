@@ -19,6 +19,7 @@ from typing import Any
 
 from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.analysis.summary import summarize
+from grasp_safety_filter.analysis.verdict import run_verdict
 from grasp_safety_filter.campaign.spec import RunSpec
 from grasp_safety_filter.runner import record_run
 
@@ -39,6 +40,7 @@ OUTCOME_COLUMNS = (
     'ticks',
     'position_error_rms',
     'orientation_error_rms',
+    'max_slip',
     'error',
 )
 #: Where and how long it ran: not part of the outcome (differ between machines and runs).
@@ -91,8 +93,11 @@ def failed_outcome(error: str, details: str = '') -> dict[str, Any]:
 def outcome_of(summary: dict[str, Any]) -> dict[str, Any]:
     """Return a run's outcome columns from its ``summary.json``.
 
-    ``held``: the run reached its duration and no constraint was violated (slip, separation,
-    a joint limit, the fingertip workspace, an object face), whatever the scenario stops on.
+    ``held`` is ``grasp-analyze``'s verdict (:func:`~grasp_safety_filter.analysis.verdict.
+    run_verdict`): on the rigid plant, the run reached its duration with no constraint
+    violated (slip, separation, a joint limit, the fingertip workspace, an object face),
+    whatever the scenario stops on; on MuJoCo, with no contact lost, the object not dropped
+    and no joint limit passed (its slip is measured: ``max_slip``).
     """
     firsts = {
         family: record['first_t']
@@ -103,8 +108,10 @@ def outcome_of(summary: dict[str, Any]) -> dict[str, Any]:
     margins = summary['min_margin']
     steps = summary.get('filter', {})
     tracking = summary.get('object_tracking', {})
+    events = summary.get('contact_events') or {}
+    slips = [d for d in (events.get('slip_distance') or {}).values() if d is not None]
     return {
-        'held': bool(summary['completed'] and not firsts),
+        'held': run_verdict(summary).held,
         'completed': bool(summary['completed']),
         't_end': summary['t_end'],
         'stop_reason': summary['stop_reason'] or '',
@@ -120,6 +127,7 @@ def outcome_of(summary: dict[str, Any]) -> dict[str, Any]:
         'ticks': steps.get('steps'),
         'position_error_rms': _rms(tracking, 'position_error_m'),
         'orientation_error_rms': _rms(tracking, 'orientation_error_rad'),
+        'max_slip': max(slips) if slips else None,
         'error': '',
     }
 
