@@ -475,6 +475,25 @@ def test_nodes_exit_quietly_on_two_sigints_while_they_are_built():
             node.kill()
 
 
+def test_the_filter_node_logs_its_start_up_advice_once_at_its_first_tick():
+    """The paper's cubic class-K functions freeze its joint limits: a warning, with gains."""
+    nodes = start_graph()
+    try:
+        node = nodes[NODE_NAMES.index('safety_filter_node')]
+        node.wait_for_line(r'^\[WARN\] .*start-up advice \(frozen\): joint_limits: .* frozen')
+        node.wait_for_line(r'start-up advice \(frozen\): QP at rest: feasible')
+        node.wait_for_line(r'start-up advice \(frozen\): suggestion: barrier\.alpha1\.kind=linear')
+        time.sleep(0.5)  # more ticks: no second advice
+        advice = [line for line in node.lines if 'start-up advice' in line]
+        assert len(advice) == 4, node.report()  # joint limits, fingertip workspace, QP, gains
+        for process in nodes:
+            process.process.send_signal(signal.SIGINT)
+        assert_quiet_exits(nodes)
+    finally:
+        for node in nodes:
+            node.kill()
+
+
 def wait_until_importing(
     node: NodeProcess, library: str, timeout: float = PROCESS_TIMEOUT
 ) -> None:

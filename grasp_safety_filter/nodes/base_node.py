@@ -197,11 +197,13 @@ class EndpointNode(Node):
                 self._log_statuses(msg)
 
     def log_lines(self, lines: Iterable[tuple[DiagnosticLevel, str]]) -> None:
-        """Log an endpoint's lines: ERROR as errors, anything else as information."""
+        """Log an endpoint's lines: ERROR as errors, WARN as warnings, others as information."""
         for level, text in lines:
             # One call site per severity: rclpy refuses to change it between calls.
             if level == DiagnosticLevel.ERROR:
                 self.get_logger().error(text)
+            elif level == DiagnosticLevel.WARN:
+                self.get_logger().warning(text)
             else:
                 self.get_logger().info(text)
 

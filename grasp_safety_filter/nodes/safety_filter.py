@@ -60,6 +60,7 @@ from grasp_safety_filter.nodes.object_stream import EXACT, ObjectStream, StreamC
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRate, PublicationRateConfig
 from grasp_safety_filter.nodes.shared_parse import SharedParse
+from grasp_safety_filter.nodes.startup_log import StartupLog
 from grasp_safety_filter.nodes.tick_answer import TickAnswer
 from grasp_safety_filter.nodes.tick_inputs import INPUTS, REPLAY, TickAssembler, TickInputs
 
@@ -162,6 +163,7 @@ class SafetyFilterEndpoint:
         self._last_rejection: str | None = None
         self._wall_clock = wall_clock
         self._switched_at: float | None = None
+        self._advice = StartupLog(model)
 
     # -------------------------------------------------------------------------- inputs
     def on_joint_states(
@@ -266,6 +268,7 @@ class SafetyFilterEndpoint:
         """
         if filter_config is not None:
             self.filter = SafetyFilter.from_config(self.model, filter_config)
+            self._advice.again()
         if input_policy_config is not None:
             self.inputs.guard.max_age = input_policy_config.max_age
             self.hold.hold_timeout = input_policy_config.hold_timeout
@@ -344,6 +347,7 @@ class SafetyFilterEndpoint:
                 stamp,
             )
         self.last_result = result
+        self._advice.first_state(state)
         u = self.hold.accept(now, u)
         # The gravity fallback's q: only a tick's accepted joint state, never one merely parsed.
         self.held.last_positions = np.array(inputs.joint_states.position)
@@ -393,8 +397,8 @@ class SafetyFilterEndpoint:
         return wall if self._wall_clock is None else max(wall, self._wall_clock())
 
     def take_log(self) -> list[LogLine]:
-        """Return and forget the grasp check's log lines (each change of its answer, once)."""
-        return self.grasp.take_log()
+        """Return and forget the log lines: the grasp check's changes, the start-up advice."""
+        return self.grasp.take_log() + self._advice.take(self.filter)
 
     def _reject(
         self,

@@ -1,0 +1,239 @@
+"""Start-up advice: what the barrier families allow at the initial grasp, and the QP at rest.
+
+At rest (``h_dot = 0``) a relative-degree-two barrier row ``h_ddot + alpha_1'(h) h_dot +
+alpha_2(B) >= 0`` with ``B = h_dot + alpha_1(h)`` lets its coordinate accelerate towards the
+bound at most at ``a = alpha_2(alpha_1(h))``, and approach it at most at ``v = alpha_1(h)``.
+The time it takes to use the margin h is of the order of::
+
+    tau = h / v + v / a          (linear alpha_i = k_i h: tau = 1 / k_1 + 1 / k_2)
+
+A family whose rows have ``tau`` longer than a motion of the task (``frozen_time``, 1 s by
+default) is practically frozen: the cubic ``alpha(h) = h^3`` at 0.15 rad leaves 3.4e-3 rad/s
+and 3.8e-8 rad/s^2, tau = 9e4 s. The linear functions' tau does not depend on h, nor on its
+unit (rad on a joint or a fingertip, m on an object face), so they are the suggestion:
+``k_1 = k_2 = 2 / tau_target``.
+
+The QP at rest: the largest ball of torques (radius ``rest_margin``, N·m) inside every row
+``A_r u >= lower_r`` (rows normalised by ``|A_r|``) and the actuator box, a linear program
+(scipy's HiGHS). ``rest_margin < 0``: no torque holds the grasp at rest within the actuator
+limits; the rows that bind at the optimum name the conflict.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Any
+
+import numpy as np
+from scipy.optimize import linprog
+
+from grasp_safety_filter.control.constraints.box_barrier import BoxBarrier
+from grasp_safety_filter.model.grasp_state import GraspState
+
+#: A family that needs longer than this to use its margins from rest is frozen, s.
+FROZEN_TIME = 1.0
+#: tau of the suggested linear class-K functions, s (gain 2 / TARGET_TIME each).
+TARGET_TIME = 0.2
+#: The families with a rest margin but no class-K function (their rows are not rates).
+_SKIPPED = ('torque_rate',)
+#: Rows whose |A_r| is below this (N·m^-1 in the row's unit) have no torque to act on.
+_ZERO_ROW = 1e-12
+#: Binding rows at the LP's optimum: |dual| above this.
+_BINDING_DUAL = 1e-9
+
+
+@dataclass(frozen=True)
+class FamilyAdvice:
+    """One barrier family's allowance at the initial margins, at rest.
+
+    Attributes:
+        family: The family's name.
+        row: The row with the longest ``tau`` (of equal ones, the smallest margin).
+        margin: Its h (rad, or m on an object face).
+        speed: ``alpha_1(h)``: its largest approach speed, unit/s.
+        acceleration: ``alpha_2(alpha_1(h))``: its largest acceleration from rest, unit/s^2.
+        tau: ``h / speed + speed / acceleration``, s (inf at h <= 0).
+        frozen_rows: How many of the family's rows have ``tau > frozen_time``.
+        rows: The family's number of rows.
+    """
+
+    family: str
+    row: str
+    margin: float
+    speed: float
+    acceleration: float
+    tau: float
+    frozen_rows: int
+    rows: int
+
+    @property
+    def frozen(self) -> bool:
+        """Whether any row is practically frozen."""
+        return self.frozen_rows > 0
+
+
+@dataclass(frozen=True)
+class StartupAdvice:
+    """The advice at one state: family allowances, the QP at rest, suggested gains.
+
+    Attributes:
+        families: One entry per enabled relative-degree-two family.
+        rest_margin: Radius of the largest torque ball inside every row at rest, N·m (< 0:
+            infeasible at rest).
+        binding: The rows that limit ``rest_margin`` (barrier rows and actuator limits).
+        suggestion: ``--set`` values for linear class-K functions of ``TARGET_TIME``, when a
+            family is frozen; empty otherwise.
+    """
+
+    families: tuple[FamilyAdvice, ...]
+    rest_margin: float
+    binding: tuple[str, ...]
+    suggestion: dict[str, Any]
+
+    @property
+    def frozen(self) -> tuple[str, ...]:
+        """The frozen families' names."""
+        return tuple(f.family for f in self.families if f.frozen)
+
+    @property
+    def verdict(self) -> str:
+        """``infeasible``, ``frozen`` or ``ok`` (the first that applies)."""
+        if not self.rest_margin >= 0.0:
+            return 'infeasible'
+        if self.frozen:
+            return 'frozen'
+        return 'ok'
+
+    @property
+    def warns(self) -> bool:
+        """Whether the advice is a warning (anything but ``ok``)."""
+        return self.verdict != 'ok'
+
+    def lines(self) -> list[str]:
+        """Return the advice as log lines, one per family, the QP at rest and a suggestion."""
+        lines = []
+        for f in self.families:
+            unit = _unit(f.row)
+            state = (
+                f'practically frozen ({f.frozen_rows} of {f.rows} rows)' if f.frozen else 'free'
+            )
+            lines.append(
+                f'{f.family}: smallest margin {f.margin:.3g} {unit} ({f.row}): approach at '
+                f'most {f.speed:.2g} {unit}/s, accelerate at most {f.acceleration:.2g} '
+                f'{unit}/s^2 from rest, {f.tau:.2g} s to use it: {state}'
+            )
+        limiting = ', '.join(self.binding[:4]) + (' ...' if len(self.binding) > 4 else '')
+        if self.verdict == 'infeasible':
+            lines.append(
+                f'QP at rest: infeasible by {-self.rest_margin:.3g} N·m: no torque within the '
+                f'actuator limits holds the grasp (conflicting: {limiting})'
+            )
+        else:
+            lines.append(
+                f'QP at rest: feasible with a margin of {self.rest_margin:.3g} N·m (limited '
+                f'by {limiting})'
+            )
+        if self.suggestion:
+            settings = ' '.join(f'{k}={v}' for k, v in self.suggestion.items())
+            lines.append(
+                f'suggestion: {settings} (every family uses its margin in about '
+                f'{TARGET_TIME:g} s, whatever its unit)'
+            )
+        return lines
+
+
+def rest_state(model: Any, state: GraspState) -> GraspState:
+    """Return ``state``'s configuration at rest (joint and object velocities zero)."""
+    return model.state(
+        state.t,
+        state.q,
+        np.zeros_like(state.q),
+        state.p_object_in_palm,
+        state.R_object_to_palm,
+        np.zeros(6),
+    )
+
+
+def startup_advice(
+    safety_filter: Any,
+    state: GraspState,
+    frozen_time: float = FROZEN_TIME,
+) -> StartupAdvice:
+    """Return the advice at ``state`` (at rest: :func:`rest_state`) for a ``SafetyFilter``.
+
+    Reads the filter's families and actuator limits; writes nothing of the filter's.
+    """
+    m = safety_filter.n_joints
+    limits = safety_filter.actuator_limits
+    families = [f for f in safety_filter.families if f.family not in _SKIPPED]
+    blocks = [f.rows(state) for f in families] + [limits.rows(None)]
+    A = np.vstack([b.A for b in blocks])
+    lower = np.concatenate([b.lower for b in blocks])
+    names = tuple(n for b in blocks for n in b.names)
+    allowances = tuple(
+        _family_advice(f, state, frozen_time) for f in families if isinstance(f, BoxBarrier)
+    )
+    rest_margin, binding = _rest_margin(A, lower, names, m)
+    frozen = any(f.frozen for f in allowances)
+    gain = 2.0 / TARGET_TIME
+    suggestion: dict[str, Any] = {}
+    if frozen:
+        for alpha in ('alpha1', 'alpha2'):
+            suggestion[f'barrier.{alpha}.kind'] = 'linear'
+            suggestion[f'barrier.{alpha}.gain'] = gain
+    return StartupAdvice(allowances, rest_margin, binding, suggestion)
+
+
+def _family_advice(family: BoxBarrier, state: GraspState, frozen_time: float) -> FamilyAdvice:
+    """Return one relative-degree-two family's allowance at rest at ``state``."""
+    h = np.asarray(family.values(state).h, dtype=float)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        speed = family.alpha1.value(h)
+        acceleration = family.alpha2.value(speed)
+        tau = np.where(h > 0.0, h / speed + speed / acceleration, math.inf)
+    tau = np.where(np.isnan(tau), math.inf, tau)
+    worst = int(np.lexsort((h, -tau))[0])  # the longest tau; of equal ones, the smallest h
+    return FamilyAdvice(
+        family.family,
+        family.names[worst],
+        float(h[worst]),
+        float(speed[worst]),
+        float(acceleration[worst]),
+        float(tau[worst]),
+        int(np.count_nonzero(tau > frozen_time)),
+        len(family.names),
+    )
+
+
+def _rest_margin(
+    A: np.ndarray, lower: np.ndarray, names: tuple[str, ...], m: int
+) -> tuple[float, tuple[str, ...]]:
+    """Return the largest t with a ball of radius t (N·m) inside ``A u >= lower``, and its rows.
+
+    A row without torque (``|A_r| ~ 0``) holds for every torque or none: one with
+    ``lower_r > 0`` makes the QP infeasible whatever the others (-inf, that row).
+    """
+    norms = np.linalg.norm(A, axis=1)
+    live = norms > _ZERO_ROW
+    dead = [n for n, ok, b in zip(names, live, lower, strict=True) if not ok and b > 0.0]
+    if dead:
+        return -math.inf, tuple(dead)
+    # Variables (u, t): maximise t subject to -A_r u + |A_r| t <= -lower_r.
+    A_ub = np.hstack((-A[live], norms[live, np.newaxis]))
+    cost = np.zeros(m + 1)
+    cost[-1] = -1.0
+    bounds = [(None, None)] * m + [(None, None)]
+    result = linprog(cost, A_ub=A_ub, b_ub=-lower[live], bounds=bounds, method='highs')
+    if result.status != 0:  # unbounded cannot happen (the actuator box); numerical trouble
+        return -math.inf, ()
+    live_names = [n for n, ok in zip(names, live, strict=True) if ok]
+    duals = np.asarray(result.ineqlin.marginals)
+    binding = tuple(n for n, d in zip(live_names, duals, strict=True) if abs(d) > _BINDING_DUAL)
+    return float(-result.fun), binding
+
+
+def _unit(row: str) -> str:
+    """Return a barrier row's unit: m on an object face (``u_*``, ``v_*``), else rad."""
+    label = row.rsplit('/', 1)[-1]
+    return 'm' if label.startswith(('u_', 'v_')) else 'rad'

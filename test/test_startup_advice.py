@@ -1,0 +1,206 @@
+"""The start-up advice: family allowances at rest, the QP at rest, the suggested gains.
+
+Checked against what the advice does not compute itself: each allowance against the row the
+filter's own family writes at rest (its ``lower`` is minus that acceleration), tau against the
+linear functions' closed form ``1/k1 + 1/k2``, the rest margin against the hard QP of two
+independent solvers (OSQP and daqp) at the ball's centre and against the filter's own tick
+at rest, and the suggestion against the advice it gives once applied.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import daqp
+import numpy as np
+import pytest
+
+from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
+from grasp_safety_filter.control.startup_advice import rest_state, startup_advice
+from grasp_safety_filter.io.messages import DiagnosticLevel
+from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.io.schemas import (
+    HAND_SIM_NODE,
+    load_node_parameters,
+    node_overrides,
+    SAFETY_FILTER_NODE,
+)
+from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.model.quaternion import rotation_matrix
+from grasp_safety_filter.model_report import main as model_report_main
+from grasp_safety_filter.model_report import scenario_advice
+from grasp_safety_filter.nodes.startup_log import PREFIX, StartupLog
+
+CONFIG = Path(config_path()).parent
+LINEAR = {
+    'barrier.alpha1.kind': 'linear',
+    'barrier.alpha2.kind': 'linear',
+    'barrier.alpha1.gain': 10.0,
+    'barrier.alpha2.gain': 10.0,
+}
+
+# scenario, overrides, expected verdict, families expected frozen
+CASES = [
+    ('paper_scenario.yaml', {}, 'frozen', {'joint_limits'}),
+    ('paper_scenario.yaml', LINEAR, 'ok', set()),
+    ('four_finger_box.yaml', {}, 'frozen', {'joint_limits'}),
+    ('four_finger_box.yaml', LINEAR, 'ok', set()),
+    (
+        'four_finger_sphere.yaml',
+        {'object_workspace.enabled': True},
+        'frozen',
+        {'joint_limits', 'object_workspace'},
+    ),
+    ('four_finger_sphere.yaml', {**LINEAR, 'object_workspace.enabled': True}, 'ok', set()),
+    ('four_finger_three_contacts.yaml', {}, 'frozen', {'joint_limits'}),
+    # The filter's own mu far below the plant's: no squeeze holds the cube in its cones.
+    (
+        'paper_scenario.yaml',
+        {'safety_filter_node/model.friction_coefficient': 0.01},
+        'infeasible',
+        None,
+    ),
+]
+
+
+def _filter_and_state(scenario: str, overrides: dict):
+    """Return the filter node's filter and its model's state at rest at the initial grasp."""
+    path = CONFIG / scenario
+    sim = load_node_parameters(
+        path, HAND_SIM_NODE, overrides=node_overrides(overrides, HAND_SIM_NODE)
+    )
+    params = _filter_parameters(scenario, overrides)
+    model = GraspModel.from_parameters(params)
+    p = np.asarray(sim['initial.object_position'], dtype=float)
+    R = rotation_matrix(sim['initial.object_orientation'])
+    q = model.project_to_contact(sim['initial.joint_positions'], p, R)
+    state = model.state(0.0, q, np.zeros(model.n_joints), p, R, np.zeros(6))
+    config = SafetyFilterConfig.from_parameters(params)
+    return model, SafetyFilter.from_config(model, config), state
+
+
+def _filter_parameters(scenario: str, overrides: dict) -> dict:
+    """Return the filter node's parameters of a scenario, with its overrides."""
+    own = node_overrides(overrides, SAFETY_FILTER_NODE)
+    return load_node_parameters(CONFIG / scenario, SAFETY_FILTER_NODE, overrides=own)
+
+
+@pytest.mark.parametrize(('scenario', 'overrides', 'verdict', 'frozen'), CASES)
+def test_advice_verdict_and_frozen_families(scenario, overrides, verdict, frozen):
+    advice = scenario_advice(CONFIG / scenario, overrides)
+    assert advice.verdict == verdict, advice.lines()
+    if frozen is not None:
+        assert set(advice.frozen) == frozen, advice.lines()
+    assert bool(advice.suggestion) == bool(advice.frozen)
+    assert advice.warns == (verdict != 'ok')
+
+
+@pytest.mark.parametrize(('scenario', 'overrides'), [(c[0], c[1]) for c in CASES[:6]])
+def test_allowance_is_the_rows_own_bound_at_rest(scenario, overrides):
+    """At rest a row reads ``s x_ddot(u) >= -alpha_2(alpha_1(h))``.
+
+    Its lower bound is ``-s x_ddot(0) - alpha_2(alpha_1(h))``: with alpha_2's gain doubled
+    (the same state, so the same drift ``x_ddot(0)``) it drops by the allowance.
+    """
+    _, safety_filter, state = _filter_and_state(scenario, overrides)
+    gain = SafetyFilterConfig.from_parameters(_filter_parameters(scenario, overrides)).alpha2_gain
+    _, doubled, _ = _filter_and_state(scenario, {**overrides, 'barrier.alpha2.gain': 2.0 * gain})
+    advice = startup_advice(safety_filter, state)
+    assert advice.families
+    one = {f.family: f for f in safety_filter.families}
+    two = {f.family: f for f in doubled.families}
+    for entry in advice.families:
+        rows_one, rows_two = one[entry.family].rows(state), two[entry.family].rows(state)
+        r = rows_one.names.index(entry.row)
+        drop = rows_one.lower[r] - rows_two.lower[r]
+        assert entry.acceleration == pytest.approx(drop, rel=1e-6, abs=1e-12)
+        assert entry.margin == pytest.approx(one[entry.family].values(state).h[r], abs=1e-12)
+
+
+@pytest.mark.parametrize(('k1', 'k2'), [(10.0, 10.0), (2.0, 10.0), (30.0, 40.0)])
+def test_linear_tau_is_independent_of_the_margin(k1, k2):
+    overrides = {**LINEAR, 'barrier.alpha1.gain': k1, 'barrier.alpha2.gain': k2}
+    advice = scenario_advice(CONFIG / 'four_finger_box.yaml', overrides)
+    for entry in advice.families:
+        assert entry.tau == pytest.approx(1.0 / k1 + 1.0 / k2, rel=1e-9)
+        assert entry.frozen == (1.0 / k1 + 1.0 / k2 > 1.0)
+
+
+def test_suggestion_unfreezes_every_family():
+    advice = scenario_advice(CONFIG / 'four_finger_box.yaml', {})
+    assert advice.verdict == 'frozen'
+    again = scenario_advice(CONFIG / 'four_finger_box.yaml', advice.suggestion)
+    assert again.verdict == 'ok' and not again.suggestion, again.lines()
+
+
+def _hard_qp_status(safety_filter: SafetyFilter, state, u_nom: np.ndarray) -> bool:
+    """Return whether daqp finds the hard QP at ``state`` feasible (an independent solver)."""
+    rows = safety_filter.constraint_rows(state)
+    m = safety_filter.n_joints
+    limits = safety_filter.actuator_limits
+    A = np.vstack((rows.A, np.eye(m)))
+    upper = np.concatenate((np.full(rows.A.shape[0], 1e30), limits.upper))
+    lower = np.concatenate((rows.lower, limits.lower))
+    sense = np.zeros(A.shape[0], dtype=np.int32)
+    _, _, flag, _ = daqp.solve(np.eye(m), -u_nom, A, upper, lower, sense)
+    return flag > 0
+
+
+@pytest.mark.parametrize(('scenario', 'overrides', 'verdict'), [(c[0], c[1], c[2]) for c in CASES])
+def test_rest_margin_agrees_with_an_independent_solver(scenario, overrides, verdict):
+    """A positive margin: daqp solves the hard QP at rest; a negative one: it finds none."""
+    _, safety_filter, state = _filter_and_state(scenario, overrides)
+    advice = startup_advice(safety_filter, state)
+    feasible = _hard_qp_status(safety_filter, state, np.zeros(safety_filter.n_joints))
+    assert feasible == (advice.rest_margin > 0.0), advice.lines()
+    assert (verdict == 'infeasible') == (not feasible)
+    if not feasible:
+        assert any(name.startswith('no_slip/') for name in advice.binding), advice.binding
+        result = safety_filter.solve(state, np.zeros(safety_filter.n_joints))
+        assert result.relaxed and np.all(np.isfinite(result.u))
+
+
+def test_rest_margin_shrinks_with_the_gains():
+    """The torque ball at rest grows with k1 k2 (the rows' allowance), here 1 -> 100."""
+    margins = [
+        scenario_advice(CONFIG / 'four_finger_box.yaml', {**LINEAR, 'barrier.alpha1.gain': k,
+                                                          'barrier.alpha2.gain': k}).rest_margin
+        for k in (1.0, 10.0)
+    ]  # fmt: skip
+    assert 0.0 < margins[0] < margins[1]
+
+
+def test_rest_state_has_no_velocity():
+    model, _, state = _filter_and_state('paper_scenario.yaml', {})
+    moving = model.state(0.0, state.q, np.ones(model.n_joints), state.p_object_in_palm,
+                         state.R_object_to_palm, np.ones(6))  # fmt: skip
+    rest = rest_state(model, moving)
+    assert not rest.dq.any() and not rest.twist_object.any()
+    np.testing.assert_array_equal(rest.q, state.q)
+
+
+def test_node_logs_the_advice_once_per_configuration():
+    model, safety_filter, state = _filter_and_state('paper_scenario.yaml', {})
+    log = StartupLog(model)
+    assert log.take(safety_filter) == []
+    log.first_state(state)
+    log.first_state(state)
+    lines = log.take(safety_filter)
+    assert lines and all(line.text.startswith(PREFIX) for line in lines)
+    assert {line.level for line in lines} == {DiagnosticLevel.WARN}
+    assert any('joint_limits' in line.text and 'frozen' in line.text for line in lines)
+    log.first_state(state)
+    assert log.take(safety_filter) == []  # once
+    log.again()
+    log.first_state(state)
+    assert len(log.take(safety_filter)) == len(lines)
+
+
+def test_model_report_prints_the_advice(capsys):
+    assert model_report_main(['--config', str(CONFIG / 'four_finger_box.yaml'),
+                              '--set', 'barrier.alpha1.kind=linear']) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert 'start-up advice' in out and 'QP at rest: feasible' in out
+    assert 'joint_limits: smallest margin' in out
+    assert math.isfinite(float(out.split('margin of ')[1].split()[0]))
