@@ -482,7 +482,7 @@ def test_the_filter_node_logs_its_start_up_advice_once_at_its_first_tick():
         node = nodes[NODE_NAMES.index('safety_filter_node')]
         node.wait_for_line(r'^\[WARN\] .*start-up advice \(frozen\): joint_limits: .* frozen')
         node.wait_for_line(r'start-up advice \(frozen\): QP at rest: feasible')
-        node.wait_for_line(r'start-up advice \(frozen\): suggestion: barrier\.alpha1\.kind=linear')
+        node.wait_for_line(r'start-up advice \(frozen\): to let .* barrier\.alpha1\.kind=linear')
         time.sleep(0.5)  # more ticks: no second advice
         advice = [line for line in node.lines if 'start-up advice' in line]
         assert len(advice) == 4, node.report()  # joint limits, fingertip workspace, QP, gains

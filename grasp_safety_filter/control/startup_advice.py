@@ -137,8 +137,8 @@ class StartupAdvice:
         if self.suggestion:
             settings = ' '.join(f'{k}={v}' for k, v in self.suggestion.items())
             lines.append(
-                f'suggestion: {settings} (every family uses its margin in about '
-                f'{TARGET_TIME:g} s, whatever its unit)'
+                f'to let the frozen families move: {settings} (every family may then use its '
+                f'margin in about {TARGET_TIME:g} s, whatever its unit)'
             )
         return lines
 
