@@ -113,6 +113,10 @@ def test_the_table_has_a_row_per_run_and_both_outcomes(local_table):
     # Low friction slips the nominal controller at once; the filter keeps these grasps.
     assert any(row['held'] == 'False' and row['first_violation'] == 'slip' for row in nominal)
     assert all(row['held'] == 'True' for row in filtered)
+    # The start-up advice of the paper's scenario: cubic class-K functions freeze its joints.
+    assert {row['advice'] for row in local_table} == {'frozen'}
+    assert all('joint_limits' in row['advice_frozen'].split() for row in local_table)
+    assert all(float(row['advice_rest_margin']) > 0.0 for row in local_table)
 
 
 def test_a_dask_cluster_gives_the_same_table_through_a_dead_worker(tmp_path, local_table):

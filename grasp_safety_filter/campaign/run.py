@@ -21,6 +21,8 @@ from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.analysis.summary import summarize
 from grasp_safety_filter.analysis.verdict import run_verdict
 from grasp_safety_filter.campaign.spec import RunSpec
+from grasp_safety_filter.control.startup_advice import StartupAdvice
+from grasp_safety_filter.model_report import scenario_advice
 from grasp_safety_filter.runner import record_run
 
 #: The outcome columns of a row, after the run's identity and what was varied.
@@ -41,6 +43,9 @@ OUTCOME_COLUMNS = (
     'position_error_rms',
     'orientation_error_rms',
     'max_slip',
+    'advice',
+    'advice_frozen',
+    'advice_rest_margin',
     'error',
 )
 #: Where and how long it ran: not part of the outcome (differ between machines and runs).
@@ -54,10 +59,12 @@ def execute_run(run: RunSpec) -> dict[str, Any]:
     """
     start_cpu, start_wall = time.thread_time(), time.perf_counter()
     try:
+        options = run.options()
+        advice = scenario_advice(options.config, options.overrides)
         with tempfile.TemporaryDirectory(prefix='grasp-campaign-') as directory:
             bag = Path(directory) / 'bag'
-            record_run(run.options(), bag)
-            outcome = outcome_of(summarize(load_run(bag)))
+            record_run(options, bag)
+            outcome = {**outcome_of(summarize(load_run(bag))), **advice_columns(advice)}
     except Exception as error:  # recorded in its row: one failing run does not stop the others
         outcome = failed_outcome(f'{type(error).__name__}: {error}', traceback.format_exc())
     return {
@@ -118,8 +125,8 @@ def outcome_of(summary: dict[str, Any]) -> dict[str, Any]:
         'first_violation': first or '',
         'first_violation_t': firsts[first] if first else None,
         'violated': ' '.join(sorted(firsts)),
-        **{
-            f'min_margin.{family}': _finite(margins.get(family))
+        **{  # the summary's margins are finite or None
+            f'min_margin.{family}': margins.get(family)
             for family in ('fingertip_workspace', 'joint_limits', 'friction')
         },
         'relaxed_ticks': steps.get('relaxed_steps'),
@@ -129,6 +136,19 @@ def outcome_of(summary: dict[str, Any]) -> dict[str, Any]:
         'orientation_error_rms': _rms(tracking, 'orientation_error_rad'),
         'max_slip': max(slips) if slips else None,
         'error': '',
+    }
+
+
+def advice_columns(advice: StartupAdvice) -> dict[str, Any]:
+    """Return the filter's start-up advice at the run's initial grasp as row columns.
+
+    ``advice``: ``ok``, ``frozen`` or ``infeasible``; ``advice_frozen``: the frozen
+    families; ``advice_rest_margin``: the QP's torque margin at rest, N·m (None: -inf).
+    """
+    return {
+        'advice': advice.verdict,
+        'advice_frozen': ' '.join(advice.frozen),
+        'advice_rest_margin': _finite(advice.rest_margin),
     }
 
 
