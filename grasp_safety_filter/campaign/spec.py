@@ -28,15 +28,10 @@ model: model mismatch). Random values: ``{uniform: [lo, hi]}``, ``{log_uniform: 
 Sample ``s`` draws from ``numpy.random.default_rng([seed, s])``: adding samples keeps the
 earlier ones, and the modes and grid cells of one sample share its draw.
 
-``scenario`` may also be a list of files (each relative to the campaign file, or in the
-package's config/), e.g. the hands ``python -m grasp_tools.hands`` generates::
-
-    scenario: [hand_000/scenario.yaml, hand_001/scenario.yaml]
-
-The scenarios are then one more grid axis, the outermost: every sample runs on every
-scenario, its modes paired, and the table gets a ``scenario`` column (the file as the
-campaign names it). A ``scale`` distribution multiplies each scenario's own value by the
-sample's one factor.
+``scenario`` may also be a list of such files, e.g. ``[hand_000/scenario.yaml,
+hand_001/scenario.yaml]``: the scenarios are then one more grid axis, the outermost (every
+sample runs on every scenario, its modes paired), the table gets a ``scenario`` column, and
+a ``scale`` multiplies each scenario's own value by the sample's one factor.
 """
 
 from __future__ import annotations
@@ -149,36 +144,36 @@ class Campaign:
     def runs(self) -> list[RunSpec]:
         """Every run: scenarios, grid cells, then samples, then modes (a draw's modes adjacent)."""
         cells = list(itertools.product(*self.grid.values())) or [()]
-        several = len(self.scenarios) > 1
-        bases = {
-            name: _scenario_values(path, self.random) for name, path in self.scenarios.items()
-        }
+        scenarios = list(self.scenarios.items())
+        bases = [_scenario_values(path, self.random) for _, path in scenarios]
         runs: list[RunSpec] = []
         for sample in range(self.samples):
             factors, columns = self._draw(sample)
-            for scenario_index, (name, path) in enumerate(self.scenarios.items()):
-                drawn = _scaled(factors, bases[name], self.random)
-                for cell_index, cell in enumerate(cells):
-                    overrides = {**self.fixed, **dict(zip(self.grid, cell, strict=True)), **drawn}
-                    varied = {
-                        **({SCENARIO_COLUMN: name} if several else {}),
-                        **dict(zip(self.grid, cell, strict=True)),
-                        **{key: drawn.get(key, value) for key, value in columns.items()},
-                    }
-                    for mode in self.modes:
-                        runs.append(
-                            RunSpec(
-                                index=0,
-                                key=run_key(mode, path, self.duration, overrides),
-                                mode=mode,
-                                sample=sample,
-                                cell=scenario_index * len(cells) + cell_index,
-                                config=str(path),
-                                duration=self.duration,
-                                overrides=overrides,
-                                varied={k: _column_value(v) for k, v in varied.items()},
-                            )
-                        )
+            for cell, (((name, path), base), values) in enumerate(
+                itertools.product(zip(scenarios, bases, strict=True), cells)
+            ):
+                drawn = _scaled(factors, base, self.random)
+                grid = dict(zip(self.grid, values, strict=True))
+                varied = {
+                    **({SCENARIO_COLUMN: name} if len(scenarios) > 1 else {}),
+                    **grid,
+                    **{key: drawn.get(key, value) for key, value in columns.items()},
+                }
+                overrides = {**self.fixed, **grid, **drawn}
+                runs += [
+                    RunSpec(
+                        index=0,
+                        key=run_key(mode, path, self.duration, overrides),
+                        mode=mode,
+                        sample=sample,
+                        cell=cell,
+                        config=str(path),
+                        duration=self.duration,
+                        overrides=overrides,
+                        varied={k: _column_value(v) for k, v in varied.items()},
+                    )
+                    for mode in self.modes
+                ]
         runs.sort(key=lambda run: (run.cell, run.sample, MODES.index(run.mode)))
         return [dataclasses.replace(run, index=index) for index, run in enumerate(runs)]
 
