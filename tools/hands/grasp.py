@@ -9,7 +9,7 @@ Hand ``i`` of seed ``s`` draws everything from ``numpy.random.default_rng([s, i]
 3. the joint angles that put every sphere centre there, solved on the package's own hand
    model (:func:`~.ik.solve_fingertip_centres`);
 4. each fingertip frame turned so that its contact lies at random fingertip coordinates
-   ``|a| <= 0.6``, ``|b + π/2| <= 0.6`` rad (the workspace's centre is ``(0, -π/2)``);
+   ``|a| <= 1``, ``|b + π/2| <= 1`` rad (the workspace's centre is ``(0, -π/2)``);
 5. joint limits around the solved angles, some near a limit
    (:func:`~.kinematics.draw_joint_limits`);
 6. the URDF and the scenario file written, the contacts closed exactly by the model's
@@ -63,8 +63,9 @@ from grasp_tools.hands.scenario import (
 
 #: Draws of one hand before giving up.
 MAX_ATTEMPTS = 200
-#: Fingertip coordinates' largest offset from the workspace's centre (0, -π/2), rad.
-CONTACT_TILT = 0.6
+#: Fingertip coordinates' largest offset from the workspace's centre (0, -π/2), rad: the
+#: contacts start anywhere from the fingertip's tip to 0.42 rad from its workspace's edge.
+CONTACT_TILT = 1.0
 #: Words of a start-up check's finding -> the rejection reason counted.
 CHECK_REASONS = (
     ('no force closure', 'no force closure'),

@@ -14,7 +14,8 @@ The thumb touches the object first in contact order; the other fingers face it:
   their normals points against the thumb's.
 
 Fingertip spheres of radius 6–15 mm (at most the smallest half edge less 3 mm on a box) must
-not overlap: a draw whose spheres come closer than 2 mm is refused (:class:`DrawRejectedError`).
+not overlap: the contacts are drawn again while two spheres come closer than 2 mm, and after
+30 such draws the whole draw is refused (:class:`DrawRejectedError`).
 """
 
 from __future__ import annotations
@@ -116,11 +117,15 @@ def draw_object(rng: np.random.Generator) -> ObjectDesign:
     return ObjectDesign(shape, edges, mass, mu, p_object, yaw)  # type: ignore[arg-type]
 
 
-def draw_contacts(rng: np.random.Generator, obj: ObjectDesign, n_fingers: int) -> Contacts:
+def draw_contacts(
+    rng: np.random.Generator, obj: ObjectDesign, n_fingers: int, attempts: int = 30
+) -> Contacts:
     """Draw each finger's fingertip radius and contact, the thumb's first (module docstring).
 
+    The contact points are drawn again (the radii kept) while two spheres overlap.
+
     Raises:
-        DrawRejectedError: Two fingertip spheres would overlap.
+        DrawRejectedError: The spheres overlapped in each of ``attempts`` draws.
     """
     if obj.shape == 'box':
         half_min = 0.5 * min(obj.edge_lengths)
@@ -128,25 +133,25 @@ def draw_contacts(rng: np.random.Generator, obj: ObjectDesign, n_fingers: int) -
     else:
         radius_max = TIP_RADIUS_RANGE[1]
     radii = rng.uniform(TIP_RADIUS_RANGE[0], radius_max, size=n_fingers)
-    if obj.shape == 'box':
-        p_in_object, n_in_object, faces = _box_contacts(rng, obj, radii)
-    else:
-        p_in_object, n_in_object = _sphere_contacts(rng, obj, n_fingers)
-        faces = ('',) * n_fingers
     R = obj.R_object_to_palm
-    contacts = Contacts(
-        p_contact_in_palm=obj.p_object_in_palm + p_in_object @ R.T,
-        n_outward_in_palm=n_in_object @ R.T,
-        tip_radius=radii,
-        faces=faces,
-    )
-    centres = contacts.p_tip_centre_in_palm
-    for i in range(n_fingers):
-        for j in range(i):
-            gap = np.linalg.norm(centres[i] - centres[j]) - radii[i] - radii[j]
-            if gap < TIP_CLEARANCE:
-                raise DrawRejectedError('fingertips overlap')
-    return contacts
+    for _ in range(attempts):
+        if obj.shape == 'box':
+            p_in_object, n_in_object, faces = _box_contacts(rng, obj, radii)
+        else:
+            p_in_object, n_in_object = _sphere_contacts(rng, obj, n_fingers)
+            faces = ('',) * n_fingers
+        contacts = Contacts(
+            p_contact_in_palm=obj.p_object_in_palm + p_in_object @ R.T,
+            n_outward_in_palm=n_in_object @ R.T,
+            tip_radius=radii,
+            faces=faces,
+        )
+        centres = contacts.p_tip_centre_in_palm
+        gaps = np.linalg.norm(centres[:, np.newaxis] - centres[np.newaxis], axis=2)
+        gaps -= radii[:, np.newaxis] + radii[np.newaxis]
+        if np.all(gaps[np.triu_indices(n_fingers, 1)] >= TIP_CLEARANCE):
+            return contacts
+    raise DrawRejectedError('fingertips overlap')
 
 
 def _box_contacts(
