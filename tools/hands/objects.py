@@ -11,7 +11,8 @@ The thumb touches the object first in contact order; the other fingers face it:
   (plus up to 3 mm) inside its face's edges;
 - sphere: the thumb anywhere around the equator (elevation -0.3 to 0.5 rad), the others
   spread over 0.6–1.8 rad of azimuth around the opposite direction, so that the mean of
-  their normals points against the thumb's.
+  their normals points against the thumb's (drawn again unless ``n_thumb . mean(n_others)
+  <= -0.2``).
 
 Fingertip spheres of radius 6–15 mm (at most the smallest half edge less 3 mm on a box) must
 not overlap: the contacts are drawn again while two spheres come closer than 2 mm, and after
@@ -36,6 +37,9 @@ SIZE_RANGE = (0.03, 0.10)
 TIP_RADIUS_RANGE = (0.006, 0.015)
 #: Least clearance between two fingertip spheres, m.
 TIP_CLEARANCE = 0.002
+#: Least ``-n_thumb . mean(n_others)``: the thumb's normal against the others' mean (a box's
+#: is 0.25 at the least: one of four fingers on the opposite face, three beside it).
+OPPOSITION = 0.2
 
 
 class DrawRejectedError(Exception):
@@ -149,7 +153,9 @@ def draw_contacts(
         centres = contacts.p_tip_centre_in_palm
         gaps = np.linalg.norm(centres[:, np.newaxis] - centres[np.newaxis], axis=2)
         gaps -= radii[:, np.newaxis] + radii[np.newaxis]
-        if np.all(gaps[np.triu_indices(n_fingers, 1)] >= TIP_CLEARANCE):
+        normals = contacts.n_outward_in_palm
+        opposed = normals[0] @ normals[1:].mean(axis=0) <= -OPPOSITION
+        if opposed and np.all(gaps[np.triu_indices(n_fingers, 1)] >= TIP_CLEARANCE):
             return contacts
     raise DrawRejectedError('fingertips overlap')
 
