@@ -202,3 +202,76 @@ def test_the_store_keeps_what_finished_and_ignores_a_line_cut_short(tmp_path):
     lines = (tmp_path / 'results.jsonl').read_text().splitlines()
     assert [json.loads(line)['key'] for line in lines if line.endswith('}')] == ['a', 'b', 'c']
     assert sorted(ResultStore(tmp_path).finished) == ['a', 'b', 'c']
+
+
+TWO_SCENARIOS = """
+    scenario: [SCENARIO, four_finger_box.yaml]
+    duration: 0.5
+    samples: 3
+    seed: 3
+    grid:
+      barrier.alpha1.gain: [1.0, 10.0]
+    random:
+      hand_sim_node/model.object.mass: {scale: [0.5, 2.0]}
+    reference:
+      axes: [z, yaw]
+      position: [0.01, 0.1]
+      orientation: [0.1, 1.0]
+      frequency: [0.5, 2.0]
+"""
+
+
+def test_a_list_of_scenarios_is_one_more_grid_axis_on_the_same_draws(tmp_path):
+    campaign = load_campaign(write(tmp_path, TWO_SCENARIOS))
+    runs = campaign.runs()
+    box = config_path('four_finger_box.yaml').resolve()
+    assert len(runs) == 2 * 2 * 3 * 2
+    assert len({run.key for run in runs}) == len(runs)
+    assert campaign.varied_columns[0] == 'scenario'
+    by_config = {str(SCENARIO.resolve()): 0.11, str(box): 0.1}  # each file's object mass
+    for run in runs:
+        assert run.varied['scenario'] == (
+            str(SCENARIO) if run.config == str(SCENARIO.resolve()) else 'four_finger_box.yaml'
+        )
+        # A scale multiplies the run's own scenario's value.
+        mass = run.overrides['hand_sim_node/model.object.mass']
+        assert 0.5 * by_config[run.config] <= mass <= 2.0 * by_config[run.config]
+        assert run.varied['hand_sim_node/model.object.mass'] == mass
+    # A grid cell is one scenario and one gain; each scenario has its own cells.
+    cells = {run.cell: (run.config, run.overrides['barrier.alpha1.gain']) for run in runs}
+    assert len(cells) == 4 and len(set(cells.values())) == 4
+    for nominal, filtered in zip(runs[::2], runs[1::2], strict=True):
+        assert (nominal.mode, filtered.mode) == ('nominal', 'filtered')
+        assert (nominal.config, nominal.overrides) == (filtered.config, filtered.overrides)
+    # Sample s has one reference and one mass factor, whatever the scenario.
+    references, factors = {}, {}
+    for run in runs:
+        amplitude = tuple(run.overrides['reference.amplitude'])
+        references.setdefault(run.sample, set()).add(amplitude)
+        factor = run.overrides['hand_sim_node/model.object.mass'] / by_config[run.config]
+        factors.setdefault(run.sample, []).append(factor)
+    assert all(len(values) == 1 for values in references.values())
+    assert all(np.ptp(values) < 1e-12 for values in factors.values())
+    assert len({values[0] for values in factors.values()}) == 3
+
+
+def test_one_scenario_in_a_list_runs_as_the_file_alone(tmp_path):
+    alone = load_campaign(write(tmp_path, BASE)).runs()
+    listed = load_campaign(write(tmp_path, BASE.replace('SCENARIO', '[SCENARIO]'))).runs()
+    assert [run.key for run in listed] == [run.key for run in alone]
+    assert all('scenario' not in run.varied for run in listed)
+
+
+@pytest.mark.parametrize(
+    ('change', 'message'),
+    [
+        ('four_finger_box.yaml]', "scenario 'nowhere.yaml'"),
+        ('SCENARIO]', 'names a file twice'),
+        ('3]', "'scenario' must be a file name or a list of them, got 3"),
+    ],
+)
+def test_a_bad_scenario_list_is_refused(tmp_path, change, message):
+    old = 'four_finger_box.yaml]'
+    text = TWO_SCENARIOS.replace(old, change.replace('four_finger_box.yaml', 'nowhere.yaml'))
+    with pytest.raises(CampaignError, match=message):
+        load_campaign(write(tmp_path, text))

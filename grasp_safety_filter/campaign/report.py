@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.campaign.run import outcome_of
-from grasp_safety_filter.campaign.spec import Campaign, RunSpec
+from grasp_safety_filter.campaign.spec import Campaign, RunSpec, SCENARIO_COLUMN
 
 REPORT_FILE = 'report.md'
 WORST_DIRECTORY = 'worst'
@@ -120,7 +120,7 @@ def write_report(
     lines = [
         f'# Campaign {campaign.path.name}',
         '',
-        f'Scenario `{campaign.scenario}`, {campaign.duration:g} s runs, modes '
+        f'{_scenarios_text(campaign)}, {campaign.duration:g} s runs, modes '
         f'{", ".join(campaign.modes)}, {campaign.samples} samples (seed {campaign.seed}). '
         f'Finished: {len(rows)} of {len(runs)} runs; {len(errors)} raised (not counted).',
         '',
@@ -162,6 +162,13 @@ def write_report(
     path = out_dir / REPORT_FILE
     path.write_text('\n'.join(lines) + '\n')
     return path
+
+
+def _scenarios_text(campaign: Campaign) -> str:
+    """``Scenario `PATH``` or, for several, how many and the first."""
+    if len(campaign.scenarios) == 1:
+        return f'Scenario `{campaign.scenario}`'
+    return f'{len(campaign.scenarios)} scenarios (the first `{campaign.scenario}`)'
 
 
 def _paired(rows: Sequence[Mapping[str, Any]], campaign: Campaign) -> list[str]:
@@ -226,8 +233,9 @@ def _plots(
     sections = []
     for column in campaign.varied_columns:
         values = [row[column] for row in rows if row.get(column) is not None]
-        if len(set(map(str, values))) < 2:
-            continue
+        distinct = len(set(map(str, values)))
+        if distinct < 2 or (column == SCENARIO_COLUMN and distinct > MAX_LEVELS):
+            continue  # one value; or many scenarios, one run each: runs.csv has them
         levels = _levels(values)
         counts = {
             (label, mode): (_held(inside), len(inside))

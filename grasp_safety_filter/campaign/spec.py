@@ -27,6 +27,11 @@ model: model mismatch). Random values: ``{uniform: [lo, hi]}``, ``{log_uniform: 
 
 Sample ``s`` draws from ``numpy.random.default_rng([seed, s])``: adding samples keeps the
 earlier ones, and the modes and grid cells of one sample share its draw.
+
+``scenario`` may also be a list of such files, e.g. ``[hand_000/scenario.yaml,
+hand_001/scenario.yaml]``: the scenarios are then one more grid axis, the outermost (every
+sample runs on every scenario, its modes paired), the table gets a ``scenario`` column, and
+a ``scale`` multiplies each scenario's own value by the sample's one factor.
 """
 
 from __future__ import annotations
@@ -52,6 +57,8 @@ from grasp_safety_filter.run_types import MODES, RunOptions
 
 #: The reference's axes, in the order of ``reference.amplitude``.
 AXES = ('x', 'y', 'z', 'roll', 'pitch', 'yaw')
+#: The table's column of the scenario, when a campaign has several.
+SCENARIO_COLUMN = 'scenario'
 _KEYS = {'scenario', 'duration', 'modes', 'samples', 'seed', 'set', 'grid', 'random', 'reference'}
 _DISTRIBUTIONS = ('uniform', 'log_uniform', 'choice', 'scale')
 _REFERENCE_KEYS = {'axes', 'position', 'orientation', 'frequency'}
@@ -71,7 +78,8 @@ class RunSpec:
             run with the same key is never run again.
         mode: ``"nominal"`` or ``"filtered"``.
         sample: The random draw (0 when nothing is random).
-        cell: The grid cell (0 without a grid).
+        cell: The grid cell (0 without a grid), the scenario's index being its outermost
+            axis.
         config: The scenario file, absolute.
         duration: Simulated duration, s.
         overrides: ``{name: value}``, as ``RunOptions.overrides``.
@@ -102,10 +110,14 @@ class RunSpec:
 
 @dataclass(frozen=True)
 class Campaign:
-    """A loaded campaign file (module docstring) and its runs."""
+    """A loaded campaign file (module docstring) and its runs.
+
+    Attributes:
+        scenarios: ``{name as the file gives it: absolute path}``, in the file's order.
+    """
 
     path: Path
-    scenario: Path
+    scenarios: Mapping[str, Path]
     duration: float
     modes: tuple[str, ...]
     samples: int
@@ -116,50 +128,62 @@ class Campaign:
     reference: Mapping[str, Any] | None
 
     @property
+    def scenario(self) -> Path:
+        """The first (or only) scenario file."""
+        return next(iter(self.scenarios.values()))
+
+    @property
     def varied_columns(self) -> list[str]:
         """The table's columns for what varies, in order."""
-        columns = [*self.grid, *self.random]
+        columns = [SCENARIO_COLUMN] if len(self.scenarios) > 1 else []
+        columns += [*self.grid, *self.random]
         if self.reference is not None:
             columns += ['reference.frequency', 'reference.position', 'reference.orientation']
         return columns
 
     def runs(self) -> list[RunSpec]:
-        """Every run: grid cells, then samples, then modes (the modes of a draw adjacent)."""
+        """Every run: scenarios, grid cells, then samples, then modes (a draw's modes adjacent)."""
         cells = list(itertools.product(*self.grid.values())) or [()]
-        scenario_values = _scenario_values(self.scenario, self.random)
+        scenarios = list(self.scenarios.items())
+        bases = [_scenario_values(path, self.random) for _, path in scenarios]
         runs: list[RunSpec] = []
         for sample in range(self.samples):
-            drawn, columns = self._draw(sample, scenario_values)
-            for cell_index, cell in enumerate(cells):
-                overrides = {**self.fixed, **dict(zip(self.grid, cell, strict=True)), **drawn}
-                varied = {**dict(zip(self.grid, cell, strict=True)), **columns}
-                for mode in self.modes:
-                    runs.append(
-                        RunSpec(
-                            index=0,
-                            key=run_key(mode, self.scenario, self.duration, overrides),
-                            mode=mode,
-                            sample=sample,
-                            cell=cell_index,
-                            config=str(self.scenario),
-                            duration=self.duration,
-                            overrides=overrides,
-                            varied={name: _column_value(v) for name, v in varied.items()},
-                        )
+            factors, columns = self._draw(sample)
+            for cell, (((name, path), base), values) in enumerate(
+                itertools.product(zip(scenarios, bases, strict=True), cells)
+            ):
+                drawn = _scaled(factors, base, self.random)
+                grid = dict(zip(self.grid, values, strict=True))
+                varied = {
+                    **({SCENARIO_COLUMN: name} if len(scenarios) > 1 else {}),
+                    **grid,
+                    **{key: drawn.get(key, value) for key, value in columns.items()},
+                }
+                overrides = {**self.fixed, **grid, **drawn}
+                runs += [
+                    RunSpec(
+                        index=0,
+                        key=run_key(mode, path, self.duration, overrides),
+                        mode=mode,
+                        sample=sample,
+                        cell=cell,
+                        config=str(path),
+                        duration=self.duration,
+                        overrides=overrides,
+                        varied={k: _column_value(v) for k, v in varied.items()},
                     )
+                    for mode in self.modes
+                ]
         runs.sort(key=lambda run: (run.cell, run.sample, MODES.index(run.mode)))
         return [dataclasses.replace(run, index=index) for index, run in enumerate(runs)]
 
-    def _draw(
-        self, sample: int, scenario_values: Mapping[str, Any]
-    ) -> tuple[dict[str, Any], dict[str, Any]]:
-        """Return sample ``sample``'s overrides and its table columns."""
+    def _draw(self, sample: int) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Return sample ``sample``'s overrides (a ``scale``'s factor) and its table columns."""
         rng = np.random.default_rng([self.seed, sample])
         overrides: dict[str, Any] = {}
         for name, (kind, arguments) in self.random.items():
-            overrides[name] = _typed(
-                name, _sample(rng, kind, arguments, scenario_values.get(name))
-            )
+            value = _sample(rng, kind, arguments)
+            overrides[name] = value if kind == 'scale' else _typed(name, value)
         columns = dict(overrides)
         if self.reference is not None:
             amplitude, frequency = _reference(rng, self.reference)
@@ -201,7 +225,11 @@ def load_campaign(path: str | Path) -> Campaign:
         raise CampaignError(f'{where}: unknown key {unknown[0]!r}{hint}')
     if 'scenario' not in document:
         raise CampaignError(f"{where}: 'scenario' is required (a scenario parameter file)")
-    scenario = _scenario_path(path, document['scenario'], where)
+    names = document['scenario']
+    names = names if isinstance(names, list) and names else [names]
+    scenarios = {str(name): _scenario_path(path, name, where) for name in names}
+    if len(scenarios) != len(names):
+        raise CampaignError(f"{where}: 'scenario' names a file twice")
     duration = document.get('duration', 2.0)
     if isinstance(duration, bool) or not isinstance(duration, int | float) or duration <= 0:
         raise CampaignError(
@@ -226,7 +254,7 @@ def load_campaign(path: str | Path) -> Campaign:
     }
     reference = _reference_section(document.get('reference'), where)
     campaign = Campaign(
-        path, scenario, float(duration), modes, samples, seed, fixed, grid, random, reference
+        path, scenarios, float(duration), modes, samples, seed, fixed, grid, random, reference
     )
     try:
         campaign.runs()[0].options()  # every name declared by a node, the scenario readable
@@ -237,7 +265,9 @@ def load_campaign(path: str | Path) -> Campaign:
 
 def _scenario_path(path: Path, value: Any, where: str) -> Path:
     if not isinstance(value, str) or not value:
-        raise CampaignError(f"{where}: 'scenario' must be a file name, got {value!r}")
+        raise CampaignError(
+            f"{where}: 'scenario' must be a file name or a list of them, got {value!r}"
+        )
     for candidate in (path.parent / value, config_path(value)):
         if candidate.is_file():
             return candidate.resolve()
@@ -342,18 +372,29 @@ def _scenario_values(scenario: Path, random: Mapping[str, tuple[str, Any]]) -> d
     return values
 
 
-def _sample(rng: np.random.Generator, kind: str, arguments: Sequence[Any], base: Any) -> Any:
+def _sample(rng: np.random.Generator, kind: str, arguments: Sequence[Any]) -> Any:
+    """Draw a value, or for ``scale`` the factor (:func:`_scaled` applies it)."""
     if kind == 'choice':
         return arguments[int(rng.integers(len(arguments)))]
     lo, hi = arguments
     if kind == 'log_uniform':
         return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
-    factor = float(rng.uniform(lo, hi))
-    if kind == 'uniform':
-        return factor
-    if isinstance(base, list):
-        return [float(v) * factor for v in base]
-    return float(base) * factor
+    return float(rng.uniform(lo, hi))
+
+
+def _scaled(
+    drawn: Mapping[str, Any],
+    scenario_values: Mapping[str, Any],
+    random: Mapping[str, tuple[str, Any]],
+) -> dict[str, Any]:
+    """Return ``drawn`` with each ``scale`` factor applied to the scenario's own value."""
+    overrides = dict(drawn)
+    for name, (kind, _) in random.items():
+        if kind == 'scale':
+            base, factor = scenario_values[name], drawn[name]
+            value = [float(v) * factor for v in base] if isinstance(base, list) else base * factor
+            overrides[name] = _typed(name, value)
+    return overrides
 
 
 def _reference(
