@@ -36,7 +36,7 @@ a ``scale`` multiplies each scenario's own value by the sample's one factor.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 import dataclasses
 from dataclasses import dataclass, field
 import hashlib
@@ -49,18 +49,16 @@ from typing import Any
 import numpy as np
 import yaml
 
+from grasp_safety_filter.campaign.draws import AXES, DISTRIBUTIONS, draw_reference, draw_value
 from grasp_safety_filter.io.parameters import ParameterError, suggestion
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import load_node_parameters, NODE_SCHEMAS
 from grasp_safety_filter.io.schemas.overrides import override_errors, split_override
 from grasp_safety_filter.run_types import MODES, RunOptions
 
-#: The reference's axes, in the order of ``reference.amplitude``.
-AXES = ('x', 'y', 'z', 'roll', 'pitch', 'yaw')
 #: The table's column of the scenario, when a campaign has several.
 SCENARIO_COLUMN = 'scenario'
 _KEYS = {'scenario', 'duration', 'modes', 'samples', 'seed', 'set', 'grid', 'random', 'reference'}
-_DISTRIBUTIONS = ('uniform', 'log_uniform', 'choice', 'scale')
 _REFERENCE_KEYS = {'axes', 'position', 'orientation', 'frequency'}
 
 
@@ -182,11 +180,11 @@ class Campaign:
         rng = np.random.default_rng([self.seed, sample])
         overrides: dict[str, Any] = {}
         for name, (kind, arguments) in self.random.items():
-            value = _sample(rng, kind, arguments)
+            value = draw_value(rng, kind, arguments)
             overrides[name] = value if kind == 'scale' else _typed(name, value)
         columns = dict(overrides)
         if self.reference is not None:
-            amplitude, frequency = _reference(rng, self.reference)
+            amplitude, frequency = draw_reference(rng, self.reference)
             overrides['reference.source'] = 'paper'
             overrides['reference.amplitude'] = amplitude
             overrides['reference.frequency'] = frequency
@@ -302,10 +300,10 @@ def _distribution(name: str, value: Any, where: str) -> tuple[str, tuple[Any, ..
     errors = override_errors([name])
     if errors:
         raise CampaignError(f'{where}: {errors[0]}')
-    if not (isinstance(value, dict) and len(value) == 1 and next(iter(value)) in _DISTRIBUTIONS):
+    if not (isinstance(value, dict) and len(value) == 1 and next(iter(value)) in DISTRIBUTIONS):
         raise CampaignError(
             f"{where}: random '{name}' must be one of "
-            f'{{{": [...]}, {".join(_DISTRIBUTIONS)}: [...]}}, got {value!r}'
+            f'{{{": [...]}, {".join(DISTRIBUTIONS)}: [...]}}, got {value!r}'
         )
     kind, arguments = next(iter(value.items()))
     if not isinstance(arguments, list) or not arguments:
@@ -372,16 +370,6 @@ def _scenario_values(scenario: Path, random: Mapping[str, tuple[str, Any]]) -> d
     return values
 
 
-def _sample(rng: np.random.Generator, kind: str, arguments: Sequence[Any]) -> Any:
-    """Draw a value, or for ``scale`` the factor (:func:`_scaled` applies it)."""
-    if kind == 'choice':
-        return arguments[int(rng.integers(len(arguments)))]
-    lo, hi = arguments
-    if kind == 'log_uniform':
-        return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
-    return float(rng.uniform(lo, hi))
-
-
 def _scaled(
     drawn: Mapping[str, Any],
     scenario_values: Mapping[str, Any],
@@ -395,18 +383,6 @@ def _scaled(
             value = [float(v) * factor for v in base] if isinstance(base, list) else base * factor
             overrides[name] = _typed(name, value)
     return overrides
-
-
-def _reference(
-    rng: np.random.Generator, reference: Mapping[str, Any]
-) -> tuple[list[float], float]:
-    """Draw an amplitude A (per axis: a magnitude in its range and a sign) and a frequency w."""
-    amplitude = [0.0] * len(AXES)
-    for axis in reference['axes']:
-        index = AXES.index(axis)
-        lo, hi = reference['position' if index < 3 else 'orientation']
-        amplitude[index] = float(rng.choice((-1.0, 1.0)) * rng.uniform(lo, hi))
-    return amplitude, float(rng.uniform(*reference['frequency']))
 
 
 def _column_value(value: Any) -> Any:
