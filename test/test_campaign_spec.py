@@ -275,3 +275,21 @@ def test_a_bad_scenario_list_is_refused(tmp_path, change, message):
     text = TWO_SCENARIOS.replace(old, change.replace('four_finger_box.yaml', 'nowhere.yaml'))
     with pytest.raises(CampaignError, match=message):
         load_campaign(write(tmp_path, text))
+
+
+@pytest.mark.parametrize(
+    'name', sorted(p.name for p in (Path(config_path()).parent / 'campaigns').glob('*.yaml'))
+)
+def test_every_example_campaign_loads_with_both_modes_paired(name):
+    campaign = load_campaign(Path(config_path()).parent / 'campaigns' / name)
+    runs = campaign.runs()
+    cells = {run.cell for run in runs}
+    assert len(runs) == campaign.samples * len(campaign.modes) * len(cells)
+    assert set(campaign.modes) == {'nominal', 'filtered'}
+    by_draw = {}
+    for run in runs:
+        by_draw.setdefault((run.cell, run.sample), []).append(run)
+    # Each draw runs in both modes with the same overrides: the modes are paired.
+    for pair in by_draw.values():
+        assert sorted(run.mode for run in pair) == ['filtered', 'nominal']
+        assert pair[0].overrides == pair[1].overrides
