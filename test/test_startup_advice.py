@@ -31,6 +31,7 @@ from grasp_safety_filter.model.quaternion import rotation_matrix
 from grasp_safety_filter.model_report import main as model_report_main
 from grasp_safety_filter.model_report import scenario_advice
 from grasp_safety_filter.nodes.startup_log import PREFIX, StartupLog
+from grasp_tools.hands.grasp import generate_hand
 
 CONFIG = Path(config_path()).parent
 LINEAR = {
@@ -64,7 +65,7 @@ CASES = [
 ]
 
 
-def _filter_and_state(scenario: str, overrides: dict):
+def _filter_and_state(scenario: str | Path, overrides: dict):
     """Return the filter node's filter and its model's state at rest at the initial grasp."""
     path = CONFIG / scenario
     sim = load_node_parameters(
@@ -80,7 +81,7 @@ def _filter_and_state(scenario: str, overrides: dict):
     return model, SafetyFilter.from_config(model, config), state
 
 
-def _filter_parameters(scenario: str, overrides: dict) -> dict:
+def _filter_parameters(scenario: str | Path, overrides: dict) -> dict:
     """Return the filter node's parameters of a scenario, with its overrides."""
     own = node_overrides(overrides, SAFETY_FILTER_NODE)
     return load_node_parameters(CONFIG / scenario, SAFETY_FILTER_NODE, overrides=own)
@@ -204,3 +205,19 @@ def test_model_report_prints_the_advice(capsys):
     assert 'start-up advice' in out and 'QP at rest: feasible' in out
     assert 'joint_limits: smallest margin' in out
     assert math.isfinite(float(out.split('margin of ')[1].split()[0]))
+
+
+@pytest.mark.parametrize('index', [17, 71, 80])
+def test_rest_margin_on_generated_hands_with_light_fingers(tmp_path, index):
+    """Rows of norms 1 to ~5e5 (light fingers' joint accelerations): the margin is still found.
+
+    Hands of seed 0 that HiGHS could not solve with the rows unscaled; daqp, an independent
+    solver, agrees on feasibility at rest.
+    """
+    scenario = generate_hand(0, index, tmp_path / f'hand_{index:03d}').scenario
+    _, safety_filter, state = _filter_and_state(scenario, {})
+    advice = startup_advice(safety_filter, state)
+    assert math.isfinite(advice.rest_margin), advice.lines()
+    assert advice.binding and all('/' in name for name in advice.binding)
+    feasible = _hard_qp_status(safety_filter, state, np.zeros(safety_filter.n_joints))
+    assert feasible == (advice.rest_margin > 0.0), advice.lines()

@@ -80,8 +80,9 @@ class StartupAdvice:
     Attributes:
         families: One entry per enabled relative-degree-two family.
         rest_margin: Radius of the largest torque ball inside every row at rest, N·m (< 0:
-            infeasible at rest).
-        binding: The rows that limit ``rest_margin`` (barrier rows and actuator limits).
+            infeasible at rest; NaN: the linear program failed).
+        binding: The rows that limit ``rest_margin`` (barrier rows and actuator limits), or
+            why it failed.
         suggestion: ``--set`` values for linear class-K functions of ``TARGET_TIME``, when a
             family is frozen; empty otherwise.
     """
@@ -98,7 +99,9 @@ class StartupAdvice:
 
     @property
     def verdict(self) -> str:
-        """``infeasible``, ``frozen`` or ``ok`` (the first that applies)."""
+        """``undetermined``, ``infeasible``, ``frozen`` or ``ok`` (the first that applies)."""
+        if math.isnan(self.rest_margin):
+            return 'undetermined'
         if not self.rest_margin >= 0.0:
             return 'infeasible'
         if self.frozen:
@@ -124,7 +127,9 @@ class StartupAdvice:
                 f'{unit}/s^2 from rest, {f.tau:.2g} s to use it: {state}'
             )
         limiting = ', '.join(self.binding[:4]) + (' ...' if len(self.binding) > 4 else '')
-        if self.verdict == 'infeasible':
+        if self.verdict == 'undetermined':
+            lines.append(f'QP at rest: not determined ({limiting})')
+        elif self.verdict == 'infeasible':
             lines.append(
                 f'QP at rest: infeasible by {-self.rest_margin:.3g} N·m: no torque within the '
                 f'actuator limits holds the grasp (conflicting: {limiting})'
@@ -219,14 +224,17 @@ def _rest_margin(
     dead = [n for n, ok, b in zip(names, live, lower, strict=True) if not ok and b > 0.0]
     if dead:
         return -math.inf, tuple(dead)
-    # Variables (u, t): maximise t subject to -A_r u + |A_r| t <= -lower_r.
-    A_ub = np.hstack((-A[live], norms[live, np.newaxis]))
+    # Variables (u, t): maximise t subject to -A_r u / |A_r| + t <= -lower_r / |A_r|. The
+    # rows normalised: their norms span 1 (actuator limits) to ~1e6 (a light finger's joint
+    # acceleration), which HiGHS does not solve unscaled.
+    scale = norms[live, np.newaxis]
+    A_ub = np.hstack((-A[live] / scale, np.ones_like(scale)))
     cost = np.zeros(m + 1)
     cost[-1] = -1.0
-    bounds = [(None, None)] * m + [(None, None)]
-    result = linprog(cost, A_ub=A_ub, b_ub=-lower[live], bounds=bounds, method='highs')
-    if result.status != 0:  # unbounded cannot happen (the actuator box); numerical trouble
-        return -math.inf, ()
+    bounds = [(None, None)] * (m + 1)
+    result = linprog(cost, A_ub=A_ub, b_ub=-lower[live] / scale[:, 0], bounds=bounds)
+    if result.status != 0:  # always feasible, bounded by the actuator box: numerical trouble
+        return math.nan, (f'the linear program failed: {result.message}',)
     live_names = [n for n, ok in zip(names, live, strict=True) if ok]
     duals = np.asarray(result.ineqlin.marginals)
     binding = tuple(n for n, d in zip(live_names, duals, strict=True) if abs(d) > _BINDING_DUAL)
