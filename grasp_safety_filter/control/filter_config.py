@@ -21,7 +21,9 @@ _FIELDS: dict[str, str] = {
     'torque_rate.max_step': 'torque_rate_max_step',
     'torque_rate.max_rate': 'torque_rate_max_rate',
     'joint_limits.enabled': 'joint_limits_enabled',
+    'joint_limits.margin': 'joint_limits_margin',
     'fingertip_workspace.enabled': 'fingertip_workspace_enabled',
+    'fingertip_workspace.margin': 'fingertip_workspace_margin',
     'object_workspace.enabled': 'object_workspace_enabled',
     'object_workspace.margin': 'object_workspace_margin',
     'object_workspace.sphere_a_half_width': 'object_workspace_sphere_a_half_width',
@@ -59,7 +61,9 @@ class SafetyFilterConfig:
         torque_rate_max_rate: The bound per second, N·m/s (>= 0; 0: none): per tick the
             tighter of ``max_step`` and ``max_rate`` times the time since the last tick.
         joint_limits_enabled: Enforce the joint-limit barriers.
+        joint_limits_margin: Distance the barriers keep from the joint limits, rad (>= 0).
         fingertip_workspace_enabled: Enforce the fingertip-workspace barriers.
+        fingertip_workspace_margin: Distance they keep from the workspace bounds, rad.
         object_workspace_enabled: Enforce the object-workspace barriers.
         object_workspace_margin: Distance kept from a box face's edges, m (> 0).
         object_workspace_sphere_a_half_width, object_workspace_sphere_b_half_width: The box
@@ -89,7 +93,9 @@ class SafetyFilterConfig:
     torque_rate_max_step: float = 0.2
     torque_rate_max_rate: float = 0.0
     joint_limits_enabled: bool = True
+    joint_limits_margin: float = 0.0
     fingertip_workspace_enabled: bool = True
+    fingertip_workspace_margin: float = 0.0
     object_workspace_enabled: bool = False
     object_workspace_margin: float = 0.005
     object_workspace_sphere_a_half_width: float = 1.0

@@ -93,15 +93,25 @@ class FilterRows:
             torsional_friction,
         )
         contacts = no_slip.contact_names
-        joint_limits = JointLimitBarrier(joint_names, q_min, q_max, config.alpha1, config.alpha2)
+        joint_limits = JointLimitBarrier(
+            joint_names,
+            *_inset(q_min, q_max, config.joint_limits_margin, 'joint_limits.margin'),
+            config.alpha1,
+            config.alpha2,
+        )
         try:
             a_min, a_max, b_min, b_max = workspace
         except (TypeError, ValueError):
             raise ValueError(
                 f"'workspace': expected (a_min, a_max, b_min, b_max), got {workspace!r}"
             ) from None
+        margin = config.fingertip_workspace_margin
         fingertip_workspace = FingertipWorkspaceBarrier(
-            contacts, a_min, a_max, b_min, b_max, config.alpha1, config.alpha2
+            contacts,
+            *_inset(a_min, a_max, margin, 'fingertip_workspace.margin'),
+            *_inset(b_min, b_max, margin, 'fingertip_workspace.margin'),
+            config.alpha1,
+            config.alpha2,
         )
         chosen: list[tuple[ConstraintFamily, float]] = []
         if config.no_slip_enabled:
@@ -157,6 +167,29 @@ class FilterRows:
         with _NO_CONTEXT if quiet else np.errstate(all='ignore'):
             for write, start in self._writers:
                 write(state, A, lower, start)
+
+
+def _inset(lower: Any, upper: Any, margin: float, parameter: str) -> tuple[Any, Any]:
+    """Return the bounds ``(lower + margin, upper - margin)`` (as given when the margin is 0).
+
+    Raises:
+        ValueError: The margin leaves no room between two bounds (naming ``parameter``).
+    """
+    if margin == 0.0:
+        return lower, upper
+    try:
+        lower, upper = np.broadcast_arrays(np.asarray(lower, float), np.asarray(upper, float))
+    except (TypeError, ValueError):
+        return lower, upper  # malformed: the family names it
+    crossed = np.flatnonzero(np.atleast_1d(upper - lower <= 2.0 * margin))
+    if crossed.size:
+        k = int(crossed[0])
+        raise ValueError(
+            f"'{parameter}': {margin} leaves no room between the bounds "
+            f'{float(np.atleast_1d(lower)[k])} and {float(np.atleast_1d(upper)[k])}: expected '
+            'less than half of every range'
+        )
+    return lower + margin, upper - margin
 
 
 def object_workspace_of(

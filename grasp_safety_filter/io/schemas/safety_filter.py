@@ -73,8 +73,20 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'Keep every joint inside its URDF limits (relative-degree-2 barrier)',
     ),
     ParameterSpec(
+        'joint_limits.margin', DOUBLE, 0.0,
+        'Distance the barrier keeps from every joint limit, so that what a control period '
+        'overshoots stays inside the limits (0: the limits themselves, as in the paper) [rad]',
+        min_value=0.0,
+    ),
+    ParameterSpec(
         'fingertip_workspace.enabled', BOOL, True,
         'Keep every contact point inside the fingertip workspace (relative-degree-2 barrier)',
+    ),
+    ParameterSpec(
+        'fingertip_workspace.margin', DOUBLE, 0.0,
+        'Distance the barrier keeps from every fingertip workspace bound (0: the bounds '
+        'themselves, as in the paper) [rad]',
+        min_value=0.0,
     ),
     ParameterSpec(
         'object_workspace.enabled', BOOL, False,
