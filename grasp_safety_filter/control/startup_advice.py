@@ -35,6 +35,10 @@ from grasp_safety_filter.model.grasp_state import GraspState
 FROZEN_TIME = 1.0
 #: tau of the suggested linear class-K functions, s (gain 2 / TARGET_TIME each).
 TARGET_TIME = 0.2
+#: The suggested margins from the joint limits and fingertip workspace bounds, rad: linear
+#: barriers let coordinates reach their bounds, which a 1 ms hold overshoots by up to ~1e-2
+#: rad on light fingers (docs/any_hand.md).
+SUGGESTED_MARGIN = 0.02
 #: The families with a rest margin but no class-K function (their rows are not rates).
 _SKIPPED = ('torque_rate',)
 #: Rows whose |A_r| is below this (N·m^-1 in the row's unit) have no torque to act on.
@@ -83,7 +87,8 @@ class StartupAdvice:
             infeasible at rest; NaN: the linear program failed).
         binding: The rows that limit ``rest_margin`` (barrier rows and actuator limits), or
             why it failed.
-        suggestion: ``--set`` values for linear class-K functions of ``TARGET_TIME``, when a
+        suggestion: ``--set`` values for linear class-K functions of ``TARGET_TIME``, margins
+            of ``SUGGESTED_MARGIN`` and the object workspace barriers, when a
             family is frozen; empty otherwise.
     """
 
@@ -140,10 +145,11 @@ class StartupAdvice:
                 f'by {limiting})'
             )
         if self.suggestion:
-            settings = ' '.join(f'{k}={v}' for k, v in self.suggestion.items())
+            settings = ' '.join(f'{k}={_text(v)}' for k, v in self.suggestion.items())
             lines.append(
                 f'to let the frozen families move: {settings} (every family may then use its '
-                f'margin in about {TARGET_TIME:g} s, whatever its unit)'
+                f'margin in about {TARGET_TIME:g} s, whatever its unit; the margins absorb what '
+                'a control period overshoots; the contacts kept on their object faces)'
             )
         return lines
 
@@ -187,6 +193,12 @@ def startup_advice(
         for alpha in ('alpha1', 'alpha2'):
             suggestion[f'barrier.{alpha}.kind'] = 'linear'
             suggestion[f'barrier.{alpha}.gain'] = gain
+        config = safety_filter.config
+        for family in ('joint_limits', 'fingertip_workspace'):
+            if getattr(config, f'{family}_margin') < SUGGESTED_MARGIN:
+                suggestion[f'{family}.margin'] = SUGGESTED_MARGIN
+        if not config.object_workspace_enabled:
+            suggestion['object_workspace.enabled'] = True
     return StartupAdvice(allowances, rest_margin, binding, suggestion)
 
 
@@ -245,3 +257,8 @@ def _unit(row: str) -> str:
     """Return a barrier row's unit: m on an object face (``u_*``, ``v_*``), else rad."""
     label = row.rsplit('/', 1)[-1]
     return 'm' if label.startswith(('u_', 'v_')) else 'rad'
+
+
+def _text(value: Any) -> str:
+    """Return a parameter value as a parameter file writes it (``true``, ``10.0``)."""
+    return str(value).lower() if isinstance(value, bool) else str(value)
