@@ -1,9 +1,10 @@
 """The filter node's start-up advice in its log: once, at the first state it ticks on.
 
 The advice (:mod:`~grasp_safety_filter.control.startup_advice`) costs a linear program
-(milliseconds), so the tick only keeps its state; the advice is computed when the node takes
-its log lines, after the tick's answer is out. A new filter configuration (parameters set at
-run time) gets its own advice at the next tick.
+(~2 ms; its first-call costs are paid by the node's spare tick at start-up,
+:mod:`~grasp_safety_filter.nodes.tick_kernels`), so the tick only keeps its state; the
+advice is computed when the node takes its log lines, after the tick's answer is out. A new
+filter configuration (parameters set at run time) gets its own advice at the next tick.
 """
 
 from __future__ import annotations

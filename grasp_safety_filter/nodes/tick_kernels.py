@@ -28,6 +28,7 @@ import numpy as np
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.reference import Pose
 from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
+from grasp_safety_filter.control.startup_advice import rest_state, startup_advice
 from grasp_safety_filter.io.messages import (
     effort_from_msg,
     effort_to_msg,
@@ -139,6 +140,9 @@ def load_filter_kernels(
         result.margins  # noqa: B018 (read on the ticks that publish them: loads their kernels)
         safety_filter.margins(state, u_nom)  # a filter switched off publishes these
         safety_filter.load_kernels()  # those of the rarer ticks, on this tick's rows
+        # The start-up advice at the first tick (its rows at rest, HiGHS): ~10 ms the first
+        # time in a process, which would stall the input streams then.
+        startup_advice(safety_filter, rest_state(spare, state))
 
     return _spare_tick(parameters, config_directory, msgs, tick)
 
