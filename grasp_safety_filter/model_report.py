@@ -18,6 +18,7 @@ import numpy as np
 from grasp_safety_filter.control.startup_advice import StartupAdvice
 from grasp_safety_filter.errors import config_error_line, ConfigError, EXIT_CONFIG_ERROR
 from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.quaternion import rotation_matrix
 
 
@@ -38,14 +39,12 @@ def main(argv: list[str] | None = None) -> int:
     overrides = dict(args.overrides)
     try:
         model, params = load_initial_grasp(args.config, overrides)
-        p_object = np.asarray(params['initial.object_position'], dtype=float)
-        R_object = rotation_matrix(params['initial.object_orientation'])
-        q = model.project_to_contact(params['initial.joint_positions'], p_object, R_object)
+        state = initial_state(model, params)
         advice = scenario_advice(args.config, overrides)
     except ConfigError as error:
         print(config_error_line('grasp-model-report', error), file=sys.stderr)
         return EXIT_CONFIG_ERROR
-    state = model.state(0.0, q, np.zeros(model.n_joints), p_object, R_object, np.zeros(6))
+    q = state.q
     print(f'scenario: {args.config}')
     print(
         f'hand: {model.n_joints} joints, {model.n_contacts} contacts; '
@@ -95,9 +94,17 @@ def scenario_advice(config: Path, overrides: Mapping[str, Any] | None = None) ->
     own = node_overrides(overrides or {}, SAFETY_FILTER_NODE)
     params = load_node_parameters(config, SAFETY_FILTER_NODE, overrides=own)
     model = GraspModel.from_parameters(params)
+    safety_filter = SafetyFilter.from_config(model, SafetyFilterConfig.from_parameters(params))
+    return startup_advice(safety_filter, initial_state(model, sim_params))
+
+
+def initial_state(model: Any, sim_params: Mapping[str, Any]) -> GraspState:
+    """Return ``model``'s state at the simulator's ``initial.*`` grasp, contacts closed, at rest.
+
+    Raises:
+        GraspConfigError: The fingertips cannot be brought onto the object.
+    """
     p_object = np.asarray(sim_params['initial.object_position'], dtype=float)
     R_object = rotation_matrix(sim_params['initial.object_orientation'])
     q = model.project_to_contact(sim_params['initial.joint_positions'], p_object, R_object)
-    state = model.state(0.0, q, np.zeros(model.n_joints), p_object, R_object, np.zeros(6))
-    safety_filter = SafetyFilter.from_config(model, SafetyFilterConfig.from_parameters(params))
-    return startup_advice(safety_filter, state)
+    return model.state(0.0, q, np.zeros(model.n_joints), p_object, R_object, np.zeros(6))

@@ -142,8 +142,9 @@ def outcome_of(summary: dict[str, Any]) -> dict[str, Any]:
 def advice_columns(advice: StartupAdvice) -> dict[str, Any]:
     """Return the filter's start-up advice at the run's initial grasp as row columns.
 
-    ``advice``: ``ok``, ``frozen`` or ``infeasible``; ``advice_frozen``: the frozen
-    families; ``advice_rest_margin``: the QP's torque margin at rest, N·m (None: -inf).
+    ``advice``: its verdict (``ok``, ``frozen``, ``infeasible`` or ``undetermined``);
+    ``advice_frozen``: the frozen families; ``advice_rest_margin``: the QP's torque margin at
+    rest, N·m (None when not finite: infeasible whatever the torque, or undetermined).
     """
     return {
         'advice': advice.verdict,
