@@ -8,7 +8,7 @@ raised (``error``) are counted apart: they say nothing about the filter.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 import math
 from pathlib import Path
 from typing import Any
@@ -217,6 +217,16 @@ def _levels(values: Sequence[Any]) -> list[tuple[str, Any]]:
     return levels
 
 
+def _held_of(
+    rows: Sequence[Mapping[str, Any]], mode: str, column: str, test: Callable[[Any], bool]
+) -> tuple[int, int]:
+    """Return how many of ``mode``'s runs whose ``column`` passes ``test`` held, of how many."""
+    inside = [
+        r for r in rows if r['mode'] == mode and r.get(column) is not None and test(r[column])
+    ]
+    return _held(inside), len(inside)
+
+
 def _label(value: Any) -> str:
     return f'{value:.4g}' if isinstance(value, float) else str(value)
 
@@ -238,14 +248,10 @@ def _plots(
             continue  # one value; or many scenarios, one run each: runs.csv has them
         levels = _levels(values)
         counts = {
-            (label, mode): (_held(inside), len(inside))
+            (label, mode): _held_of(rows, mode, column, test)
             for label, test in levels
             for mode in modes
-            for inside in [
-                [r for r in rows if r['mode'] == mode and r.get(column) is not None
-                 and test(r[column])]
-            ]
-        }  # fmt: skip
+        }
         table = [f'| `{column}` | ' + ' | '.join(modes) + ' |', '| --- |' + ' --- |' * len(modes)]
         table += [
             f'| {label} | ' + ' | '.join(rate_text(*counts[label, mode]) for mode in modes) + ' |'
