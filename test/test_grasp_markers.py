@@ -281,3 +281,51 @@ def _cpu_seconds(pid: int) -> float:
     """User + system CPU time of a process, s (Linux)."""
     fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+@pytest.mark.parametrize('executor_name', ['wait_set_executor', 'make_executor'])
+def test_polled_streams_give_their_newest_message_without_waking_the_executor(executor_name):
+    import rclpy
+
+    from grasp_safety_filter.nodes import spin_node
+    from grasp_safety_filter.nodes.grasp_markers_node import GraspMarkersNode
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = GraspMarkersNode(
+        context=context,
+        global_arguments=[
+            '--ros-args',
+            '--params-file',
+            str(REPO / 'config' / 'paper_scenario.yaml'),
+        ],
+    )
+    driver = rclpy.create_node('polled_probe', context=context)
+    executor = getattr(spin_node, executor_name)(context)
+    executor.add_node(node)
+    node._timer.cancel()  # the test takes the stream, not the node's drawing
+    try:
+        polled, _ = node._streams[0]
+        spec = topics.topic_spec(topics.JOINT_STATES)
+        publisher = driver.create_publisher(
+            m.rclpy_message_class(spec.msgtype), topics.JOINT_STATES, spec.qos.to_rclpy()
+        )
+        deadline = time.monotonic() + 10.0
+        while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        msgs = m.MessageNamespace.from_rclpy()
+        for k in range(1, 6):
+            publisher.publish(m.joint_state_to_msg(msgs, k * 1_000_000, ['j'], [0.0], [0.0], None))
+            executor.spin_once(timeout_sec=0.02)
+        time.sleep(0.2)
+        executor.spin_once(timeout_sec=0.02)
+        if executor_name == 'wait_set_executor':
+            assert polled._kept is None  # the executor never ran its callback
+        newest = polled.take_newest()
+        assert newest is not None and m.header_stamp_ns(newest) == 5_000_000
+        assert polled.take_newest() is None
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        driver.destroy_node()
+        rclpy.shutdown(context=context)

@@ -24,6 +24,7 @@ from pathlib import Path
 import sys
 from typing import Any
 
+from rclpy.callback_groups import CallbackGroup
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -166,6 +167,24 @@ class EndpointNode(Node):
             rclpy_message_class(spec.msgtype), topic, guarded, qos.to_rclpy(), raw=raw
         )
 
+    def subscribe_polled(self, topic: str) -> PolledSubscription:
+        """Subscribe to a stream whose newest message is taken when wanted, not on arrival.
+
+        Best effort with a history of one, as ``newest_only``. Spun by an executor that
+        honours callback groups (:func:`~grasp_safety_filter.nodes.spin_node.
+        wait_set_executor`), the node is never woken by it: reading a 1 kHz driver's stream
+        30 times a second costs 30 takes, not 1 000 callbacks (DDS keeps the newest sample
+        meanwhile). Under the events executor, which runs every callback, it still works.
+        """
+        spec = topic_spec(topic)
+        qos = dataclasses.replace(spec.qos, reliability='best_effort', depth=1)
+        polled = PolledSubscription()
+        polled.subscription = self.create_subscription(
+            rclpy_message_class(spec.msgtype), topic, polled.keep, qos.to_rclpy(),
+            callback_group=_NeverExecuted(),
+        )  # fmt: skip
+        return polled
+
     def add_publisher(self, topic: str) -> None:
         """Publish ``topic`` too (its type and QoS from the table), once the node knows it must."""
         spec = topic_spec(topic)
@@ -302,3 +321,38 @@ def _start_up_parameters(
     validate_parameters(schema, values, source, other_schemas=others)
     given.update({n: GivenParameter(v, source, Path.cwd()) for n, v in values.items()})
     return name, given
+
+
+class _NeverExecuted(CallbackGroup):
+    """A callback group the executor never waits on nor runs: its subscriptions are polled."""
+
+    def can_execute(self, entity: Any) -> bool:
+        return False
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return False
+
+    def ending_execution(self, entity: Any) -> None:
+        pass
+
+
+class PolledSubscription:
+    """A subscription its owner takes from (:meth:`EndpointNode.subscribe_polled`)."""
+
+    def __init__(self) -> None:
+        self.subscription: Any = None
+        self._kept: Any = None
+
+    def keep(self, msg: Any) -> None:
+        """Keep a message an executor took (the events executor ignores callback groups)."""
+        self._kept = msg
+
+    def take_newest(self) -> Any | None:
+        """Return the newest message received since the last take (None: none)."""
+        newest, self._kept = self._kept, None
+        handle = self.subscription.handle
+        with handle:
+            # The take an executor does (rclpy's ``wait_for_message`` does it too).
+            while (taken := handle.take_message(self.subscription.msg_type, False)) is not None:
+                newest = taken[0]
+        return newest

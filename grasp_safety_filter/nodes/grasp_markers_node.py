@@ -4,12 +4,15 @@ Run: ``ros2 run grasp_safety_filter grasp_markers_node --ros-args --params-file
 config/paper_scenario.yaml`` (the model section is the controllers'; ``use_sim_time`` as
 theirs).
 
-Subscribes to ``/hand/joint_states`` and ``/object/odom`` (newest only, best effort: they
-match any publisher; kept serialised, the newest converted when drawn), ``/hand/contacts``
-(the simulator's forces) and ``/diagnostics`` (the filter's active rows); publishes
+Takes the newest ``/hand/joint_states``, ``/object/odom`` and ``/hand/contacts`` (the
+simulator's forces) when it draws (best effort, history one: they match any publisher, and a
+1 kHz driver does not wake the node), subscribes to ``/diagnostics`` (the filter's active
+rows); publishes
 ``/grasp/markers`` (``visualization_msgs/MarkerArray``, palm frame) at most ``markers.rate``
 times a second of steady time. Set the viewer's fixed frame to the palm frame
-(``model.palm_frame``): no TF is needed. Everything else is
+(``model.palm_frame``): no TF is needed. The markers are built as rosbags messages and
+published serialised (rclpy's message classes would cost most of the node's CPU).
+Everything else is
 :class:`~grasp_safety_filter.nodes.grasp_markers.GraspMarkersEndpoint`.
 
 Live parameters: ``markers.rate`` and ``markers.force_scale``; the model is read-only.
@@ -21,9 +24,9 @@ from collections.abc import Mapping
 from typing import Any
 
 from rclpy.clock import Clock, ClockType
-from rclpy.serialization import deserialize_message
+from rosbags.typesys import get_typestore, Stores
 
-from grasp_safety_filter.io.messages import rclpy_message_class
+from grasp_safety_filter.io.messages import MessageNamespace
 from grasp_safety_filter.io.schemas import GRASP_MARKERS_NODE
 from grasp_safety_filter.io.topics import (
     CONTACTS,
@@ -31,12 +34,11 @@ from grasp_safety_filter.io.topics import (
     JOINT_STATES,
     MARKERS,
     OBJECT_ODOM,
-    topic_spec,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode
 from grasp_safety_filter.nodes.grasp_markers import GraspMarkersEndpoint, MarkerConfig
-from grasp_safety_filter.nodes.spin_node import spin_node
+from grasp_safety_filter.nodes.spin_node import spin_node, wait_set_executor
 
 #: Shortest interval between two WARN logs of input that did not parse, s.
 REJECTION_LOG_PERIOD = 5.0
@@ -48,26 +50,19 @@ class GraspMarkersNode(EndpointNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(GRASP_MARKERS_NODE, publishes=(MARKERS,), **kwargs)
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
+        self._typestore = get_typestore(Stores.ROS2_JAZZY)
         self.endpoint = GraspMarkersEndpoint(
-            model, self.msgs, MarkerConfig.from_parameters(self.parameters)
+            model,
+            MessageNamespace.from_typestore(self._typestore),
+            MarkerConfig.from_parameters(self.parameters),
         )
+        self._serialised: tuple[Any, bytes] | None = None  # the last array, serialised
         endpoint = self.endpoint
-        # The streams are kept serialised and only the newest is converted, when drawn: a
-        # 1 kHz driver then costs this node a reference per message, not a message object.
-        self._streams = {
-            JOINT_STATES: endpoint.on_joint_states,
-            OBJECT_ODOM: endpoint.on_odom,
-            CONTACTS: endpoint.on_contacts,
-        }
-        self._newest: dict[str, bytes] = {}
-        self._classes = {t: rclpy_message_class(topic_spec(t).msgtype) for t in self._streams}
-        for topic in self._streams:
-            self.subscribe(
-                topic,
-                lambda data, topic=topic: self._newest.__setitem__(topic, data),
-                newest_only=True,
-                raw=True,
-            )
+        self._streams = [
+            (self.subscribe_polled(JOINT_STATES), endpoint.on_joint_states),
+            (self.subscribe_polled(OBJECT_ODOM), endpoint.on_odom),
+            (self.subscribe_polled(CONTACTS), endpoint.on_contacts),
+        ]
         self.subscribe(DIAGNOSTICS, endpoint.on_diagnostics)
         # Steady time: markers keep coming when a simulator's clock stops, as a viewer expects.
         self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
@@ -86,13 +81,16 @@ class GraspMarkersNode(EndpointNode):
         )
 
     def _publish_markers(self) -> None:
-        for topic, handle in self._streams.items():
-            data = self._newest.pop(topic, None)
-            if data is not None:
-                handle(deserialize_message(data, self._classes[topic]))
+        for subscription, keep in self._streams:
+            msg = subscription.take_newest()
+            if msg is not None:
+                keep(msg)
         markers = self.endpoint.markers()
         if markers is not None:
-            self.publisher(MARKERS).publish(markers)
+            if self._serialised is None or self._serialised[0] is not markers:
+                data = self._typestore.serialize_cdr(markers, markers.__msgtype__)
+                self._serialised = (markers, data.tobytes())
+            self.publisher(MARKERS).publish(self._serialised[1])
         if self.endpoint.last_error is not None:
             self.get_logger().warning(
                 self.endpoint.last_error, throttle_duration_sec=REJECTION_LOG_PERIOD
@@ -108,7 +106,7 @@ class GraspMarkersNode(EndpointNode):
 
 def main(args: list[str] | None = None) -> None:
     """Run ``grasp_markers_node`` until Ctrl-C or shutdown."""
-    spin_node(GraspMarkersNode, args)
+    spin_node(GraspMarkersNode, args, wait_set_executor)
 
 
 if __name__ == '__main__':

@@ -42,7 +42,11 @@ EXIT_BAD_PARAMETERS = EXIT_CONFIG_ERROR
 SIGNAL_CHECK_PERIOD = 0.1
 
 
-def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) -> None:
+def spin_node(
+    node_factory: Callable[..., Node],
+    args: list[str] | None = None,
+    executor_factory: Callable[[Any], Any] | None = None,
+) -> None:
     """Initialise rclpy, spin one node until shutdown, SIGINT or SIGTERM, and clean up (Jazzy).
 
     The body of a node process. SIGINT and SIGTERM (one, or a second while cleaning up, as
@@ -53,6 +57,8 @@ def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) 
     Args:
         node_factory: Builds the node; called with ``global_arguments`` (an EndpointNode).
         args: The process's arguments (default ``sys.argv``).
+        executor_factory: Builds the executor from the context (default
+            :func:`make_executor`).
 
     Raises:
         SystemExit: With :data:`EXIT_BAD_PARAMETERS` after printing one line on stderr, when
@@ -69,7 +75,7 @@ def spin_node(node_factory: Callable[..., Node], args: list[str] | None = None) 
         _init_rclpy(arguments)
         if not termination.requested:
             node = node_factory(global_arguments=arguments)
-            executor = make_executor(context)
+            executor = (executor_factory or make_executor)(context)
             executor.add_node(node)
         while not termination.requested and context.ok():
             try:
@@ -108,6 +114,16 @@ def make_executor(context: Any) -> Any:
     except ImportError:  # an rclpy without it (before Jazzy)
         return SingleThreadedExecutor(context=context)
     return EventsExecutor(context=context)
+
+
+def wait_set_executor(context: Any) -> Any:
+    """Return rclpy's ``SingleThreadedExecutor``: it honours callback groups.
+
+    For a node that polls its streams (:meth:`~grasp_safety_filter.nodes.base_node.
+    EndpointNode.subscribe_polled`): this executor leaves them alone, where the events
+    executor takes (and converts) every message they receive.
+    """
+    return SingleThreadedExecutor(context=context)
 
 
 def _init_rclpy(arguments: list[str]) -> None:

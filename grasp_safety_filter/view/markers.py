@@ -9,8 +9,9 @@ part, so that each update replaces the last), all in the scene's palm frame:
 - ``contacts``: the contact points (red: a contact one of the filter's active rows names);
   ``normals``: a line per contact, into the object; ``forces``: an arrow per contact, the
   contact force on the object, ``force_scale`` m per N (when known);
-- ``cones``: each friction cone ``|f_t| <= mu f_n`` as a triangle list, coloured by the
-  share of it used, beta / mu (green 0, red 1 and beyond; grey when unknown);
+- ``cones``: each friction cone ``|f_t| <= mu f_n`` as a triangle list in its contact's
+  frame (the same points while mu holds), coloured by the share of it used, beta / mu
+  (green 0, red 1 and beyond; grey when unknown);
 - ``active``: the joints an active row names (red spheres), and the active rows as text above
   the object.
 
@@ -22,11 +23,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 from matplotlib import colormaps
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from grasp_safety_filter.io.messages import quaternion_xyzw_from_matrix
 from grasp_safety_filter.view.scene import friction_cone, GraspScene, Shape
 
 #: Normals and friction cones are this share of the object's largest half extent long.
@@ -73,7 +75,9 @@ class MarkerSpec:
     text: str = ''
 
 
-def _solid(ns: str, index: int, shape: Shape, rgba: tuple[float, ...]) -> MarkerSpec:
+def _solid(
+    ns: str, index: int, shape: Shape, quaternion: np.ndarray, rgba: tuple[float, ...]
+) -> MarkerSpec:
     """Return a solid's cube, sphere or cylinder marker (a capsule: a cylinder, caps included)."""
     if shape.kind == 'box':
         kind, scale = 'cube', 2.0 * shape.size
@@ -83,8 +87,29 @@ def _solid(ns: str, index: int, shape: Shape, rgba: tuple[float, ...]) -> Marker
         radius, half = shape.size
         length = 2.0 * (half + radius) if shape.kind == 'capsule' else 2.0 * half
         kind, scale = 'cylinder', np.array([2.0 * radius, 2.0 * radius, length])
-    quaternion = quaternion_xyzw_from_matrix(shape.R_shape_to_palm)
     return MarkerSpec(ns, index, kind, shape.p_shape_in_palm, quaternion, scale, rgba)
+
+
+def _quaternions_xyzw(R: np.ndarray) -> np.ndarray:
+    """Return the unit quaternions ``(x, y, z, w)``, ``w >= 0``, of rotations (N, 3, 3)."""
+    if len(R) == 0:
+        return np.zeros((0, 4))
+    return Rotation.from_matrix(R).as_quat(canonical=True)
+
+
+@lru_cache(maxsize=64)
+def _cone_triangles(mu: float, length: float) -> np.ndarray:
+    """Return a friction cone's triangles in its contact frame (apex at 0, along z), m.
+
+    Cached: a marker whose points are the same array is not rebuilt
+    (:class:`~grasp_safety_filter.io.messages.markers.MarkerArrayBuilder`).
+    """
+    rim = friction_cone(np.zeros(3), np.array([0.0, 0.0, 1.0]), mu, length, CONE_SEGMENTS)
+    rim = rim[:, 1, :].T
+    apex = np.zeros_like(rim[:-1])
+    triangles = np.stack([apex, rim[:-1], rim[1:]], axis=1).reshape(-1, 3)
+    triangles.flags.writeable = False
+    return triangles
 
 
 def _named(rows: Sequence[str]) -> set[str]:
@@ -112,10 +137,21 @@ def scene_markers(
     size = float(np.max(scene.object.size)) if scene.object is not None else 0.05
     length = ARROW_SHARE * size
     width = 0.04 * length
-    markers = [_solid('links', i, link, LINK_RGBA) for i, link in enumerate(scene.links)]
-    markers += [_solid('fingertips', i, tip, TIP_RGBA) for i, tip in enumerate(scene.fingertips)]
+    solids = [*scene.links, *scene.fingertips, *([scene.object] if scene.object else [])]
+    frames = [s.R_shape_to_palm for s in solids] + list(scene.R_contact_to_palm)
+    quaternions = _quaternions_xyzw(np.array(frames).reshape(-1, 3, 3))
+    n_links, n_tips = len(scene.links), len(scene.fingertips)
+    markers = [
+        _solid('links', i, link, quaternions[i], LINK_RGBA) for i, link in enumerate(scene.links)
+    ]
+    markers += [
+        _solid('fingertips', i, tip, quaternions[n_links + i], TIP_RGBA)
+        for i, tip in enumerate(scene.fingertips)
+    ]
     if scene.object is not None:
-        markers.append(_solid('object', 0, scene.object, OBJECT_RGBA))
+        markers.append(
+            _solid('object', 0, scene.object, quaternions[n_links + n_tips], OBJECT_RGBA)
+        )
     line, chain = np.array([width, 0.0, 0.0]), scene.chain.reshape(-1, 3)
     markers.append(MarkerSpec('chain', 0, 'line_list', scale=line, points=chain))
     named = _named(active_rows)
@@ -132,20 +168,23 @@ def scene_markers(
             markers.append(
                 MarkerSpec('forces', i, 'arrow', scale=arrow, rgba=FORCE_RGBA, points=ends)
             )
-    for i, (p, n, mu_i) in enumerate(zip(p_c, scene.normal_in_palm, mu, strict=True)):
+    contact_quaternions = quaternions[len(solids) :]
+    for i, (p, q, mu_i) in enumerate(zip(p_c, contact_quaternions, mu, strict=True)):
         if beta is None:
             rgba = (0.6, 0.6, 0.6, 0.5)
         else:
             used = min(beta[i] / mu_i, 1.0) if np.isfinite(beta[i]) else 1.0
             rgba = (*FRICTION_USE(used)[:3], 0.5)
-        rim = friction_cone(p, n, float(mu_i), length, CONE_SEGMENTS)[:, 1, :].T
-        apex = np.repeat([p], CONE_SEGMENTS, axis=0)
-        triangles = np.stack([apex, rim[:-1], rim[1:]], axis=1).reshape(-1, 3)
-        markers.append(MarkerSpec('cones', i, 'triangle_list', rgba=rgba, points=triangles))
+        triangles = _cone_triangles(float(mu_i), length)
+        markers.append(MarkerSpec('cones', i, 'triangle_list', p, q, rgba=rgba, points=triangles))
     joints = [scene.p_joint_in_palm[name] for name in scene.p_joint_in_palm if name in named]
     markers.append(
         MarkerSpec(
-            'active', 0, 'sphere_list', scale=np.full(3, 4.0 * width), rgba=RED,
+            'active',
+            0,
+            'sphere_list',
+            scale=np.full(3, 4.0 * width),
+            rgba=RED,
             points=np.array(joints).reshape(-1, 3),
         )
     )

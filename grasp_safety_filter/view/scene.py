@@ -54,7 +54,7 @@ class GraspScene:
         fingertips: The contact model's fingertip spheres, one per contact.
         object: The object (box or sphere), None if the model has no object shape.
         p_contact_in_palm: Contact points, (n, 3), m.
-        normal_in_palm: Unit contact normals, into the object, (n, 3).
+        R_contact_to_palm: Contact frames, their z the normal into the object, (n, 3, 3).
         force_in_palm: Contact forces on the object, (n, 3), N; None if not given.
         contact_names: One per contact.
     """
@@ -66,9 +66,14 @@ class GraspScene:
     fingertips: tuple[Shape, ...]
     object: Shape | None
     p_contact_in_palm: np.ndarray
-    normal_in_palm: np.ndarray
+    R_contact_to_palm: np.ndarray
     force_in_palm: np.ndarray | None
     contact_names: tuple[str, ...]
+
+    @property
+    def normal_in_palm(self) -> np.ndarray:
+        """Unit contact normals, into the object, (n, 3)."""
+        return self.R_contact_to_palm[:, :, 2]
 
     def points(self) -> np.ndarray:
         """Every point the scene must show (solids' centres widened by their size), (N, 3)."""
@@ -204,7 +209,7 @@ class SceneBuilder:
             fingertips,
             self._object(p_object_in_palm, R_object_to_palm),
             np.array([c.p_contact_in_palm for c in contacts]),
-            R_contact[:, :, 2].copy(),
+            R_contact,
             force,
             tuple(model.contact_names),
         )

@@ -38,7 +38,9 @@ class MarkerArrayBuilder:
 
     A marker message is made once per namespace and id and then updated in place: building
     one costs a Python message class most of its time in the sub-messages it makes anew,
-    and a viewer's update changes only poses, points and colours. The markers never expire
+    and a viewer's update changes only poses, points and colours. A spec whose points are
+    the array of the marker's last update (a cone in its contact frame) keeps its points
+    messages. The markers never expire
     (``lifetime`` 0): each update replaces them by namespace and id.
 
     Args:
@@ -50,6 +52,7 @@ class MarkerArrayBuilder:
         self.msgs = msgs
         self.frame_id = frame_id
         self._markers: dict[tuple[str, int], Any] = {}
+        self._points: dict[tuple[str, int], np.ndarray] = {}  # the arrays they were built of
 
     def _new(self, ns: str, index: int) -> Any:
         msgs = self.msgs
@@ -97,7 +100,9 @@ class MarkerArrayBuilder:
             marker.scale.x, marker.scale.y, marker.scale.z = (float(c) for c in spec.scale)
             colour = marker.color
             colour.r, colour.g, colour.b, colour.a = (float(c) for c in spec.rgba)
-            marker.points = _points(msgs, spec.points)
+            if self._points.get(key) is not spec.points:
+                marker.points = _points(msgs, spec.points)
+                self._points[key] = spec.points
             marker.colors = [_color(msgs, c) for c in spec.colors]
             marker.text = spec.text
             markers.append(marker)
