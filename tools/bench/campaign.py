@@ -1,13 +1,15 @@
 """A campaign's throughput and overhead: ``python -m grasp_tools.bench.campaign FILE --out DIR``.
 
-Times ``--serial`` of the campaign's runs, a seeded random sample, one after the other in this
-process (after one to warm up), before and again after the campaign: one run's rate, its
-drift on a shared machine bracketed. Between them, the whole campaign runs through
-``grasp-campaign``'s engine on a local cluster of ``--workers`` processes, resuming from
-``DIR`` like the command. Prints the campaign's rate against ``workers x`` one run's rate,
-and the overhead: the CPU of every process of the campaign (this one with the scheduler,
-the workers) beyond the runs' own, as a share of the runs' CPU. Then writes ``runs.csv``
-and ``report.md`` as the command does.
+The campaign's pending runs are split into ``--blocks`` consecutive blocks, run through
+``grasp-campaign``'s engine on one local cluster of ``--workers`` processes (resuming from
+``DIR`` like the command). Before each block and after the last, ``--serial`` of the
+campaign's runs (a seeded random sample, the same each time) are timed one after the other in
+this process: one run's rate, measured next to each block, so that a shared machine's drift
+over a long campaign moves both sides of each block's ratio alike. Prints each block's rate
+against ``workers x`` the mean of its two bracketing serial rates, their median and range,
+the whole campaign's, and the overhead: the CPU of every process of the campaign (this one
+with the scheduler, the workers) beyond the runs' own, as a share of the runs' CPU. Then
+writes ``runs.csv`` and ``report.md`` as the command does.
 """
 
 from __future__ import annotations
@@ -51,39 +53,51 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('campaign', type=Path)
     parser.add_argument('--out', type=Path, required=True)
     parser.add_argument('--workers', type=int, default=default_workers())
-    parser.add_argument('--serial', type=int, default=10, help='runs timed one by one')
+    parser.add_argument('--serial', type=int, default=6, help='runs timed one by one')
+    parser.add_argument('--blocks', type=int, default=5, help='blocks between serial timings')
     args = parser.parse_args(argv)
     campaign = load_campaign(args.campaign)
     runs = campaign.runs()
     execute_run(runs[0])  # imports and compiled kernels, as a worker's first run
     picks = np.random.default_rng(0).choice(len(runs), min(args.serial, len(runs)), replace=False)
     sample = [runs[i] for i in sorted(picks)]  # both modes, short and long runs, as the campaign
-    before = _serial(sample)
     store = ResultStore(args.out)
-    pending = {run.key for run in runs} - set(store.finished)
+    pending_runs = [run for run in runs if run.key not in store.finished]
+    pending = {run.key for run in pending_runs}
+    blocks = [list(b) for b in np.array_split(np.arange(len(pending_runs)), args.blocks) if len(b)]
     me = psutil.Process()
-    cpu_before = _tree_cpu(me)
-    start = time.perf_counter()
+    serial = [len(sample) / _serial(sample)]
+    done, elapsed, cpu_all, ratios = 0, 0.0, 0.0, []
     with dask_client(workers=args.workers) as client:
-        started = time.perf_counter()
-        done = execute(runs, store, client)
-        elapsed = time.perf_counter() - started
-        cpu_all = _tree_cpu(me) - cpu_before  # the workers still alive: their CPU counts
-    total = time.perf_counter() - start
-    after = _serial(sample)
-    serial_rate = 2 * len(sample) / (before + after)
+        for block in blocks:
+            cpu_before = _tree_cpu(me)
+            started = time.perf_counter()
+            block_done = execute([pending_runs[i] for i in block], store, client)
+            block_elapsed = time.perf_counter() - started
+            cpu_all += _tree_cpu(me) - cpu_before  # the workers still alive: their CPU counts
+            serial.append(len(sample) / _serial(sample))
+            done, elapsed = done + block_done, elapsed + block_elapsed
+            one_run = 0.5 * (serial[-2] + serial[-1])
+            ratios.append(block_done / block_elapsed / (args.workers * one_run))
+            print(
+                f'block {len(ratios)}: {block_done} runs in {block_elapsed:.1f} s, '
+                f'{block_done / block_elapsed:.3f} runs/s; one run at a time {serial[-2]:.3f} '
+                f'-> {serial[-1]:.3f} runs/s; ratio {ratios[-1]:.2f}',
+                flush=True,
+            )
+    serial_rate = float(np.mean(serial))
     print(
-        f'one run at a time ({len(sample)} runs): {len(sample) / before:.3f} runs/s before the '
-        f'campaign, {len(sample) / after:.3f} after; {serial_rate:.3f} in all'
+        f'one run at a time ({len(sample)} runs, {len(serial)} times): '
+        f'{min(serial):.3f}-{max(serial):.3f} runs/s, mean {serial_rate:.3f}'
     )
     rows = store.rows(runs)
     run_cpu = sum(row['cpu_s'] for row in rows if row['key'] in pending and row.get('cpu_s'))
     if done:
         rate = done / elapsed
         print(
-            f"campaign: {done} runs in {elapsed:.1f} s ({total:.1f} s with the cluster's start "
-            f'and stop): {rate:.3f} runs/s = {rate / (args.workers * serial_rate):.2f} x '
-            f"{args.workers} x one run's rate"
+            f'campaign: {done} runs in {elapsed:.1f} s: {rate:.3f} runs/s = '
+            f"{rate / (args.workers * serial_rate):.2f} x {args.workers} x one run's mean rate; "
+            f'per block {np.median(ratios):.2f} median, {min(ratios):.2f}-{max(ratios):.2f}'
         )
         busy = sum(row['wall_s'] for row in rows if row['key'] in pending) / (
             args.workers * elapsed
