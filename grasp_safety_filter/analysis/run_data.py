@@ -117,11 +117,6 @@ class RunData:
     torsion: np.ndarray | None = None
 
     @property
-    def t_filter(self) -> np.ndarray:
-        """Stamps of the filter's statuses, shape (F,), s."""
-        return self.filter_statuses.t
-
-    @property
     def joint_names(self) -> list[str]:
         """Joint names, command order."""
         return list(self.scenario['joint_names'])

@@ -128,8 +128,6 @@ class GraspModel:
         self._packed_layout: PackedLayout | None = None
         if contacts is not None:
             self._set_contacts(contacts)
-        # [I | 0], (m, m + 1): the joint torque u as an affine map of (u, 1).
-        self._unit_torque = np.eye(hand.n_joints, hand.n_joints + 1)
         self.contact_names = list(contact_names)
         #: mu_i per contact, (n,), read-only (one value given applies to every contact).
         self.friction_coefficient = friction_coefficients(friction_coefficient, contact_names)

@@ -94,9 +94,8 @@ class DAQPBackend:
             settings: daqp settings over :data:`DEFAULT_SETTINGS` (e.g. ``iter_limit``).
         """
         m, k = problem.n_torques, problem.n_rows
-        self._m, self._k = m, k
+        self._m = m
         self._u_min, self._u_max = problem.u_min, problem.u_max
-        self._sqrt_weights = np.sqrt(np.asarray(slack_weights, dtype=float))
         options = {**DEFAULT_SETTINGS, **settings}
         no_upper = np.full(k, _INFINITY)
         self._hard = _Model(
