@@ -124,6 +124,19 @@ def test_contact_points_are_drawn_on_the_fingertips_and_on_the_object(name):
     # Force arrows: on the object, from each contact point.
     for arrow, point in zip(markers['forces'], points, strict=True):
         assert np.allclose(xyz(arrow.points[0]), point)
+    # Friction cones, drawn in their contact frames: apex at the contact point, axis into
+    # the object, every rim point at the cone's half angle atan(mu) from the axis.
+    mu = endpoint.model.friction_coefficient
+    for cone, point, mu_i in zip(markers['cones'], points, mu, strict=True):
+        R, p = rotation(cone.pose.orientation), xyz(cone.pose.position)
+        assert np.allclose(p, point)
+        axis = R[:, 2]
+        assert np.dot(xyz(body.pose.position) - point, axis) > 0.0
+        in_palm = np.array([xyz(q) for q in cone.points]) @ R.T + p
+        rays = in_palm - point
+        rays = rays[np.linalg.norm(rays, axis=1) > 1e-12]
+        tangent = np.linalg.norm(np.cross(rays, axis), axis=1) / (rays @ axis)
+        assert np.allclose(tangent, mu_i)
 
 
 @pytest.mark.parametrize('name', CONFIGS)

@@ -23,6 +23,7 @@ from grasp_safety_filter.cli import analyze_main
 from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.runner import record_run, RunOptions
+from grasp_safety_filter.view.pictures import close_up_bounds, setup_figure
 from grasp_safety_filter.view.scene import SceneBuilder
 from hand_sim_node.config import SimConfig
 from hand_sim_node.plant import PlantConfig
@@ -94,6 +95,22 @@ def test_links_are_the_urdf_visual_solids(name):
     for p in scene.p_joint_in_palm.values():
         assert np.min(np.linalg.norm(ends - p, axis=1)) < 1e-12
     assert len(scene.p_joint_in_palm) == model.n_joints
+
+
+@pytest.mark.parametrize('name', SCENARIOS)
+def test_the_close_up_holds_the_object_and_the_fingertips_and_is_a_zoom(name):
+    _, _, scene = initial_scene(name)
+    figure = setup_figure(scene, name)
+    whole, _, close = figure.axes
+    assert close.get_title() == 'close-up view'
+    limits = np.array([close.get_xlim3d(), close.get_ylim3d(), close.get_zlim3d()]).T
+    for solid in [*scene.fingertips, scene.object]:
+        reach = float(np.max(solid.size))
+        assert np.all(limits[0] <= solid.p_shape_in_palm - reach)
+        assert np.all(solid.p_shape_in_palm + reach <= limits[1])
+    assert np.all(close_up_bounds(scene)[0] >= limits[0] - 1e-12)
+    whole_width = np.diff(whole.get_xlim3d())[0]
+    assert np.diff(close.get_xlim3d())[0] < 0.8 * whole_width
 
 
 @pytest.fixture(scope='module')
