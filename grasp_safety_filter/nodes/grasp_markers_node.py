@@ -7,13 +7,11 @@ theirs).
 Takes the newest ``/hand/joint_states``, ``/object/odom`` and ``/hand/contacts`` (the
 simulator's forces) when it draws (best effort, history one: they match any publisher, and a
 1 kHz driver does not wake the node), subscribes to ``/diagnostics`` (the filter's active
-rows); publishes
-``/grasp/markers`` (``visualization_msgs/MarkerArray``, palm frame) at most ``markers.rate``
-times a second of steady time. Set the viewer's fixed frame to the palm frame
-(``model.palm_frame``): no TF is needed. The markers are built as rosbags messages and
-published serialised (rclpy's message classes would cost most of the node's CPU).
-Everything else is
-:class:`~grasp_safety_filter.nodes.grasp_markers.GraspMarkersEndpoint`.
+rows); publishes ``/grasp/markers`` (``visualization_msgs/MarkerArray``, palm frame) at most
+``markers.rate`` times a second of steady time. Set the viewer's fixed frame to the palm
+frame (``model.palm_frame``): no TF is needed. The markers are built as rosbags messages and
+published serialised (rclpy's message classes would cost most of the node's CPU). Everything
+else is :class:`~grasp_safety_filter.nodes.grasp_markers.GraspMarkersEndpoint`.
 
 Live parameters: ``markers.rate`` and ``markers.force_scale``; the model is read-only.
 """
