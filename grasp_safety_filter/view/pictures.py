@@ -147,11 +147,7 @@ def draw_scene(
 
 def close_up_bounds(scene: GraspScene) -> np.ndarray:
     """Return the corners of the box around the object and the fingertips, widened, (2, 3), m."""
-    solids = [*scene.fingertips] + ([scene.object] if scene.object else [])
-    extents = [
-        s.p_shape_in_palm + sign * float(np.max(s.size)) for s in solids for sign in (-1, 1)
-    ]
-    points = np.vstack([scene.p_contact_in_palm, *extents])
+    points = scene.grasp_points()
     low, high = points.min(axis=0), points.max(axis=0)
     widen = CLOSE_UP_MARGIN * float(np.max(high - low))
     return np.array([low - widen, high + widen])

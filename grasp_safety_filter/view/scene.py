@@ -12,6 +12,7 @@ pictures`) and markers draw a scene; nothing here draws.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -77,11 +78,17 @@ class GraspScene:
 
     def points(self) -> np.ndarray:
         """Every point the scene must show (solids' centres widened by their size), (N, 3)."""
-        solids = [*self.links, *self.fingertips] + ([self.object] if self.object else [])
-        extents = [
-            s.p_shape_in_palm + sign * float(np.max(s.size)) for s in solids for sign in (-1, 1)
-        ]
-        return np.vstack([self.chain.reshape(-1, 3), self.p_contact_in_palm, *extents])
+        return np.vstack([self.chain.reshape(-1, 3), *_extents(self.links), self.grasp_points()])
+
+    def grasp_points(self) -> np.ndarray:
+        """Return the points of the object, fingertips and contacts (widened alike), (N, 3)."""
+        solids = [*self.fingertips] + ([self.object] if self.object else [])
+        return np.vstack([self.p_contact_in_palm, *_extents(solids)])
+
+
+def _extents(solids: Sequence[Shape]) -> list[np.ndarray]:
+    """Return each solid's centre widened by its largest size, both ways, m."""
+    return [s.p_shape_in_palm + sign * float(np.max(s.size)) for s in solids for sign in (-1, 1)]
 
 
 def friction_cone(
