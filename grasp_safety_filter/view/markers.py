@@ -27,8 +27,8 @@ from functools import lru_cache
 
 from matplotlib import colormaps
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from grasp_safety_filter.io.messages import quaternion_xyzw_from_matrix
 from grasp_safety_filter.view.scene import friction_cone, GraspScene, Shape
 
 #: Normals and friction cones are this share of the object's largest half extent long.
@@ -90,13 +90,6 @@ def _solid(
     return MarkerSpec(ns, index, kind, shape.p_shape_in_palm, quaternion, scale, rgba)
 
 
-def _quaternions_xyzw(R: np.ndarray) -> np.ndarray:
-    """Return the unit quaternions ``(x, y, z, w)``, ``w >= 0``, of rotations (N, 3, 3)."""
-    if len(R) == 0:
-        return np.zeros((0, 4))
-    return Rotation.from_matrix(R).as_quat(canonical=True)
-
-
 @lru_cache(maxsize=64)
 def _cone_triangles(mu: float, length: float) -> np.ndarray:
     """Return a friction cone's triangles in its contact frame (apex at 0, along z), m.
@@ -139,7 +132,7 @@ def scene_markers(
     width = 0.04 * length
     solids = [*scene.links, *scene.fingertips, *([scene.object] if scene.object else [])]
     frames = [s.R_shape_to_palm for s in solids] + list(scene.R_contact_to_palm)
-    quaternions = _quaternions_xyzw(np.array(frames).reshape(-1, 3, 3))
+    quaternions = [quaternion_xyzw_from_matrix(R) for R in frames]
     n_links, n_tips = len(scene.links), len(scene.fingertips)
     markers = [
         _solid('links', i, link, quaternions[i], LINK_RGBA) for i, link in enumerate(scene.links)
