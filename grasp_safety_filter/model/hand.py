@@ -356,7 +356,7 @@ class HandModel:
         dq = np.ascontiguousarray(dq, dtype=np.float64)
         raw = self.raw_terms(q, dq)
         p_f, R_f, J, twist, J_dot_dq, M, M_inv, h_bias, gravity = hand_in_model_order(
-            *raw, *self.fingertip_frames, self.pinocchio_index, dq
+            raw, self.fingertip_frames, self.pinocchio_index, dq
         )
         return HandTerms(
             M_h=M,

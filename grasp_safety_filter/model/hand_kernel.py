@@ -9,7 +9,7 @@ in LOCAL_WORLD_ALIGNED, the same operations in the same order: the frame Jacobia
 calls' bits; the accelerations agree to rounding, as Pinocchio's compiled code may fuse a
 multiply-add) and gathers everything into the model's joint order. One implementation
 serves the hand's terms (:meth:`~grasp_safety_filter.model.hand.HandModel.terms`) and the
-one-pass grasp terms (:func:`~grasp_safety_filter.model.packed_pass.hand_and_object_terms`).
+one-pass grasp terms (:mod:`~grasp_safety_filter.model.packed_terms`).
 
 Placements are rows of 12: the rotation's 9 entries column by column, then the translation
 (Pinocchio's ``SE3`` in memory); motions are rows of 6, ``(linear, angular)``.
@@ -71,19 +71,8 @@ def _frame_classical_acceleration(
 
 @kernel
 def hand_in_model_order(
-    frame_placements: np.ndarray,
-    joint_placements: np.ndarray,
-    joint_velocities: np.ndarray,
-    joint_accelerations: np.ndarray,
-    J_joints: np.ndarray,
-    M_upper: np.ndarray,
-    nle: np.ndarray,
-    g: np.ndarray,
-    M_inverse_pin: np.ndarray,
-    frame_index: np.ndarray,
-    parent_joint: np.ndarray,
-    offset_in_parent: np.ndarray,
-    support: np.ndarray,
+    raw: tuple[np.ndarray, ...],
+    frames: tuple[np.ndarray, ...],
     joint_index: np.ndarray,
     dq: np.ndarray,
 ) -> tuple[
@@ -93,21 +82,10 @@ def hand_in_model_order(
     """Return the hand's terms in the model's joint order.
 
     Args:
-        frame_placements: Every frame's placement in the palm (``data.oMf``), (nframes, 12).
-        joint_placements: Every joint's placement in the palm (``data.oMi``), (njoints, 12).
-        joint_velocities: Every joint's velocity in its own frame (``data.v``), (njoints, 6).
-        joint_accelerations: Every joint's acceleration at ddq = 0 in its own frame
-            (``data.a``), (njoints, 6).
-        J_joints: The joint Jacobian in the world frame (``data.J``; Pinocchio's order), (6, nv).
-        M_upper: M_h, upper triangle (Pinocchio's order), (nv, nv), kg·m².
-        nle: ``C_h dq + g`` (Pinocchio's order), (nv,), N·m.
-        g: ``g(q)`` (Pinocchio's order), (nv,), N·m.
-        M_inverse_pin: ``M_h^-1`` (Pinocchio's order), (nv, nv).
-        frame_index: Each fingertip's frame, (n,).
-        parent_joint: Each fingertip frame's parent joint, (n,).
-        offset_in_parent: Each fingertip frame's origin in its parent joint's frame, (n, 3), m.
-        support: Whether Pinocchio's column k moves fingertip i (the joints supporting its
-            parent joint), (n, nv).
+        raw: Pinocchio's terms at ``(q, dq)`` in its joint order
+            (:class:`~grasp_safety_filter.model.hand.RawHandTerms`).
+        frames: Where the fingertip frames hang in Pinocchio's model
+            (:class:`~grasp_safety_filter.model.hand.FingertipFrames`).
         joint_index: Pinocchio's index of each of the model's joints, (m,).
         dq: Joint velocities (the model's order), (m,), rad/s.
 
@@ -118,6 +96,11 @@ def hand_in_model_order(
         (BLAS, as numpy's product), ``J_fingertip_dot_dq`` (n, 6), ``M_h`` (m, m, both
         triangles), ``M_h_inverse`` (m, m), ``h_bias`` (m,) and ``gravity_torque`` (m,).
     """
+    (
+        frame_placements, joint_placements, joint_velocities, joint_accelerations, J_joints,
+        M_upper, nle, g, M_inverse_pin,
+    ) = raw
+    frame_index, parent_joint, offset_in_parent, support = frames
     n = frame_index.shape[0]
     m = joint_index.shape[0]
     p_f = np.empty((n, 3))

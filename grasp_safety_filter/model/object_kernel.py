@@ -8,7 +8,7 @@ In palm coordinates, with ``R = R_object_to_palm`` and the body-frame inertia ``
 An isotropic inertia ``c I3`` (the cube's, the sphere's) is the same in every frame and has
 no gyroscopic torque: the terms are then the body-frame constants. One implementation
 serves :class:`~grasp_safety_filter.model.rigid_object.RigidObject` and the one-pass grasp
-terms (:func:`~grasp_safety_filter.model.packed_pass.hand_and_object_terms`). Units: kg,
+terms (:mod:`~grasp_safety_filter.model.packed_terms`). Units: kg,
 kg·m², N·m.
 """
 

@@ -1,8 +1,8 @@
-"""The one-pass grasp terms' shared stages: hand and object before the contacts, the rest after.
+"""The one-pass grasp terms' shared stages after the contacts' kinematics.
 
 Each one-pass kernel of :mod:`grasp_safety_filter.model.packed_terms` (one per kind of
-object surface) runs :func:`hand_and_object_terms`, its surface's contact kernel,
-:func:`write_grasp_terms`, which solves the contact dynamics and writes every term into the
+object surface) forms the hand's and the object's terms, runs its surface's contact kernel,
+then :func:`write_grasp_terms`, which solves the contact dynamics and writes every term into the
 buffer in :func:`~grasp_safety_filter.model.packed_terms.packed_fields`' order, and
 :func:`write_object_coordinate_acceleration`, the last term. The
 stages are inlined into each kernel by numba (:data:`~grasp_safety_filter.model.compiled.
@@ -16,8 +16,6 @@ import numpy as np
 
 from grasp_safety_filter.model.compiled import inline_kernel, kernel
 from grasp_safety_filter.model.dynamics_kernel import acceleration_terms, velocity_terms
-from grasp_safety_filter.model.hand_kernel import hand_in_model_order
-from grasp_safety_filter.model.object_kernel import object_dynamics
 from grasp_safety_filter.model.rolling_kernels import object_coordinate_rate_terms
 from grasp_safety_filter.model.wrench_solve import wrench_solve
 
@@ -62,63 +60,12 @@ def _put3(out: np.ndarray, start: int, values: np.ndarray) -> int:
 
 
 @inline_kernel
-def hand_and_object_terms(
-    frame_placements: np.ndarray,
-    joint_placements: np.ndarray,
-    joint_velocities: np.ndarray,
-    joint_accelerations: np.ndarray,
-    J_joints: np.ndarray,
-    M_upper: np.ndarray,
-    nle: np.ndarray,
-    g: np.ndarray,
-    M_inverse_pin: np.ndarray,
-    frame_index: np.ndarray,
-    parent_joint: np.ndarray,
-    offset_in_parent: np.ndarray,
-    support: np.ndarray,
-    joint_index: np.ndarray,
-    dq: np.ndarray,
-    R_object_to_palm: np.ndarray,
-    twist_object: np.ndarray,
-    M_o_in_body: np.ndarray,
-    isotropic: bool,
-) -> tuple[ObjectTerms, HandTerms]:
-    """Return the object's mass matrices and bias, and the hand's terms in the model's order.
-
-    The arguments are :func:`~grasp_safety_filter.model.packed_terms.sphere_on_plane_terms`'
-    of the same names.
-
-    Returns:
-        ``(M_o, M_o^-1, C_o x_o_dot)`` (:func:`~grasp_safety_filter.model.object_kernel.
-        object_dynamics`) and :func:`~grasp_safety_filter.model.
-        hand_kernel.hand_in_model_order`'s ``(p_f, R_f, J_f, twist_f, J_f_dot dq, M_h,
-        M_h^-1, h_bias, g)`` (HandModel.terms).
-    """
-    # ---- The object (RigidObject.dynamics).
-    M_o, M_o_inverse, C_o_twist = object_dynamics(
-        M_o_in_body, isotropic, R_object_to_palm, twist_object
-    )
-    # ---- The hand, in the model's joint order (HandModel.terms).
-    p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = (
-        hand_in_model_order(
-            frame_placements, joint_placements, joint_velocities, joint_accelerations,
-            J_joints, M_upper, nle, g, M_inverse_pin, frame_index, parent_joint,
-            offset_in_parent, support, joint_index, dq,
-        )
-    )
-    return (M_o, M_o_inverse, C_o_twist), (
-        p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity
-    )
-
-
-@inline_kernel
 def write_grasp_terms(
     out: np.ndarray,
     object_terms: ObjectTerms,
     hand_terms: HandTerms,
     contacts: tuple[np.ndarray, ...],
-    joint_span: np.ndarray,
-    fingertip_span: np.ndarray,
+    branches: tuple[np.ndarray, np.ndarray],
     q: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -137,13 +84,14 @@ def write_grasp_terms(
 
     Args:
         out: The buffer (:attr:`~grasp_safety_filter.model.packed_terms.PackedLayout.size`,).
-        object_terms: :func:`hand_and_object_terms`' object terms.
-        hand_terms: :func:`hand_and_object_terms`' hand terms.
+        object_terms: ``(M_o, M_o^-1, C_o x_o_dot)``, palm frame
+            (:func:`~grasp_safety_filter.model.object_kernel.object_dynamics`).
+        hand_terms: The hand's terms in the model's order
+            (:func:`~grasp_safety_filter.model.hand_kernel.hand_in_model_order`).
         contacts: The contacts' geometry and rolling rates, the 14 arrays of
             :func:`~grasp_safety_filter.model.rolling_kernels.sphere_on_plane_contacts`.
-        joint_span: Each joint's span (:class:`~grasp_safety_filter.model.hand.Branches`),
-            (m, 2).
-        fingertip_span: Each fingertip's span, (n, 2).
+        branches: Each joint's and each fingertip's span, (m, 2) and (n, 2)
+            (:class:`~grasp_safety_filter.model.hand.Branches`).
         q: Joint angles, (m,), rad.
         dq: Joint velocities, (m,), rad/s.
         p_object_in_palm: Object centre of mass, (3,), m.
@@ -162,6 +110,7 @@ def write_grasp_terms(
             finite gives NaN wrench and accelerations instead).
     """
     M_o, M_o_inverse, C_o_twist = object_terms
+    joint_span, fingertip_span = branches
     p_f, R_f, J_s, twist_f, J_frames_dot_dq, M_h, M_h_inverse, h_bias, gravity = hand_terms
     # ---- Contact dynamics (dynamics_kernel: two passes around the solve of B_ho).
     (

@@ -216,22 +216,10 @@ def packed_state(
     w_e = rigid_object.external_wrench()
     buffer = np.empty(layout.size)
     contacts.terms_kernel(
-        buffer,
-        *raw,
-        *hand.fingertip_frames,
-        hand.pinocchio_index,
-        *hand.branches,
-        q,
-        dq,
-        p_o,
-        R_o,
-        twist_o,
-        rigid_object.mass_matrices_in_body,
-        rigid_object.isotropic,
-        w_e,
-        *contacts.surface_arrays,
-        layout.torsion,
-        layout.torsional_compliance,
+        buffer, raw, hand.fingertip_frames, hand.pinocchio_index, hand.branches,
+        q, dq, p_o, R_o, twist_o,
+        rigid_object.mass_matrices_in_body, rigid_object.isotropic, w_e,
+        contacts.surface_arrays, layout.torsion, layout.torsional_compliance,
     )
     return PackedGraspState.of(float(t), buffer, layout, w_e, contacts)
 

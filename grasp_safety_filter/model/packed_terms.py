@@ -28,8 +28,9 @@ from typing import NamedTuple
 import numpy as np
 
 from grasp_safety_filter.model.compiled import kernel
+from grasp_safety_filter.model.hand_kernel import hand_in_model_order
+from grasp_safety_filter.model.object_kernel import object_dynamics
 from grasp_safety_filter.model.packed_pass import (
-    hand_and_object_terms,
     write_grasp_terms,
     write_object_coordinate_acceleration,
 )
@@ -134,22 +135,10 @@ class PackedLayout(NamedTuple):
 @kernel
 def sphere_on_plane_terms(
     out: np.ndarray,
-    frame_placements: np.ndarray,
-    joint_placements: np.ndarray,
-    joint_velocities: np.ndarray,
-    joint_accelerations: np.ndarray,
-    J_joints: np.ndarray,
-    M_upper: np.ndarray,
-    nle: np.ndarray,
-    g: np.ndarray,
-    M_inverse_pin: np.ndarray,
-    frame_index: np.ndarray,
-    parent_joint: np.ndarray,
-    offset_in_parent: np.ndarray,
-    support: np.ndarray,
+    raw: tuple[np.ndarray, ...],
+    frames: tuple[np.ndarray, ...],
     joint_index: np.ndarray,
-    joint_span: np.ndarray,
-    fingertip_span: np.ndarray,
+    branches: tuple[np.ndarray, np.ndarray],
     q: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -158,9 +147,7 @@ def sphere_on_plane_terms(
     M_o_in_body: np.ndarray,
     isotropic: bool,
     w_e: np.ndarray,
-    plane_origin: np.ndarray,
-    plane_frame: np.ndarray,
-    radius: np.ndarray,
+    surfaces: tuple[np.ndarray, np.ndarray, np.ndarray],
     torsion: bool,
     torsional_compliance: float,
 ) -> None:
@@ -168,24 +155,13 @@ def sphere_on_plane_terms(
 
     Args:
         out: The buffer, (:attr:`PackedLayout.size`,).
-        frame_placements: Every frame's placement (``oMf``), (nframes, 12).
-        joint_placements: Every joint's placement (``oMi``), (njoints, 12).
-        joint_velocities: Every joint's velocity, own frame (``v``), (njoints, 6).
-        joint_accelerations: Every joint's acceleration at ddq = 0, own frame (``a``),
-            (njoints, 6).
-        J_joints: The joint Jacobian, world frame (Pinocchio's order), (6, nv).
-        M_upper: M_h, upper triangle (Pinocchio's order), (nv, nv), kg·m².
-        nle: ``C_h dq + g`` (Pinocchio's order), (nv,), N·m.
-        g: ``g(q)`` (Pinocchio's order), (nv,), N·m.
-        M_inverse_pin: ``M_h^-1`` (Pinocchio's order), (nv, nv).
-        frame_index: Each fingertip's frame, (n,).
-        parent_joint: Each fingertip frame's parent joint, (n,).
-        offset_in_parent: Each fingertip frame's origin in its parent's frame, (n, 3), m.
-        support: Whether Pinocchio's velocity column k moves fingertip i, (n, nv).
+        raw: Pinocchio's terms at ``(q, dq)``, in its joint order
+            (:class:`~grasp_safety_filter.model.hand.RawHandTerms`).
+        frames: Where the fingertip frames hang in Pinocchio's model
+            (:class:`~grasp_safety_filter.model.hand.FingertipFrames`).
         joint_index: Pinocchio's index of each of the model's joints, (m,).
-        joint_span: Each joint's span (:class:`~grasp_safety_filter.model.hand.Branches`),
-            (m, 2).
-        fingertip_span: Each fingertip's span, (n, 2).
+        branches: Each joint's and each fingertip's span, (m, 2) and (n, 2)
+            (:class:`~grasp_safety_filter.model.hand.Branches`).
         q: Joint angles, (m,), rad.
         dq: Joint velocities, (m,), rad/s.
         p_object_in_palm: Object centre of mass, (3,), m.
@@ -196,27 +172,24 @@ def sphere_on_plane_terms(
             (:attr:`~grasp_safety_filter.model.rigid_object.RigidObject.mass_matrices_in_body`).
         isotropic: Whether ``I_body`` is isotropic (then ``M_o`` is the same in every frame).
         w_e: External wrench on the object, (6,).
-        plane_origin: Each face's origin in the object frame, (n, 3), m.
-        plane_frame: Each face's ``[e1, e2, n]`` in the object frame, (n, 3, 3).
-        radius: Each fingertip's radius, (n,), m.
+        surfaces: Each face's origin in the object frame (n, 3), m; each face's ``[e1, e2,
+            n]`` in the object frame (n, 3, 3); each fingertip's radius (n,), m.
         torsion: Soft-finger contacts (:attr:`PackedLayout.torsion`).
         torsional_compliance: Their relative torsional compliance rho.
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
     """
-    object_terms, hand_terms = hand_and_object_terms(
-        frame_placements, joint_placements, joint_velocities, joint_accelerations, J_joints,
-        M_upper, nle, g, M_inverse_pin, frame_index, parent_joint, offset_in_parent, support,
-        joint_index, dq, R_object_to_palm, twist_object, M_o_in_body, isotropic,
-    )
+    plane_origin, plane_frame, radius = surfaces
+    object_terms = object_dynamics(M_o_in_body, isotropic, R_object_to_palm, twist_object)
+    hand_terms = hand_in_model_order(raw, frames, joint_index, dq)
     p_f, R_f, _, twist_f = hand_terms[:4]
     contacts = sphere_on_plane_contacts(
         p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
         plane_origin, plane_frame, radius,
     )
     at, xi_cf_ddot = write_grasp_terms(
-        out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
+        out, object_terms, hand_terms, contacts, branches, q, dq,
         p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
     )
     write_object_coordinate_acceleration(out, at, contacts, xi_cf_ddot, radius, radius, True)
@@ -225,22 +198,10 @@ def sphere_on_plane_terms(
 @kernel
 def sphere_on_sphere_terms(
     out: np.ndarray,
-    frame_placements: np.ndarray,
-    joint_placements: np.ndarray,
-    joint_velocities: np.ndarray,
-    joint_accelerations: np.ndarray,
-    J_joints: np.ndarray,
-    M_upper: np.ndarray,
-    nle: np.ndarray,
-    g: np.ndarray,
-    M_inverse_pin: np.ndarray,
-    frame_index: np.ndarray,
-    parent_joint: np.ndarray,
-    offset_in_parent: np.ndarray,
-    support: np.ndarray,
+    raw: tuple[np.ndarray, ...],
+    frames: tuple[np.ndarray, ...],
     joint_index: np.ndarray,
-    joint_span: np.ndarray,
-    fingertip_span: np.ndarray,
+    branches: tuple[np.ndarray, np.ndarray],
     q: np.ndarray,
     dq: np.ndarray,
     p_object_in_palm: np.ndarray,
@@ -249,9 +210,7 @@ def sphere_on_sphere_terms(
     M_o_in_body: np.ndarray,
     isotropic: bool,
     w_e: np.ndarray,
-    R_chart_to_object: np.ndarray,
-    object_radius: np.ndarray,
-    radius: np.ndarray,
+    surfaces: tuple[np.ndarray, np.ndarray, np.ndarray],
     torsion: bool,
     torsional_compliance: float,
 ) -> None:
@@ -259,26 +218,23 @@ def sphere_on_sphere_terms(
 
     :func:`sphere_on_plane_terms` with the contacts of spherical fingertips on a sphere
     (:func:`~grasp_safety_filter.model.sphere_object_kernels.sphere_on_sphere_contacts`):
-    the same arguments, the object's surface given by ``R_chart_to_object``, each
-    contact's chart of the object sphere (n, 3, 3), and ``object_radius``, the object's
-    radius per contact (n,), m, in place of the planes' origins and frames.
+    the same arguments, with ``surfaces`` each contact's chart of the object sphere
+    (n, 3, 3), the object's radius per contact (n,), m, and each fingertip's radius (n,), m.
 
     Raises:
         numpy.linalg.LinAlgError: B_ho is singular.
         ValueError: A fingertip centre is the object's centre.
     """
-    object_terms, hand_terms = hand_and_object_terms(
-        frame_placements, joint_placements, joint_velocities, joint_accelerations, J_joints,
-        M_upper, nle, g, M_inverse_pin, frame_index, parent_joint, offset_in_parent, support,
-        joint_index, dq, R_object_to_palm, twist_object, M_o_in_body, isotropic,
-    )
+    R_chart_to_object, object_radius, radius = surfaces
+    object_terms = object_dynamics(M_o_in_body, isotropic, R_object_to_palm, twist_object)
+    hand_terms = hand_in_model_order(raw, frames, joint_index, dq)
     p_f, R_f, _, twist_f = hand_terms[:4]
     contacts = sphere_on_sphere_contacts(
         p_f, R_f, twist_f, p_object_in_palm, R_object_to_palm, twist_object,
         R_chart_to_object, object_radius, radius,
     )
     at, xi_cf_ddot = write_grasp_terms(
-        out, object_terms, hand_terms, contacts, joint_span, fingertip_span, q, dq,
+        out, object_terms, hand_terms, contacts, branches, q, dq,
         p_object_in_palm, R_object_to_palm, twist_object, w_e, torsion, torsional_compliance,
     )
     write_object_coordinate_acceleration(
