@@ -9,7 +9,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from grasp_safety_filter.analysis.figures import envelope
+from grasp_safety_filter.analysis.panels import envelope
 from grasp_safety_filter.analysis.run_data import load_run
 from grasp_safety_filter.analysis.summary import summarize
 from grasp_safety_filter.runner import record_run, RunOptions

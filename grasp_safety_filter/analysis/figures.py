@@ -4,10 +4,8 @@ Contact coordinates and required friction have one line per contact; joint angle
 torques one panel per joint, a row of panels per finger (the hand's joints grouped by
 finger, :mod:`grasp_safety_filter.model.fingers`), whatever each finger's joint count.
 
-A long run's lines are thinned to their envelope before drawing (:func:`envelope`: each
-line's smallest and largest sample in each of ``MAX_POINTS / 2`` time bins), so that
-drawing takes the same memory and time however long the run: at the figures' width of
-under 1000 pixels nothing visible is lost, spikes (one relaxed tick) included.
+A long run's lines are thinned to their envelope before drawing
+(:func:`~grasp_safety_filter.analysis.panels.envelope`).
 """
 
 from __future__ import annotations
@@ -28,6 +26,7 @@ from grasp_safety_filter.analysis.grasp_figures import (
     setup_picture,
 )
 from grasp_safety_filter.analysis.object_figure import object_figure
+from grasp_safety_filter.analysis.panels import envelope, stop_marker
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.io.files import write_file
 from grasp_safety_filter.model.fingers import all_joints, Finger
@@ -47,8 +46,6 @@ FIGURE_FILES = (
 INFEASIBLE = {'color': '0.85', 'zorder': 0}
 # Symmetric grasps give identical curves; line styles keep each one visible.
 LINE_STYLES = ('-', '--', ':', '-.')
-#: Most samples drawn per line (a 15 s run at 1 kHz has 15 001).
-MAX_POINTS = 4000
 #: The figures :func:`plot_run` draws in a forked child while it draws the others
 #: (:mod:`~grasp_safety_filter.analysis.forked`): about half of the drawing time.
 FORKED_FIGURES = ('joints.png', 'object.png', 'setup.png')
@@ -56,36 +53,6 @@ FORKED_FIGURES = ('joints.png', 'object.png', 'setup.png')
 ANIMATION = 'animation.gif'
 #: Most joint panels in a row of the joint and torque figures (a longer finger wraps).
 MAX_COLUMNS = 4
-
-
-def envelope(
-    t: np.ndarray, values: np.ndarray, max_points: int | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """Thin a line to at most ``max_points`` samples: each bin's smallest and largest.
-
-    Args:
-        t: Sample times, shape (N,), s.
-        values: Samples, shape (N,); NaN (no value) is kept only where a bin has nothing else.
-        max_points: Most samples returned (>= 2; default :data:`MAX_POINTS`).
-
-    Returns:
-        The kept times and values, in time order (the input itself when it is short).
-
-    """
-    n = len(t)
-    max_points = MAX_POINTS if max_points is None else max(int(max_points), 2)
-    if n <= max_points:
-        return t, values
-    bins = max_points // 2
-    width = -(-n // bins)  # ceil: the last bin is the only one with padding
-    padded = np.full(bins * width, np.nan)
-    padded[:n] = values
-    rows = padded.reshape(bins, width)
-    low = np.argmin(np.where(np.isnan(rows), np.inf, rows), axis=1)
-    high = np.argmax(np.where(np.isnan(rows), -np.inf, rows), axis=1)
-    start = np.arange(bins) * width
-    kept = np.unique(np.minimum(np.concatenate((start + low, start + high)), n - 1))
-    return t[kept], values[kept]
 
 
 def _shade_outside(axes: Axes, low: float, high: float, values: np.ndarray) -> None:
@@ -97,12 +64,6 @@ def _shade_outside(axes: Axes, low: float, high: float, values: np.ndarray) -> N
     axes.axhspan(bottom, low, **INFEASIBLE)
     axes.axhspan(high, top, **INFEASIBLE)
     axes.set_ylim(bottom, top)
-
-
-def _stop_marker(axes: Axes, run: RunData) -> None:
-    """Mark where a run stopped early (nothing for a run that reached its duration)."""
-    if run.stop_reason not in (None, 'duration'):
-        axes.axvline(run.t_end, color='k', linestyle=':', linewidth=1.0)
 
 
 def plot_contacts(run: RunData, path: Path) -> Path:
@@ -121,7 +82,7 @@ def plot_contacts(run: RunData, path: Path) -> Path:
     axes_b.set_xlabel('t [s]')
     axes_a.legend(loc='best')
     for axes in (axes_a, axes_b):
-        _stop_marker(axes, run)
+        stop_marker(axes, run)
     axes_a.set_title(f'{run.mode}: contact coordinates (grey: outside the fingertip workspace)')
     return _save(figure, path)
 
@@ -193,7 +154,7 @@ def joints_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Figu
             low, high = run.joint_lower_limits[j], run.joint_upper_limits[j]
             _shade_outside(axes, float(low), float(high), run.q[:, j])
             _joint_title(axes, run.joint_names[j])
-            _stop_marker(axes, run)
+            stop_marker(axes, run)
     figure.suptitle(f'{run.mode}: joint angles {by} (grey: beyond the joint limits)')
     return figure
 
@@ -244,7 +205,7 @@ def plot_friction(run: RunData, path: Path) -> Path:
     torsion_label = '$\\beta_i$; torsion: $\\mu_i |\\tau_i| / (\\mu_{t,i} f_{n,i})$'
     axes.set_ylabel('$\\beta_i$' if spin is None else torsion_label)
     axes.legend(loc='best')
-    _stop_marker(axes, run)
+    stop_marker(axes, run)
     title = 'grey: slip' if shared else "dashed: each contact's mu; grey: above every mu"
     axes.set_title(f'{run.mode}: required friction ({title})')
     return _save(figure, path)
@@ -280,7 +241,7 @@ def torques_figure(run: RunData, fingers: Sequence[Finger] | None = None) -> Fig
             axes.plot(*envelope(t, run.u_nominal[:, j]), color='0.5')
             axes.plot(*envelope(t, run.u_command[:, j]), color='C3', linewidth=1.0)
             _joint_title(axes, run.joint_names[j])
-            _stop_marker(axes, run)
+            stop_marker(axes, run)
     figure.suptitle(
         f'{run.mode}: joint torques {by}\n(grey: nominal $u_{{nom}}$, red: commanded $u^*$)'
     )

@@ -11,6 +11,7 @@ from __future__ import annotations
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from grasp_safety_filter.analysis.panels import envelope, stop_marker
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.analysis.tracking import NO_REFERENCE, unwrapped_euler
 
@@ -33,9 +34,6 @@ def object_figure(run: RunData) -> Figure:
         ValueError: The run has no object pose (no ``/object/odom`` in its bag).
 
     """
-    # Imported here: figures imports this module for plot_run.
-    from grasp_safety_filter.analysis.figures import _stop_marker, envelope
-
     tracking = run.tracking
     if tracking is None:
         raise ValueError('object figure: the run has no /object/odom samples')
@@ -59,7 +57,7 @@ def object_figure(run: RunData) -> Figure:
             )
         axes.set_ylabel(f'{label} [{unit}]')
         _at_least(axes, MIN_SPAN[unit])
-        _stop_marker(axes, run)
+        stop_marker(axes, run)
     panels[0].legend(loc='best')
     panels[-1].set_xlabel('t [s]')
     summary = tracking.summary()
