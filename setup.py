@@ -45,6 +45,7 @@ setup(
     extras_require={
         'test': [
             'pytest>=7',
+            'pytest-xdist>=3.5',  # make test: two tests at a time
             'ruff>=0.6',
             # The linters a colcon build runs on Jazzy (ament_flake8 with its plugins, pep257).
             'ament-lint==0.14.2',
