@@ -119,16 +119,17 @@ class NominalControllerEndpoint:
         self.reference: ReferenceSource | None = None
         self.last_output: NominalOutput | None = None
         self.stream = stream
-        self.topic_names = {
-            JOINT_STATES: JOINT_STATES,
-            OBJECT_ODOM: stream.object_topic,
-        } | dict(topic_names or {})
+        self.topic_names = stream.topics() | dict(topic_names or {})
         self.inputs = NominalInputs(model, stream, self.topic_names, parse)
-        self.input_watchdog = InputWatchdog(INPUTS, self.topic_names)
+        no_tick = (
+            'inputs arrive, but no joint state and object pose make a tick'
+            if self.inputs.objects is not None
+            else 'inputs arrive, but no joint state and odometry of one stamp'
+        )
+        self.input_watchdog = InputWatchdog(INPUTS, self.topic_names, no_tick=no_tick)
         self.ticked = False
         self.rejected_count = 0
         self._reports = ReportThrottle()
-        self._last_rejection: str | None = None
         self._joint_names = list(model.joint_names)
         self._joint_name_tuple = tuple(self._joint_names)
         self._initial_pose: Pose | None = None
@@ -190,16 +191,7 @@ class NominalControllerEndpoint:
         waiting = self.input_watchdog.waiting(now_wall)
         if waiting is None:
             return []
-        waited, missing = waiting
-        what = self.input_watchdog.describe_waiting(missing)
-        if not missing:
-            what = (
-                'inputs arrive, but no joint state and object pose make a tick'
-                if self.inputs.objects is not None
-                else 'inputs arrive, but no joint state and odometry of one stamp'
-            )
-            if self._last_rejection is not None:
-                what += f'; the last rejected: {self._last_rejection}'
+        waited, missing, what = waiting
         report = DiagnosticReport.create(
             DIAGNOSTIC_NAME,
             DiagnosticLevel.WARN,
@@ -363,7 +355,7 @@ class NominalControllerEndpoint:
         ``now`` (s), else the last tick's stamp.
         """
         self.rejected_count += 1
-        self._last_rejection = str(error)
+        self.input_watchdog.rejected(error)
         if stamp is None and now is not None:
             stamp = seconds_to_nanoseconds(max(now, 0.0))
         elif stamp is None:

@@ -36,7 +36,6 @@ from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
     EFFORT_NOMINAL,
     JOINT_STATES,
-    OBJECT_ODOM,
     OBJECT_REFERENCE,
     OBJECT_REFERENCE_SAMPLE,
 )
@@ -65,7 +64,7 @@ class NominalControllerNode(EndpointNode):
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         config = NominalConfig.from_parameters(self.parameters)
         stream = StreamConfig.from_parameters(self.parameters)
-        topics = {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: stream.object_topic}
+        topics = stream.topics()
         self.endpoint = NominalControllerEndpoint(
             model,
             config,

@@ -47,7 +47,7 @@ from grasp_safety_filter.io.schemas import (
     POSE_MESSAGE,
     STREAM_PARAMETERS,
 )
-from grasp_safety_filter.io.topics import OBJECT_ODOM, OBJECT_POSE
+from grasp_safety_filter.io.topics import JOINT_STATES, OBJECT_ODOM, OBJECT_POSE
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
 
@@ -91,6 +91,12 @@ class StreamConfig:
     def object_topic(self) -> str:
         """The topic of the object's pose: ``/object/odom`` or ``/object/pose``."""
         return OBJECT_POSE if self.object_message == POSE_MESSAGE else OBJECT_ODOM
+
+    def topics(self, *others: str) -> dict[str, str]:
+        """Return the input topics by table name: the state's (:attr:`object_topic`), others."""
+        return {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: self.object_topic} | {
+            topic: topic for topic in others
+        }
 
     def estimate_config(self) -> ObjectEstimateConfig:
         """Return the estimator's configuration."""

@@ -18,7 +18,7 @@ with a real hand, the driver's stamps must be on the same clock as this node, an
 and the object's pose are subscribed best effort, which matches any publisher).
 
 Input watchdog: a timer on the steady clock (every
-:data:`~grasp_safety_filter.nodes.safety_filter.WATCHDOG_PERIOD` s; under ``use_sim_time`` a
+:data:`~grasp_safety_filter.nodes.input_watchdog.WATCHDOG_PERIOD` s; under ``use_sim_time`` a
 dead simulator stops the node clock too) calls ``SafetyFilterEndpoint.watchdog``: once no
 tick has been accepted for ``input.hold_timeout`` s of wall-clock time, the hold policy's
 fallback goes to ``/hand/effort_command`` every period, stamped with the node clock's now
@@ -58,19 +58,19 @@ from grasp_safety_filter.io.topics import (
     EFFORT_NOMINAL,
     JOINT_STATES,
     MARGINS,
-    OBJECT_ODOM,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.base_node import EndpointNode
 from grasp_safety_filter.nodes.command_output import CommandConfig
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
+from grasp_safety_filter.nodes.input_watchdog import WATCHDOG_PERIOD
 from grasp_safety_filter.nodes.object_stream import StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import (
     PUBLICATION_RATE_PARAMETERS,
     PublicationRateConfig,
 )
-from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
 from grasp_safety_filter.nodes.spin_node import spin_node
 from grasp_safety_filter.nodes.tick_kernels import load_filter_kernels
 
@@ -90,8 +90,7 @@ class SafetyFilterNode(EndpointNode):
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         stream = StreamConfig.from_parameters(self.parameters)
         command_config = CommandConfig.from_parameters(self.parameters)
-        topics = {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: stream.object_topic}
-        topics[EFFORT_NOMINAL] = EFFORT_NOMINAL
+        topics = stream.topics(EFFORT_NOMINAL)
         self.endpoint = SafetyFilterEndpoint(
             model,
             SafetyFilterConfig.from_parameters(self.parameters),

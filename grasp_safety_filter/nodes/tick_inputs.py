@@ -222,6 +222,21 @@ class TickAssembler:
             stamp = max(stamp, self.last_tick_ns)
         return stamp
 
+    def fallback_stamp(self, now: float) -> int:
+        """Stamp of the input watchdog's fallback, ns: :meth:`clock_stamp`, past a pending tick.
+
+        A tick of the clock's stamp under way (a lockstep simulator waits for its command
+        while the nominal controller is slow) must not be answered by the fallback in its
+        place: the fallback goes 1 ns later, and the tick still gets its own u* when its
+        inputs are complete.
+        """
+        stamp = self.clock_stamp(now)
+        return stamp + 1 if self.has_pending(stamp) else stamp
+
+    def dropped(self, topic: str, error: MessageError) -> bool:
+        """Whether an input refused by :meth:`parse` or :meth:`check` goes unanswered: never."""
+        return False
+
     def current_stamp(self, msg: Any, now: float) -> int | None:
         """Return the message's stamp if readable, not before the last tick, not in the future.
 
