@@ -20,10 +20,7 @@ A u_nom for a tick already answered, or stale (late), is dropped.
 from __future__ import annotations
 
 from collections.abc import Mapping
-import time
 from typing import Any
-
-import numpy as np
 
 from grasp_safety_filter.io.messages import (
     EffortData,
@@ -38,7 +35,8 @@ from grasp_safety_filter.io.messages import (
 from grasp_safety_filter.io.topics import EFFORT_NOMINAL, JOINT_STATES, OBJECT_ODOM
 from grasp_safety_filter.nodes.object_stream import ObjectStream, StreamConfig
 from grasp_safety_filter.nodes.shared_parse import SharedParse
-from grasp_safety_filter.nodes.tick_inputs import TickAssembler, TickInputs, TimedState
+from grasp_safety_filter.nodes.tick_inputs import TickAssembler, TickInputs
+from grasp_safety_filter.nodes.tick_state import timed_state, TimedState
 
 #: States kept waiting for their u_nom, and unmatched u_nom kept for their state (the
 #: oldest are dropped beyond this).
@@ -138,7 +136,7 @@ class LatestTickAssembler(TickAssembler):
         return None
 
     def _add_state(self, stamp: int, joints: JointStateData) -> TickInputs | None:
-        timed = self._timed_state(joints)
+        timed = timed_state(lambda: self.stream.grasp_state(joints))
         self._newest_state_ns = stamp
         if any(s < stamp for s in self._unmatched):
             self.nominal_answers = False  # a u_nom that no state of its stamp came for
@@ -188,17 +186,6 @@ class LatestTickAssembler(TickAssembler):
                 f'than the state at t = {joints.t:.9f} s (input.max_age {self.guard.max_age} s)'
             )
         return nominal
-
-    def _timed_state(self, joints: JointStateData) -> TimedState:
-        """Return the model terms at the joint state and the object estimate, timed in s."""
-        start = time.perf_counter()
-        try:
-            state: Any = self.stream.grasp_state(joints)
-        except MessageError:
-            raise
-        except (ValueError, np.linalg.LinAlgError) as error:
-            state = error
-        return state, time.perf_counter() - start
 
     def _ready_tick(
         self, joints: JointStateData, timed: TimedState, nominal: EffortData

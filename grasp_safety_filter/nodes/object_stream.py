@@ -50,6 +50,7 @@ from grasp_safety_filter.io.schemas import (
 from grasp_safety_filter.io.topics import JOINT_STATES, OBJECT_ODOM, OBJECT_POSE
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
+from grasp_safety_filter.nodes.tick_state import model_state
 
 _DEFAULTS = {spec.name: spec.default for spec in STREAM_PARAMETERS}
 
@@ -210,14 +211,7 @@ class ObjectStream:
 
         """
         estimate = self.estimate(joints)
-        state = self.model.state(
-            joints.t,
-            joints.position,
-            joints.velocity,
-            estimate.p_object_in_palm,
-            estimate.R_object_to_palm,
-            estimate.twist_object,
-        )
+        state = model_state(self.model, joints, estimate)
         self.estimator.observe(state)
         self.last_estimate = estimate
         return state
