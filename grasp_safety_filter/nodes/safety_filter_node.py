@@ -47,8 +47,6 @@ from collections.abc import Mapping
 import time
 from typing import Any
 
-from rclpy.clock import Clock, ClockType
-
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io.schemas import SAFETY_FILTER_NODE
@@ -60,12 +58,11 @@ from grasp_safety_filter.io.topics import (
     MARGINS,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.nodes.base_node import EndpointNode
 from grasp_safety_filter.nodes.command_output import CommandConfig
+from grasp_safety_filter.nodes.controller_node import ControllerNode
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
 from grasp_safety_filter.nodes.input_watchdog import WATCHDOG_PERIOD
 from grasp_safety_filter.nodes.object_stream import StreamConfig
-from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import (
     PUBLICATION_RATE_PARAMETERS,
     PublicationRateConfig,
@@ -78,7 +75,7 @@ from grasp_safety_filter.nodes.tick_kernels import load_filter_kernels
 ENABLED_PARAMETER = 'enabled'
 
 
-class SafetyFilterNode(EndpointNode):
+class SafetyFilterNode(ControllerNode):
     """The safety filter node (module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -102,7 +99,7 @@ class SafetyFilterNode(EndpointNode):
             wall_clock=time.monotonic,
             stream=stream,
             command_config=command_config,
-            topic_names={key: self.resolve_topic_name(name) for key, name in topics.items()},
+            topic_names=self.resolved_topics(topics),
         )
         # Its first tick then costs what the others cost (tick_kernels).
         load_filter_kernels(
@@ -112,43 +109,14 @@ class SafetyFilterNode(EndpointNode):
             if topic != EFFORT_COMMAND:
                 self.add_publisher(topic)
         endpoint = self.endpoint
-        monotonic = time.monotonic
-        sensor = stream.latest
-        self.subscribe(
-            JOINT_STATES,
-            lambda msg: self.answer(
-                endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-            newest_only=sensor,
-        )
-        self.subscribe(
-            stream.object_topic,
-            lambda msg: self.answer(
-                endpoint.on_odom(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-            sensor=sensor,
-        )
-        self.subscribe(
-            EFFORT_NOMINAL,
-            lambda msg: self.answer(
-                endpoint.on_effort_nominal(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-        )
-        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
-        self._watchdog_timer = self.create_timer(
-            WATCHDOG_PERIOD,
-            lambda: self.publish(endpoint.watchdog(monotonic(), now=self.now_seconds())),
-            clock=self._steady_clock,
-        )
+        self.subscribe_input(JOINT_STATES, endpoint.on_joint_states, newest_only=stream.latest)
+        self.subscribe_input(stream.object_topic, endpoint.on_odom, sensor=stream.latest)
+        self.subscribe_input(EFFORT_NOMINAL, endpoint.on_effort_nominal)
+        self.start_watchdog(WATCHDOG_PERIOD)
         state = 'on' if endpoint.enabled else 'OFF (u* = u_nom)'
         self.get_logger().info(
             f'safety filter {state}: {len(endpoint.filter.row_names)} constraint rows'
         )
-
-    def answer(self, outgoing: list[Outgoing]) -> None:
-        """Publish a tick's answer; log the grasp check's changes (once each)."""
-        self.publish(outgoing)
-        self.log_lines(self.endpoint.take_log())
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
         """Rebuild the filter, update the hold policy or switch the filter on or off (logged)."""
