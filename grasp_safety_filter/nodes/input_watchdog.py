@@ -83,9 +83,8 @@ class InputWatchdog:
     """Wall-clock bookkeeping of the inputs and ticks (module docstring).
 
     Args:
-        topics: The input topics a tick needs (table names).
-        names: Their names as the node resolved them (remapped), by table name, for the
-            reports; default: the table names.
+        names: The input topics a tick needs, by table name: their names as the node
+            resolved them (remapped), for the reports.
         hints: Per table name, why that input may be missing (said with it).
         wall_clock: The clock of the handlers' ``wall`` (``time.monotonic``), read when a
             tick is answered: the watchdog waits from the answer, so a slow tick is not
@@ -96,14 +95,13 @@ class InputWatchdog:
 
     def __init__(
         self,
-        topics: Sequence[str],
-        names: Mapping[str, str] | None = None,
+        names: Mapping[str, str],
         hints: Mapping[str, str] | None = None,
         wall_clock: Callable[[], float] | None = None,
         no_tick: str = NO_TICK,
     ) -> None:
-        self.topics = tuple(topics)
-        self.names = {topic: topic for topic in self.topics} | dict(names or {})
+        self.topics = tuple(names)
+        self.names = dict(names)
         self.hints = {self.names[topic]: hint for topic, hint in (hints or {}).items()}
         self._wall_clock = wall_clock
         self._no_tick = no_tick

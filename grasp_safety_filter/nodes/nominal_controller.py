@@ -73,9 +73,6 @@ from grasp_safety_filter.nodes.shared_parse import SharedParse
 #: Name of the nominal controller's ``DiagnosticStatus``.
 DIAGNOSTIC_NAME = NOMINAL_DIAGNOSTIC
 
-#: The inputs of a tick.
-INPUTS = (JOINT_STATES, OBJECT_ODOM)
-
 
 class NominalControllerEndpoint:
     """Computed-torque nominal control over messages (module docstring).
@@ -126,7 +123,7 @@ class NominalControllerEndpoint:
             if self.inputs.objects is not None
             else 'inputs arrive, but no joint state and odometry of one stamp'
         )
-        self.input_watchdog = InputWatchdog(INPUTS, self.topic_names, no_tick=no_tick)
+        self.input_watchdog = InputWatchdog(self.topic_names, no_tick=no_tick)
         self.ticked = False
         self.rejected_count = 0
         self._reports = ReportThrottle()

@@ -61,7 +61,7 @@ from grasp_safety_filter.nodes.publication_rate import PublicationRate, Publicat
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 from grasp_safety_filter.nodes.startup_log import StartupLog
 from grasp_safety_filter.nodes.tick_answer import TickAnswer
-from grasp_safety_filter.nodes.tick_inputs import INPUTS, REPLAY, TickInputs
+from grasp_safety_filter.nodes.tick_inputs import REPLAY, TickInputs
 
 
 class SafetyFilterEndpoint:
@@ -131,7 +131,7 @@ class SafetyFilterEndpoint:
             model, self.hold, msgs, self.command, self.rate, self._status_message
         )
         self.input_watchdog = InputWatchdog(
-            INPUTS, self.topic_names, {EFFORT_NOMINAL: NOMINAL_HINT}, wall_clock
+            self.topic_names, {EFFORT_NOMINAL: NOMINAL_HINT}, wall_clock
         )
         self.ticked = False
         self._switched_at: float | None = None
