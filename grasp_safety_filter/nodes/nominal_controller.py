@@ -38,8 +38,6 @@ from grasp_safety_filter.io.diagnostic_keys import NOMINAL_DIAGNOSTIC
 from grasp_safety_filter.io.messages import (
     bounded_text,
     DiagnosticLevel,
-    DiagnosticReport,
-    diagnostics_to_msg,
     effort_to_msg,
     MessageError,
     MessageNamespace,
@@ -47,9 +45,9 @@ from grasp_safety_filter.io.messages import (
     reference_from_msg,
     ReferenceTrajectory,
     seconds_to_nanoseconds,
+    Stamp,
 )
 from grasp_safety_filter.io.topics import (
-    DIAGNOSTICS,
     EFFORT_NOMINAL,
     JOINT_STATES,
     OBJECT_ODOM,
@@ -66,7 +64,7 @@ from grasp_safety_filter.nodes.grasp_watch import (
 from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
 from grasp_safety_filter.nodes.nominal_inputs import NominalInputs, Rejection, Tick
 from grasp_safety_filter.nodes.object_stream import EXACT, StreamConfig
-from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.outgoing import diagnostic_status, Outgoing, stamped
 from grasp_safety_filter.nodes.publication_rate import ReportThrottle
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 
@@ -189,13 +187,9 @@ class NominalControllerEndpoint:
         if waiting is None:
             return []
         waited, missing, what = waiting
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            bounded_text(f'waiting {waited:.1f} s for a first tick, no command: {what}'),
-            {'input.waiting': True, 'input.missing': ','.join(missing)},
-        )
-        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, max(now, 0.0), report))]
+        text = bounded_text(f'waiting {waited:.1f} s for a first tick, no command: {what}')
+        values = {'input.waiting': True, 'input.missing': ','.join(missing)}
+        return [self._status(max(now, 0.0), DiagnosticLevel.WARN, text, values)]
 
     def on_reference(self, msg: Any) -> list[Outgoing]:
         """Handle ``/object/reference``: keep it for the ticks to come (topic source only).
@@ -311,36 +305,26 @@ class NominalControllerEndpoint:
             else f'/object/reference is {age:.3f} s old (timeout {self.config.timeout} s): '
             'holding its last pose'
         )
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            text,
-            {
-                'reference.stale': True,
-                'reference.age': age,
-                'reference.timeout': self.config.timeout,
-            },
-        )
-        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report))
+        values = {
+            'reference.stale': True,
+            'reference.age': age,
+            'reference.timeout': self.config.timeout,
+        }
+        return self._status(stamp, DiagnosticLevel.WARN, text, values)
 
     def _no_grasp(self, stamp: int, state: GraspState) -> list[Outgoing]:
         """``u_nom = g(q)`` and an ERROR naming what fails: the grasp is not valid yet."""
         findings = findings_text(self.grasp.findings)
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.ERROR,
-            bounded_text(
-                'not a valid grasp (start-up check), u_nom = g(q) (gravity compensation), '
-                f'reference not started: {findings}'
-            ),
-            self.grasp.diagnostic_values(),
+        text = bounded_text(
+            'not a valid grasp (start-up check), u_nom = g(q) (gravity compensation), '
+            f'reference not started: {findings}'
         )
         return [
             stamped(
                 EFFORT_NOMINAL,
                 effort_to_msg(self.msgs, stamp, self._joint_names, state.gravity_torque),
             ),
-            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report)),
+            self._status(stamp, DiagnosticLevel.ERROR, text, self.grasp.diagnostic_values()),
         ]
 
     def _rejected(
@@ -360,10 +344,12 @@ class NominalControllerEndpoint:
         since = self._reports.due('input', stamp)
         if since is None:
             return []
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            bounded_text(f'input rejected, no command ({since} since the last report): {error}'),
-            {'input.rejected': True, 'input.rejected_count': self.rejected_count},
-        )
-        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report))]
+        text = bounded_text(f'input rejected, no command ({since} since the last report): {error}')
+        values = {'input.rejected': True, 'input.rejected_count': self.rejected_count}
+        return [self._status(stamp, DiagnosticLevel.WARN, text, values)]
+
+    def _status(
+        self, t: Stamp, level: DiagnosticLevel, text: str, values: Mapping[str, Any]
+    ) -> Outgoing:
+        """Return the nominal controller's status stamped ``t`` (integer ns, or s)."""
+        return diagnostic_status(self.msgs, t, DIAGNOSTIC_NAME, level, text, values)
