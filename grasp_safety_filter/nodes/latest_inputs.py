@@ -64,7 +64,7 @@ class LatestTickAssembler(TickAssembler):
         max_age: float,
         model: Any,
         stream: ObjectStream,
-        topic_names: Mapping[str, str] | None = None,
+        topic_names: Mapping[str, str],
     ) -> None:
         super().__init__(max_age, model, None, topic_names)
         self.stream = stream

@@ -129,12 +129,12 @@ class ObjectStream:
         self,
         model: Any,
         config: StreamConfig,
-        source: str | None = None,
+        source: str,
         parse: SharedParse | None = None,
     ) -> None:
         self.model = model
         self.config = config
-        self.source = source or config.object_topic
+        self.source = source
         self.estimator = ObjectStateEstimator(config.estimate_config())
         self.last_estimate: ObjectEstimate | None = None
         self._parse = parse_directly if parse is None else parse

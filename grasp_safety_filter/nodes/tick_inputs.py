@@ -70,7 +70,7 @@ class TickAssembler:
         parse: The joint state and odometry parses, shared with the nominal controller in
             process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
         topic_names: The input topics' names as the node resolved them (remapped), by table
-            name, for the error texts; default: the table's.
+            name, for the error texts.
 
     Attributes:
         guard: Stale and out-of-order stamp checks, per input topic.
@@ -82,11 +82,11 @@ class TickAssembler:
         self,
         max_age: float,
         model: Any,
-        parse: SharedParse | None = None,
-        topic_names: Mapping[str, str] | None = None,
+        parse: SharedParse | None,
+        topic_names: Mapping[str, str],
     ) -> None:
         self.guard = StampGuard(max_age)
-        self.topic_names = {topic: topic for topic in INPUTS} | dict(topic_names or {})
+        self.topic_names = dict(topic_names)
         self._parse = parse_directly if parse is None else parse
         self.last_tick_ns: int | None = None
         self.model = model
