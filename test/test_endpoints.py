@@ -35,11 +35,11 @@ from grasp_safety_filter.io.diagnostic_keys import (
 from grasp_safety_filter.io.messages import DiagnosticLevel, MessageNamespace, ObjectReference
 from grasp_safety_filter.io.schemas import load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.nodes.input_watchdog import WAITING_REPORT_PERIOD
+from grasp_safety_filter.nodes.input_watchdog import WAITING_REPORT_PERIOD, WATCHDOG_PERIOD
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRateConfig
-from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
 from grasp_safety_filter.nodes.scenario import scenario_from_msg, scenario_from_text, ScenarioError
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
@@ -548,7 +548,7 @@ def test_filter_holds_the_last_safe_command_on_bad_input(params, case):
 def test_filter_rejects_stale_and_out_of_order_stamps(params):
     sim, safety_filter, safe, (joints, odometry, _) = filter_after_one_good_tick(params)
     # Older than max_age, but within the hold timeout of the last safe command.
-    now = 1.5 * safety_filter.guard.max_age
+    now = 1.5 * safety_filter.inputs.guard.max_age
     assert now < safety_filter.hold.hold_timeout
     stale = safety_filter.on_joint_states(joints, now=now)
     (report,) = statuses(stale, 'safety_filter')

@@ -33,8 +33,8 @@ from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.diagnostic_keys import FILTER_DIAGNOSTIC, Key, silent_for, TickStatus
 from grasp_safety_filter.io.schemas import load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
+from grasp_safety_filter.nodes.input_watchdog import WATCHDOG_PERIOD
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
-from grasp_safety_filter.nodes.safety_filter import WATCHDOG_PERIOD
 from hand_sim_node.config import SimConfig
 from hand_sim_node.endpoint import HandSimEndpoint
 

@@ -20,7 +20,7 @@ import pytest
 from ros_graph import node_command
 import yaml
 
-from grasp_safety_filter.io import launch_arguments, topics
+from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.launch_arguments import (
     NodeLaunch,
     paper_demo,
@@ -292,7 +292,7 @@ def test_overrides_file_holds_the_node_section(tmp_path):
     command = node_command(sim, tmp_path, overrides_as_file=False)
     files, values, _ = parse_ros_arguments(command[1:])
     assert files == ['config.yaml'] and values == expected
-    assert launch_arguments.PACKAGE == 'grasp_safety_filter'
+    assert sim.node_kwargs()['package'] == 'grasp_safety_filter'
 
 
 @pytest.mark.parametrize(

@@ -209,7 +209,7 @@ def test_after_a_stall_a_stale_u_nom_is_dropped_and_the_queued_states_are_answer
     assert safety_filter.on_joint_states(joints1, now=now_of(1)) == []
     late = nominal_msg(model, EPOCH_NS + 1_000_000)
     assert safety_filter.on_effort_nominal(late, now=now_of(61)) == []
-    assert safety_filter.late_nominal == 1
+    assert safety_filter.inputs.late_nominal == 1
     _, joints2, _ = static_messages(62)
     stamp2 = EPOCH_NS + 62_000_000
     assert safety_filter.on_joint_states(joints2, now=now_of(62)) == []

@@ -31,14 +31,13 @@ import yaml
 
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.parameters import ROS_PARAMETERS_KEY
+from grasp_safety_filter.io.paths import PACKAGE_NAME
 from grasp_safety_filter.io.schemas import (
     GRASP_MARKERS_NODE,
     HAND_SIM_NODE,
     NOMINAL_CONTROLLER_NODE,
     SAFETY_FILTER_NODE,
 )
-
-PACKAGE = 'grasp_safety_filter'
 
 #: Node name of the recorder ``ros2 bag record`` runs (its ``--node-name``, and the default).
 RECORDER_NODE = 'rosbag2_recorder'
@@ -138,7 +137,7 @@ class NodeLaunch:
         where they beat the files' node sections (under ``/**`` they would not).
         """
         return {
-            'package': PACKAGE,
+            'package': PACKAGE_NAME,
             'executable': self.executable,
             'name': self.name,
             'namespace': '',

@@ -35,13 +35,10 @@ from grasp_safety_filter.io.diagnostic_keys import (
 )
 from grasp_safety_filter.io.messages import (
     DiagnosticLevel,
-    DiagnosticReport,
-    diagnostics_to_msg,
     MessageNamespace,
     Stamp,
 )
-from grasp_safety_filter.io.topics import DIAGNOSTICS
-from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.outgoing import diagnostic_status, Outgoing
 
 _STATUS_TEXT: dict[TickStatus, str] = {
     TickStatus.NOMINAL: 'u* = u_nom: every constraint holds',
@@ -61,10 +58,8 @@ def status_message(
     values: Mapping[str, Any],
 ) -> Outgoing:
     """Return the ``safety_filter`` status stamped ``t`` (ns, or s): enabled, ``values``."""
-    report = DiagnosticReport.create(
-        FILTER_DIAGNOSTIC, level, text, {Key.FILTER_ENABLED: enabled, **values}
-    )
-    return stamped(DIAGNOSTICS, diagnostics_to_msg(msgs, t, report))
+    values = {Key.FILTER_ENABLED: enabled, **values}
+    return diagnostic_status(msgs, t, FILTER_DIAGNOSTIC, level, text, values)
 
 
 @dataclass(frozen=True)

@@ -14,28 +14,29 @@ Which of the two holds is read off the stream: a u_nom stamped as a state in han
 ticks wait for theirs; one that matches no state (stamped no later than the newest state, or
 left unmatched when a later state arrives) makes every tick take the newest. The tracker's
 samples are checked (stale, future, out of order) and go to the estimator; they make no tick.
-A u_nom for a tick already answered (late) is dropped.
+A u_nom for a tick already answered, or stale (late), is dropped.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-import time
 from typing import Any
-
-import numpy as np
 
 from grasp_safety_filter.io.messages import (
     EffortData,
+    FutureStampError,
     JointStateData,
     MessageError,
     nanoseconds_to_seconds,
+    OutOfOrderError,
     seconds_to_nanoseconds,
     StaleInputError,
 )
 from grasp_safety_filter.io.topics import EFFORT_NOMINAL, JOINT_STATES, OBJECT_ODOM
-from grasp_safety_filter.nodes.object_stream import ObjectStream
-from grasp_safety_filter.nodes.tick_inputs import TickAssembler, TickInputs, TimedState
+from grasp_safety_filter.nodes.object_stream import ObjectStream, StreamConfig
+from grasp_safety_filter.nodes.shared_parse import SharedParse
+from grasp_safety_filter.nodes.tick_inputs import TickAssembler, TickInputs
+from grasp_safety_filter.nodes.tick_state import timed_state, TimedState
 
 #: States kept waiting for their u_nom, and unmatched u_nom kept for their state (the
 #: oldest are dropped beyond this).
@@ -54,7 +55,7 @@ class LatestTickAssembler(TickAssembler):
 
     Attributes:
         nominal_answers: Whether u_nom answers states (stamped as them): ticks wait for it.
-        late_nominal: u_nom received for ticks already answered, dropped.
+        late_nominal: u_nom received for ticks already answered, or stale, dropped.
 
     """
 
@@ -63,7 +64,7 @@ class LatestTickAssembler(TickAssembler):
         max_age: float,
         model: Any,
         stream: ObjectStream,
-        topic_names: Mapping[str, str] | None = None,
+        topic_names: Mapping[str, str],
     ) -> None:
         super().__init__(max_age, model, None, topic_names)
         self.stream = stream
@@ -99,6 +100,18 @@ class LatestTickAssembler(TickAssembler):
         self.guard.accept(self.topic_names[topic], data.t, now)
         return data.stamp_ns
 
+    def dropped(self, topic: str, error: MessageError) -> bool:
+        """Whether a refused input goes unanswered: a stale, future or out-of-order u_nom.
+
+        It is the late answer to a state already gone (the states queued behind a stall
+        are still to be answered); counted in :attr:`late_nominal`.
+        """
+        late = topic == EFFORT_NOMINAL and isinstance(
+            error, StaleInputError | OutOfOrderError | FutureStampError
+        )
+        self.late_nominal += late
+        return late
+
     def _late(self, stamp: int) -> bool:
         """Whether a u_nom answers a tick already answered (when u_nom answers states)."""
         return (
@@ -123,7 +136,7 @@ class LatestTickAssembler(TickAssembler):
         return None
 
     def _add_state(self, stamp: int, joints: JointStateData) -> TickInputs | None:
-        timed = self._timed_state(joints)
+        timed = timed_state(lambda: self.stream.grasp_state(joints))
         self._newest_state_ns = stamp
         if any(s < stamp for s in self._unmatched):
             self.nominal_answers = False  # a u_nom that no state of its stamp came for
@@ -174,17 +187,6 @@ class LatestTickAssembler(TickAssembler):
             )
         return nominal
 
-    def _timed_state(self, joints: JointStateData) -> TimedState:
-        """Return the model terms at the joint state and the object estimate, timed in s."""
-        start = time.perf_counter()
-        try:
-            state: Any = self.stream.grasp_state(joints)
-        except MessageError:
-            raise
-        except (ValueError, np.linalg.LinAlgError) as error:
-            state = error
-        return state, time.perf_counter() - start
-
     def _ready_tick(
         self, joints: JointStateData, timed: TimedState, nominal: EffortData
     ) -> TickInputs:
@@ -217,6 +219,29 @@ class LatestTickAssembler(TickAssembler):
         for old in [s for s in self._unmatched if s <= stamp]:
             del self._unmatched[old]
         self._ready.clear()
+
+
+def tick_assembler(
+    stream: StreamConfig,
+    max_age: float,
+    model: Any,
+    parse: SharedParse | None,
+    topic_names: Mapping[str, str],
+) -> TickAssembler:
+    """Return the safety filter's ticks of ``input.sync``: one a stamp, or one a joint state.
+
+    Args:
+        stream: ``input.sync`` and the object's estimate.
+        max_age: ``input.max_age``, s.
+        model: The ``GraspModel``.
+        parse: The parses shared in process (``exact`` only; default: its own).
+        topic_names: The input topics as the node resolved them, by table name.
+
+    """
+    if not stream.latest:
+        return TickAssembler(max_age, model, parse, topic_names)
+    objects = ObjectStream(model, stream, topic_names[OBJECT_ODOM])
+    return LatestTickAssembler(max_age, model, objects, topic_names)
 
 
 def _bound(pending: dict[int, Any]) -> None:

@@ -38,8 +38,6 @@ from grasp_safety_filter.io.diagnostic_keys import NOMINAL_DIAGNOSTIC
 from grasp_safety_filter.io.messages import (
     bounded_text,
     DiagnosticLevel,
-    DiagnosticReport,
-    diagnostics_to_msg,
     effort_to_msg,
     MessageError,
     MessageNamespace,
@@ -47,9 +45,9 @@ from grasp_safety_filter.io.messages import (
     reference_from_msg,
     ReferenceTrajectory,
     seconds_to_nanoseconds,
+    Stamp,
 )
 from grasp_safety_filter.io.topics import (
-    DIAGNOSTICS,
     EFFORT_NOMINAL,
     JOINT_STATES,
     OBJECT_ODOM,
@@ -66,15 +64,12 @@ from grasp_safety_filter.nodes.grasp_watch import (
 from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
 from grasp_safety_filter.nodes.nominal_inputs import NominalInputs, Rejection, Tick
 from grasp_safety_filter.nodes.object_stream import EXACT, StreamConfig
-from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
+from grasp_safety_filter.nodes.outgoing import diagnostic_status, Outgoing, stamped
 from grasp_safety_filter.nodes.publication_rate import ReportThrottle
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 
 #: Name of the nominal controller's ``DiagnosticStatus``.
 DIAGNOSTIC_NAME = NOMINAL_DIAGNOSTIC
-
-#: The inputs of a tick.
-INPUTS = (JOINT_STATES, OBJECT_ODOM)
 
 
 class NominalControllerEndpoint:
@@ -119,16 +114,17 @@ class NominalControllerEndpoint:
         self.reference: ReferenceSource | None = None
         self.last_output: NominalOutput | None = None
         self.stream = stream
-        self.topic_names = {
-            JOINT_STATES: JOINT_STATES,
-            OBJECT_ODOM: stream.object_topic,
-        } | dict(topic_names or {})
+        self.topic_names = stream.topics() | dict(topic_names or {})
         self.inputs = NominalInputs(model, stream, self.topic_names, parse)
-        self.input_watchdog = InputWatchdog(INPUTS, self.topic_names)
+        no_tick = (
+            'inputs arrive, but no joint state and object pose make a tick'
+            if self.inputs.objects is not None
+            else 'inputs arrive, but no joint state and odometry of one stamp'
+        )
+        self.input_watchdog = InputWatchdog(self.topic_names, no_tick=no_tick)
         self.ticked = False
         self.rejected_count = 0
         self._reports = ReportThrottle()
-        self._last_rejection: str | None = None
         self._joint_names = list(model.joint_names)
         self._joint_name_tuple = tuple(self._joint_names)
         self._initial_pose: Pose | None = None
@@ -190,23 +186,10 @@ class NominalControllerEndpoint:
         waiting = self.input_watchdog.waiting(now_wall)
         if waiting is None:
             return []
-        waited, missing = waiting
-        what = self.input_watchdog.describe_waiting(missing)
-        if not missing:
-            what = (
-                'inputs arrive, but no joint state and object pose make a tick'
-                if self.inputs.objects is not None
-                else 'inputs arrive, but no joint state and odometry of one stamp'
-            )
-            if self._last_rejection is not None:
-                what += f'; the last rejected: {self._last_rejection}'
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            bounded_text(f'waiting {waited:.1f} s for a first tick, no command: {what}'),
-            {'input.waiting': True, 'input.missing': ','.join(missing)},
-        )
-        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, max(now, 0.0), report))]
+        waited, missing, what = waiting
+        text = bounded_text(f'waiting {waited:.1f} s for a first tick, no command: {what}')
+        values = {'input.waiting': True, 'input.missing': ','.join(missing)}
+        return [self._status(max(now, 0.0), DiagnosticLevel.WARN, text, values)]
 
     def on_reference(self, msg: Any) -> list[Outgoing]:
         """Handle ``/object/reference``: keep it for the ticks to come (topic source only).
@@ -322,36 +305,26 @@ class NominalControllerEndpoint:
             else f'/object/reference is {age:.3f} s old (timeout {self.config.timeout} s): '
             'holding its last pose'
         )
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            text,
-            {
-                'reference.stale': True,
-                'reference.age': age,
-                'reference.timeout': self.config.timeout,
-            },
-        )
-        return stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report))
+        values = {
+            'reference.stale': True,
+            'reference.age': age,
+            'reference.timeout': self.config.timeout,
+        }
+        return self._status(stamp, DiagnosticLevel.WARN, text, values)
 
     def _no_grasp(self, stamp: int, state: GraspState) -> list[Outgoing]:
         """``u_nom = g(q)`` and an ERROR naming what fails: the grasp is not valid yet."""
         findings = findings_text(self.grasp.findings)
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.ERROR,
-            bounded_text(
-                'not a valid grasp (start-up check), u_nom = g(q) (gravity compensation), '
-                f'reference not started: {findings}'
-            ),
-            self.grasp.diagnostic_values(),
+        text = bounded_text(
+            'not a valid grasp (start-up check), u_nom = g(q) (gravity compensation), '
+            f'reference not started: {findings}'
         )
         return [
             stamped(
                 EFFORT_NOMINAL,
                 effort_to_msg(self.msgs, stamp, self._joint_names, state.gravity_torque),
             ),
-            stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report)),
+            self._status(stamp, DiagnosticLevel.ERROR, text, self.grasp.diagnostic_values()),
         ]
 
     def _rejected(
@@ -363,7 +336,7 @@ class NominalControllerEndpoint:
         ``now`` (s), else the last tick's stamp.
         """
         self.rejected_count += 1
-        self._last_rejection = str(error)
+        self.input_watchdog.rejected(error)
         if stamp is None and now is not None:
             stamp = seconds_to_nanoseconds(max(now, 0.0))
         elif stamp is None:
@@ -371,10 +344,12 @@ class NominalControllerEndpoint:
         since = self._reports.due('input', stamp)
         if since is None:
             return []
-        report = DiagnosticReport.create(
-            DIAGNOSTIC_NAME,
-            DiagnosticLevel.WARN,
-            bounded_text(f'input rejected, no command ({since} since the last report): {error}'),
-            {'input.rejected': True, 'input.rejected_count': self.rejected_count},
-        )
-        return [stamped(DIAGNOSTICS, diagnostics_to_msg(self.msgs, stamp, report))]
+        text = bounded_text(f'input rejected, no command ({since} since the last report): {error}')
+        values = {'input.rejected': True, 'input.rejected_count': self.rejected_count}
+        return [self._status(stamp, DiagnosticLevel.WARN, text, values)]
+
+    def _status(
+        self, t: Stamp, level: DiagnosticLevel, text: str, values: Mapping[str, Any]
+    ) -> Outgoing:
+        """Return the nominal controller's status stamped ``t`` (integer ns, or s)."""
+        return diagnostic_status(self.msgs, t, DIAGNOSTIC_NAME, level, text, values)

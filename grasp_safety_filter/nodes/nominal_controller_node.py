@@ -25,10 +25,7 @@ null-space posture is kept);
 from __future__ import annotations
 
 from collections.abc import Mapping
-import time
 from typing import Any
-
-from rclpy.clock import Clock, ClockType
 
 from grasp_safety_filter.control.nominal import NominalConfig
 from grasp_safety_filter.io.schemas import NOMINAL_CONTROLLER_NODE
@@ -36,16 +33,14 @@ from grasp_safety_filter.io.topics import (
     DIAGNOSTICS,
     EFFORT_NOMINAL,
     JOINT_STATES,
-    OBJECT_ODOM,
     OBJECT_REFERENCE,
     OBJECT_REFERENCE_SAMPLE,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.nodes.base_node import EndpointNode
+from grasp_safety_filter.nodes.controller_node import ControllerNode
 from grasp_safety_filter.nodes.grasp_watch import GAP_TOLERANCE_PARAMETER, GraspCheckConfig
 from grasp_safety_filter.nodes.nominal_controller import NominalControllerEndpoint
 from grasp_safety_filter.nodes.object_stream import StreamConfig
-from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.spin_node import spin_node
 from grasp_safety_filter.nodes.tick_kernels import load_nominal_kernels
 
@@ -53,7 +48,7 @@ from grasp_safety_filter.nodes.tick_kernels import load_nominal_kernels
 WAITING_CHECK_PERIOD = 0.1
 
 
-class NominalControllerNode(EndpointNode):
+class NominalControllerNode(ControllerNode):
     """The nominal controller node (module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -65,51 +60,27 @@ class NominalControllerNode(EndpointNode):
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         config = NominalConfig.from_parameters(self.parameters)
         stream = StreamConfig.from_parameters(self.parameters)
-        topics = {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: stream.object_topic}
+        topics = stream.topics()
         self.endpoint = NominalControllerEndpoint(
             model,
             config,
             self.msgs,
             GraspCheckConfig.from_parameters(self.parameters),
             stream=stream,
-            topic_names={key: self.resolve_topic_name(name) for key, name in topics.items()},
+            topic_names=self.resolved_topics(topics),
         )
         # Its first tick then costs what the others cost (tick_kernels).
         load_nominal_kernels(self.parameters, self.config_directory, config, self.msgs)
         endpoint = self.endpoint
-        monotonic = time.monotonic
-        self.subscribe(
-            JOINT_STATES,
-            lambda msg: self.answer(
-                endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-            newest_only=stream.latest,
-        )
-        self.subscribe(
-            stream.object_topic,
-            lambda msg: self.answer(
-                endpoint.on_odom(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-            sensor=stream.latest,
-        )
-        # Before its first tick it says every second what it waits for (steady clock: under
-        # use_sim_time a simulator that never starts stops the node clock too).
-        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
-        self._watchdog_timer = self.create_timer(
-            WAITING_CHECK_PERIOD,
-            lambda: self.publish(endpoint.watchdog(monotonic(), now=self.now_seconds())),
-            clock=self._steady_clock,
-        )
+        self.subscribe_input(JOINT_STATES, endpoint.on_joint_states, newest_only=stream.latest)
+        self.subscribe_input(stream.object_topic, endpoint.on_odom, sensor=stream.latest)
+        # Before its first tick it says every second what it waits for.
+        self.start_watchdog(WAITING_CHECK_PERIOD)
         if config.reference_source == 'topic':
             self.subscribe(
                 OBJECT_REFERENCE, lambda msg: self.publish(self.endpoint.on_reference(msg))
             )
         self.get_logger().info(f'nominal controller ready, reference: {config.reference_source}')
-
-    def answer(self, outgoing: list[Outgoing]) -> None:
-        """Publish a tick's answer; log the grasp check's changes (once each)."""
-        self.publish(outgoing)
-        self.log_lines(self.endpoint.take_log())
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
         """Apply new gains, paper reference shape, topic reference timeout or gap tolerance."""

@@ -31,6 +31,7 @@ from grasp_safety_filter.io.topics import JOINT_STATES, OBJECT_ODOM
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.object_stream import ObjectStream, StreamConfig
 from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
+from grasp_safety_filter.nodes.tick_state import model_state
 
 #: Unpaired inputs kept waiting for their partner (older ones are dropped).
 MAX_PENDING = 64
@@ -130,14 +131,7 @@ class NominalInputs:
             for old in [s for s in pending if s < stamp]:
                 del pending[old]
         try:
-            state = self.model.state(
-                joints.t,
-                joints.position,
-                joints.velocity,
-                odometry.p_object_in_palm,
-                odometry.R_object_to_palm,
-                odometry.twist_object,
-            )
+            state = model_state(self.model, joints, odometry)
         except (ValueError, np.linalg.LinAlgError) as error:
             return Rejection(error, stamp)
         return Tick(stamp, state)

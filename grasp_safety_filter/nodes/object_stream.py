@@ -47,9 +47,10 @@ from grasp_safety_filter.io.schemas import (
     POSE_MESSAGE,
     STREAM_PARAMETERS,
 )
-from grasp_safety_filter.io.topics import OBJECT_ODOM, OBJECT_POSE
+from grasp_safety_filter.io.topics import JOINT_STATES, OBJECT_ODOM, OBJECT_POSE
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
+from grasp_safety_filter.nodes.tick_state import model_state
 
 _DEFAULTS = {spec.name: spec.default for spec in STREAM_PARAMETERS}
 
@@ -92,6 +93,12 @@ class StreamConfig:
         """The topic of the object's pose: ``/object/odom`` or ``/object/pose``."""
         return OBJECT_POSE if self.object_message == POSE_MESSAGE else OBJECT_ODOM
 
+    def topics(self, *others: str) -> dict[str, str]:
+        """Return the input topics by table name: the state's (:attr:`object_topic`), others."""
+        return {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: self.object_topic} | {
+            topic: topic for topic in others
+        }
+
     def estimate_config(self) -> ObjectEstimateConfig:
         """Return the estimator's configuration."""
         return ObjectEstimateConfig(
@@ -122,12 +129,12 @@ class ObjectStream:
         self,
         model: Any,
         config: StreamConfig,
-        source: str | None = None,
+        source: str,
         parse: SharedParse | None = None,
     ) -> None:
         self.model = model
         self.config = config
-        self.source = source or config.object_topic
+        self.source = source
         self.estimator = ObjectStateEstimator(config.estimate_config())
         self.last_estimate: ObjectEstimate | None = None
         self._parse = parse_directly if parse is None else parse
@@ -204,14 +211,7 @@ class ObjectStream:
 
         """
         estimate = self.estimate(joints)
-        state = self.model.state(
-            joints.t,
-            joints.position,
-            joints.velocity,
-            estimate.p_object_in_palm,
-            estimate.R_object_to_palm,
-            estimate.twist_object,
-        )
+        state = model_state(self.model, joints, estimate)
         self.estimator.observe(state)
         self.last_estimate = estimate
         return state

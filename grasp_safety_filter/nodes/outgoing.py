@@ -10,9 +10,19 @@ message stream.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, NamedTuple
 
-from grasp_safety_filter.io.messages import header_stamp_ns, time_msg_to_nanoseconds
+from grasp_safety_filter.io.messages import (
+    DiagnosticLevel,
+    DiagnosticReport,
+    diagnostics_to_msg,
+    header_stamp_ns,
+    MessageNamespace,
+    Stamp,
+    time_msg_to_nanoseconds,
+)
+from grasp_safety_filter.io.topics import DIAGNOSTICS
 
 
 class Outgoing(NamedTuple):
@@ -37,3 +47,16 @@ def stamped(topic: str, msg: Any) -> Outgoing:
     if hasattr(msg, 'header'):
         return Outgoing(topic, header_stamp_ns(msg), msg)
     return Outgoing(topic, time_msg_to_nanoseconds(msg.clock, 'clock'), msg)
+
+
+def diagnostic_status(
+    msgs: MessageNamespace,
+    t: Stamp,
+    name: str,
+    level: DiagnosticLevel,
+    text: str,
+    values: Mapping[str, Any],
+) -> Outgoing:
+    """Return ``/diagnostics`` with one status ``name`` stamped ``t`` (integer ns, or s)."""
+    report = DiagnosticReport.create(name, level, text, values)
+    return stamped(DIAGNOSTICS, diagnostics_to_msg(msgs, t, report))

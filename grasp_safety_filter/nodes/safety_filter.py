@@ -47,32 +47,21 @@ from grasp_safety_filter.io.messages import (
     OutOfOrderError,
     StaleInputError,
     Stamp,
-    StampGuard,
 )
 from grasp_safety_filter.io.topics import EFFORT_NOMINAL, JOINT_STATES, OBJECT_ODOM
 from grasp_safety_filter.nodes.command_output import CommandConfig, CommandOutput
 from grasp_safety_filter.nodes.filter_status import status_message, TickContext
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig, GraspWatch, LogLine
 from grasp_safety_filter.nodes.held_commands import HeldCommands
-from grasp_safety_filter.nodes.input_watchdog import InputWatchdog
-from grasp_safety_filter.nodes.latest_inputs import LatestTickAssembler
-from grasp_safety_filter.nodes.object_stream import EXACT, ObjectStream, StreamConfig
+from grasp_safety_filter.nodes.input_watchdog import InputWatchdog, NOMINAL_HINT
+from grasp_safety_filter.nodes.latest_inputs import tick_assembler
+from grasp_safety_filter.nodes.object_stream import EXACT, StreamConfig
 from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import PublicationRate, PublicationRateConfig
 from grasp_safety_filter.nodes.shared_parse import SharedParse
 from grasp_safety_filter.nodes.startup_log import StartupLog
 from grasp_safety_filter.nodes.tick_answer import TickAnswer
-from grasp_safety_filter.nodes.tick_inputs import INPUTS, REPLAY, TickAssembler, TickInputs
-
-#: Why u_nom may be missing while the state arrives (the watchdog's reports say it).
-NOMINAL_HINT = (
-    'the nominal controller publishes u_nom only for the ticks it makes of its own inputs: '
-    'see its status on /diagnostics'
-)
-
-#: Period of the input watchdog, s (steady clock): the fallback is repeated at this period
-#: while the inputs stay away, which keeps a driver with a command timeout of 20 ms fed.
-WATCHDOG_PERIOD = 0.02
+from grasp_safety_filter.nodes.tick_inputs import REPLAY, TickInputs
 
 
 class SafetyFilterEndpoint:
@@ -90,8 +79,7 @@ class SafetyFilterEndpoint:
         parse: The joint state and odometry parses, shared with the nominal controller in
             process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
         wall_clock: The clock of the handlers' ``wall`` (``time.monotonic``), read when a
-            tick is answered: the watchdog waits from the answer, so a slow tick is not
-            followed by the fallback. None: a tick is dated by its last input's ``wall``.
+            tick is answered (:class:`~grasp_safety_filter.nodes.input_watchdog.InputWatchdog`).
         stream: ``input.sync`` and the object's estimate (default: ``exact``).
         command_config: ``command.*``: u* also in ros2_control's form (default: JointState).
         topic_names: The input topics as the node resolved them (remapped), by table name,
@@ -102,7 +90,6 @@ class SafetyFilterEndpoint:
         inputs: The input checks and the pending inputs of the ticks to come.
         enabled: u* filtered (True) or u_nom passed through (False): :meth:`switch`.
         last_result: The last tick's :class:`FilterResult` (None when disabled or before).
-        late_nominal: With ``input.sync: latest``, late u_nom dropped (states answered).
 
     """
 
@@ -130,21 +117,9 @@ class SafetyFilterEndpoint:
             input_policy_config, model.n_joints, -effort_limits, effort_limits
         )
         self.stream = stream
-        self.topic_names = {
-            JOINT_STATES: JOINT_STATES,
-            OBJECT_ODOM: stream.object_topic,
-            EFFORT_NOMINAL: EFFORT_NOMINAL,
-        } | dict(topic_names or {})
-        max_age = input_policy_config.max_age
-        self.inputs: TickAssembler = (
-            LatestTickAssembler(
-                max_age,
-                model,
-                ObjectStream(model, stream, self.topic_names[OBJECT_ODOM]),
-                self.topic_names,
-            )
-            if stream.latest
-            else TickAssembler(max_age, model, parse, self.topic_names)
+        self.topic_names = stream.topics(EFFORT_NOMINAL) | dict(topic_names or {})
+        self.inputs = tick_assembler(
+            stream, input_policy_config.max_age, model, parse, self.topic_names
         )
         self.rate = PublicationRate(publication_rate_config)
         self.grasp = GraspWatch(model, grasp_check_config)
@@ -156,12 +131,9 @@ class SafetyFilterEndpoint:
             model, self.hold, msgs, self.command, self.rate, self._status_message
         )
         self.input_watchdog = InputWatchdog(
-            INPUTS, self.topic_names, hints={EFFORT_NOMINAL: NOMINAL_HINT}
+            self.topic_names, {EFFORT_NOMINAL: NOMINAL_HINT}, wall_clock
         )
         self.ticked = False
-        self.late_nominal = 0
-        self._last_rejection: str | None = None
-        self._wall_clock = wall_clock
         self._switched_at: float | None = None
         self._advice = StartupLog(model)
 
@@ -195,39 +167,27 @@ class SafetyFilterEndpoint:
     def watchdog(self, now_wall: float, now: float) -> list[Outgoing]:
         """Stand in for ticks that stopped coming: the fallback command and an ERROR.
 
-        Called every :data:`WATCHDOG_PERIOD` s on a steady clock (under ``use_sim_time`` a
-        dead simulator stops the node clock too). Before the first tick: a WARN naming the
-        inputs not received yet, every few seconds, and no command (a driver must not get
-        torques from a filter that has never seen its hand). Afterwards, once the last tick
-        is ``input.hold_timeout`` s old: the fallback and an ERROR naming the silent inputs.
+        Called every :data:`~grasp_safety_filter.nodes.input_watchdog.WATCHDOG_PERIOD` s on
+        a steady clock (under ``use_sim_time`` a dead simulator stops the node clock too).
+        Before the first tick: a WARN saying what it waits for, every second, and no command
+        (a driver must not get torques from a filter that has never seen its hand).
+        Afterwards, once the last tick is ``input.hold_timeout`` s old: the fallback and an
+        ERROR naming the silent inputs.
 
         Args:
             now_wall: The steady clock, s (that of the handlers' ``wall``).
-            now: The node's clock, s: the fallback's stamp (never before the last tick's,
-                and 1 ns after a tick that is under way, which must still get its own u*).
+            now: The node's clock, s: the fallback's stamp
+                (:meth:`~grasp_safety_filter.nodes.tick_inputs.TickAssembler.fallback_stamp`).
 
         """
         if not self.input_watchdog.started:
             waiting = self.input_watchdog.waiting(now_wall)
-            if waiting is None:
-                return []
-            waited, missing = waiting
-            what = self.input_watchdog.describe_waiting(missing)
-            if not missing and self._last_rejection is not None:
-                what += f'; the last rejected: {self._last_rejection}'
-
-            return [self.held.waiting(waited, missing, what, now)]
+            return [] if waiting is None else [self.held.waiting(*waiting, now)]
         silence = self.input_watchdog.silence(now_wall, self.hold.hold_timeout)
         if silence is None:
             return []
-        stamp = self.inputs.clock_stamp(now)
-        if self.inputs.has_pending(stamp):
-            # A tick of this stamp is under way (a lockstep simulator waits for its command
-            # while the nominal controller is slow): the fallback must not answer it in its
-            # place, so that the tick still gets its own u* when its inputs are complete.
-            stamp += 1
         last_tick = nanoseconds_to_seconds(self.inputs.last_tick_ns or 0)
-        return self.held.absent(silence, last_tick, stamp, now)
+        return self.held.absent(silence, last_tick, self.inputs.fallback_stamp(now), now)
 
     def switch(self, enabled: bool, now: float | None = None) -> str | None:
         """Switch the filter on or off from the next tick; say so (None if unchanged).
@@ -291,6 +251,8 @@ class SafetyFilterEndpoint:
             data = self.inputs.parse(topic, msg)
             stamp = self.inputs.check(topic, data, now_s)
         except MessageError as error:
+            if self.inputs.dropped(topic, error):
+                return []
             return self._reject(topic, msg, error, now_s, close=is_clock)
         try:
             tick = self.inputs.add(topic, stamp, data)
@@ -303,21 +265,16 @@ class SafetyFilterEndpoint:
             # and the inputs did not stop (else the watchdog could answer the resent state
             # with the fallback right after its answer).
             if wall is not None:
-                self.input_watchdog.answered_again(self._answered(wall))
+                self.input_watchdog.answered_again(wall)
             return list(self._last_outputs)
         return self._tick(tick.joint_states.stamp_ns, tick, now_s, wall)
-
-    @property
-    def guard(self) -> StampGuard:
-        """Stale and out-of-order stamp checks, per input topic."""
-        return self.inputs.guard
 
     def _tick(
         self, stamp: int, inputs: TickInputs, now: float, wall: float | None
     ) -> list[Outgoing]:
         start = time.perf_counter()
         t = inputs.joint_states.t
-        self.ticked = True
+        self.ticked = True  # a state the model rejects is answered as a rejected input
         u_nom = inputs.nominal.effort
         state, model_time = self.inputs.state(stamp, inputs)
         start -= model_time  # the tick's time includes its model terms, whenever computed
@@ -326,7 +283,9 @@ class SafetyFilterEndpoint:
             if isinstance(state, Exception):
                 raise state
             if self.grasp.check(state):
-                return self._grasp_lost(stamp, inputs, now, wall)
+                # No QP on a state that is not a grasp: the hold policy's answer, an ERROR.
+                self._answered(stamp, inputs, wall)
+                return self._remember(self.held.grasp_lost(self.grasp, stamp, now))
             if self.enabled:
                 filter_start = time.perf_counter()
                 result = self.filter.solve(state, u_nom)
@@ -349,12 +308,7 @@ class SafetyFilterEndpoint:
         self.last_result = result
         self._advice.first_state(state)
         u = self.hold.accept(now, u)
-        # The gravity fallback's q: only a tick's accepted joint state, never one merely parsed.
-        self.held.last_positions = np.array(inputs.joint_states.position)
-        self.inputs.close(stamp)
-        resumed_after = (
-            None if wall is None else self.input_watchdog.accepted(self._answered(wall))
-        )
+        resumed_after = self._answered(stamp, inputs, wall)
         # Every message is stamped t, whose ns is the tick's stamp.
         outgoing = self.answer.messages(
             stamp,
@@ -371,30 +325,27 @@ class SafetyFilterEndpoint:
             ),
             resumed=resumed_after is not None,
         )
-        self._last_outputs = outgoing
-        return list(outgoing)
+        return self._remember(outgoing)
 
-    def _grasp_lost(
-        self, stamp: int, inputs: TickInputs, now: float, wall: float | None
-    ) -> list[Outgoing]:
-        """No QP on a state that is not a grasp: the hold policy's answer and an ERROR.
+    def _answered(self, stamp: int, inputs: TickInputs, wall: float | None) -> float | None:
+        """Close a tick answered (by the QP, or the hold policy when the grasp is lost).
 
-        The tick counts as answered for the input watchdog (the inputs do arrive), and its
-        joint state is the gravity fallback's q (a valid measurement of a hand that does not
-        hold the object as the model assumes).
+        Its joint state becomes the gravity fallback's q (an accepted measurement, never one
+        merely parsed; with the grasp lost, of a hand that does not hold the object as the
+        model assumes), and the input watchdog counts it as answered (the inputs do arrive).
+
+        Returns:
+            The wall-clock time without a tick if the watchdog had taken over, s; else None.
+
         """
-        self.ticked = True
         self.held.last_positions = np.array(inputs.joint_states.position)
-        outgoing = self.held.grasp_lost(self.grasp, stamp, now)
         self.inputs.close(stamp)
-        if wall is not None:
-            self.input_watchdog.accepted(self._answered(wall))
+        return None if wall is None else self.input_watchdog.accepted(wall)
+
+    def _remember(self, outgoing: list[Outgoing]) -> list[Outgoing]:
+        """Keep a tick's answer (sent again for a replay of the tick); return a copy."""
         self._last_outputs = outgoing
         return list(outgoing)
-
-    def _answered(self, wall: float) -> float:
-        """Return when a tick whose last input came at ``wall`` is answered, s."""
-        return wall if self._wall_clock is None else max(wall, self._wall_clock())
 
     def take_log(self) -> list[LogLine]:
         """Return and forget the log lines: the grasp check's changes, the start-up advice."""
@@ -416,20 +367,18 @@ class SafetyFilterEndpoint:
         tick, and for a tracker sample with ``input.sync: latest``, no command: a status.
         With ``latest`` a tick is closed only at a message's own stamp, never at the clock's
         (the states queued behind a stall are still to be answered), and a stale or
-        out-of-order u_nom is the late answer to a state already gone: dropped.
+        out-of-order u_nom is the late answer to a state already gone: dropped
+        (:meth:`~grasp_safety_filter.nodes.tick_inputs.TickAssembler.dropped`).
         """
         stale = isinstance(error, StaleInputError | OutOfOrderError | FutureStampError)
         name = self.topic_names.get(topic, topic)
-        if self.stream.latest and topic == EFFORT_NOMINAL and stale and stamp is None:
-            self.late_nominal += 1
-            return []
         if stamp is None and not stale:
             stamp = self.inputs.current_stamp(msg, now)
         if stamp is None:
             # The message's own stamp is unusable: stamp the command with the clock.
             stamp = self.inputs.clock_stamp(now)
             close = close and not self.stream.latest
-        self._last_rejection = str(error)
+        self.input_watchdog.rejected(error)
         if self.stream.latest and topic == OBJECT_ODOM:
             return self.held.ignored(name, error, stamp)  # the ticks go on with the estimate
         if not self.ticked:
@@ -439,8 +388,7 @@ class SafetyFilterEndpoint:
         outgoing = self.held.rejected(name, error, stamp, now)
         if close:
             self.inputs.close(stamp)
-        self._last_outputs = outgoing
-        return list(outgoing)
+        return self._remember(outgoing)
 
     def _status_message(
         self, t: Stamp, level: DiagnosticLevel, text: str, values: dict[str, Any]

@@ -18,7 +18,7 @@ with a real hand, the driver's stamps must be on the same clock as this node, an
 and the object's pose are subscribed best effort, which matches any publisher).
 
 Input watchdog: a timer on the steady clock (every
-:data:`~grasp_safety_filter.nodes.safety_filter.WATCHDOG_PERIOD` s; under ``use_sim_time`` a
+:data:`~grasp_safety_filter.nodes.input_watchdog.WATCHDOG_PERIOD` s; under ``use_sim_time`` a
 dead simulator stops the node clock too) calls ``SafetyFilterEndpoint.watchdog``: once no
 tick has been accepted for ``input.hold_timeout`` s of wall-clock time, the hold policy's
 fallback goes to ``/hand/effort_command`` every period, stamped with the node clock's now
@@ -47,8 +47,6 @@ from collections.abc import Mapping
 import time
 from typing import Any
 
-from rclpy.clock import Clock, ClockType
-
 from grasp_safety_filter.control.hold_policy import InputPolicyConfig
 from grasp_safety_filter.control.safety_filter import SafetyFilterConfig
 from grasp_safety_filter.io.schemas import SAFETY_FILTER_NODE
@@ -58,19 +56,18 @@ from grasp_safety_filter.io.topics import (
     EFFORT_NOMINAL,
     JOINT_STATES,
     MARGINS,
-    OBJECT_ODOM,
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
-from grasp_safety_filter.nodes.base_node import EndpointNode
 from grasp_safety_filter.nodes.command_output import CommandConfig
+from grasp_safety_filter.nodes.controller_node import ControllerNode
 from grasp_safety_filter.nodes.grasp_watch import GraspCheckConfig
+from grasp_safety_filter.nodes.input_watchdog import WATCHDOG_PERIOD
 from grasp_safety_filter.nodes.object_stream import StreamConfig
-from grasp_safety_filter.nodes.outgoing import Outgoing
 from grasp_safety_filter.nodes.publication_rate import (
     PUBLICATION_RATE_PARAMETERS,
     PublicationRateConfig,
 )
-from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint, WATCHDOG_PERIOD
+from grasp_safety_filter.nodes.safety_filter import SafetyFilterEndpoint
 from grasp_safety_filter.nodes.spin_node import spin_node
 from grasp_safety_filter.nodes.tick_kernels import load_filter_kernels
 
@@ -78,7 +75,7 @@ from grasp_safety_filter.nodes.tick_kernels import load_filter_kernels
 ENABLED_PARAMETER = 'enabled'
 
 
-class SafetyFilterNode(EndpointNode):
+class SafetyFilterNode(ControllerNode):
     """The safety filter node (module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -90,8 +87,7 @@ class SafetyFilterNode(EndpointNode):
         model = GraspModel.from_parameters(self.parameters, self.config_directory)
         stream = StreamConfig.from_parameters(self.parameters)
         command_config = CommandConfig.from_parameters(self.parameters)
-        topics = {JOINT_STATES: JOINT_STATES, OBJECT_ODOM: stream.object_topic}
-        topics[EFFORT_NOMINAL] = EFFORT_NOMINAL
+        topics = stream.topics(EFFORT_NOMINAL)
         self.endpoint = SafetyFilterEndpoint(
             model,
             SafetyFilterConfig.from_parameters(self.parameters),
@@ -103,7 +99,7 @@ class SafetyFilterNode(EndpointNode):
             wall_clock=time.monotonic,
             stream=stream,
             command_config=command_config,
-            topic_names={key: self.resolve_topic_name(name) for key, name in topics.items()},
+            topic_names=self.resolved_topics(topics),
         )
         # Its first tick then costs what the others cost (tick_kernels).
         load_filter_kernels(
@@ -113,43 +109,14 @@ class SafetyFilterNode(EndpointNode):
             if topic != EFFORT_COMMAND:
                 self.add_publisher(topic)
         endpoint = self.endpoint
-        monotonic = time.monotonic
-        sensor = stream.latest
-        self.subscribe(
-            JOINT_STATES,
-            lambda msg: self.answer(
-                endpoint.on_joint_states(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-            newest_only=sensor,
-        )
-        self.subscribe(
-            stream.object_topic,
-            lambda msg: self.answer(
-                endpoint.on_odom(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-            sensor=sensor,
-        )
-        self.subscribe(
-            EFFORT_NOMINAL,
-            lambda msg: self.answer(
-                endpoint.on_effort_nominal(msg, now=self.now_seconds(), wall=monotonic())
-            ),
-        )
-        self._steady_clock = Clock(clock_type=ClockType.STEADY_TIME)
-        self._watchdog_timer = self.create_timer(
-            WATCHDOG_PERIOD,
-            lambda: self.publish(endpoint.watchdog(monotonic(), now=self.now_seconds())),
-            clock=self._steady_clock,
-        )
+        self.subscribe_input(JOINT_STATES, endpoint.on_joint_states, newest_only=stream.latest)
+        self.subscribe_input(stream.object_topic, endpoint.on_odom, sensor=stream.latest)
+        self.subscribe_input(EFFORT_NOMINAL, endpoint.on_effort_nominal)
+        self.start_watchdog(WATCHDOG_PERIOD)
         state = 'on' if endpoint.enabled else 'OFF (u* = u_nom)'
         self.get_logger().info(
             f'safety filter {state}: {len(endpoint.filter.row_names)} constraint rows'
         )
-
-    def answer(self, outgoing: list[Outgoing]) -> None:
-        """Publish a tick's answer; log the grasp check's changes (once each)."""
-        self.publish(outgoing)
-        self.log_lines(self.endpoint.take_log())
 
     def apply_parameters(self, changed: Mapping[str, Any]) -> None:
         """Rebuild the filter, update the hold policy or switch the filter on or off (logged)."""

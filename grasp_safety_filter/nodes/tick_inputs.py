@@ -14,10 +14,7 @@ simulator that re-sent its state) is a replay: the endpoint sends the same answe
 from __future__ import annotations
 
 from collections.abc import Mapping
-import time
 from typing import Any, NamedTuple
-
-import numpy as np
 
 from grasp_safety_filter.io.messages import (
     effort_from_msg,
@@ -34,8 +31,8 @@ from grasp_safety_filter.io.messages import (
     StampGuard,
 )
 from grasp_safety_filter.io.topics import EFFORT_NOMINAL, JOINT_STATES, OBJECT_ODOM
-from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.nodes.shared_parse import parse_directly, SharedParse
+from grasp_safety_filter.nodes.tick_state import model_state, timed_state, TimedState
 
 #: Incomplete input sets kept waiting for their other inputs (older ones are dropped).
 MAX_PENDING = 64
@@ -43,9 +40,6 @@ MAX_PENDING = 64
 #: The inputs of a tick, and those of its state.
 INPUTS = (JOINT_STATES, OBJECT_ODOM, EFFORT_NOMINAL)
 STATE_INPUTS = (JOINT_STATES, OBJECT_ODOM)
-
-#: A state's model terms (or the model's refusal of it) and the time they took, s.
-TimedState = tuple[GraspState | Exception, float]
 
 
 class TickInputs(NamedTuple):
@@ -76,7 +70,7 @@ class TickAssembler:
         parse: The joint state and odometry parses, shared with the nominal controller in
             process (:mod:`~grasp_safety_filter.nodes.shared_parse`); default: its own.
         topic_names: The input topics' names as the node resolved them (remapped), by table
-            name, for the error texts; default: the table's.
+            name, for the error texts.
 
     Attributes:
         guard: Stale and out-of-order stamp checks, per input topic.
@@ -88,11 +82,11 @@ class TickAssembler:
         self,
         max_age: float,
         model: Any,
-        parse: SharedParse | None = None,
-        topic_names: Mapping[str, str] | None = None,
+        parse: SharedParse | None,
+        topic_names: Mapping[str, str],
     ) -> None:
         self.guard = StampGuard(max_age)
-        self.topic_names = {topic: topic for topic in INPUTS} | dict(topic_names or {})
+        self.topic_names = dict(topic_names)
         self._parse = parse_directly if parse is None else parse
         self.last_tick_ns: int | None = None
         self.model = model
@@ -116,21 +110,9 @@ class TickAssembler:
             return self._parse(joint_state_from_msg, msg, self._joint_name_tuple, source, True)
         return effort_from_msg(msg, self._joint_name_tuple, source)
 
-    def timed_state(self, joint_states: JointStateData, odometry: ObjectStateData) -> TimedState:
+    def _timed_state(self, joint_states: JointStateData, odometry: ObjectStateData) -> TimedState:
         """Compute a state's model terms (or the model's refusal of it), timed in s."""
-        start = time.perf_counter()
-        try:
-            state: GraspState | Exception = self.model.state(
-                joint_states.t,
-                joint_states.position,
-                joint_states.velocity,
-                odometry.p_object_in_palm,
-                odometry.R_object_to_palm,
-                odometry.twist_object,
-            )
-        except (ValueError, np.linalg.LinAlgError) as error:
-            state = error
-        return state, time.perf_counter() - start
+        return timed_state(lambda: model_state(self.model, joint_states, odometry))
 
     def now(self, msg: Any, now: float | None) -> tuple[float, bool]:
         """Return the clock for this input, s, and whether it is one.
@@ -183,7 +165,7 @@ class TickAssembler:
         if len(inputs) < len(INPUTS):
             if topic in STATE_INPUTS and all(name in inputs for name in STATE_INPUTS):
                 # The state is complete before u_nom: the model terms need not wait for it.
-                self._states[stamp] = self.timed_state(inputs[JOINT_STATES], inputs[OBJECT_ODOM])
+                self._states[stamp] = self._timed_state(inputs[JOINT_STATES], inputs[OBJECT_ODOM])
             while len(self._pending) > MAX_PENDING:
                 oldest = min(self._pending)
                 del self._pending[oldest]
@@ -194,7 +176,7 @@ class TickAssembler:
 
     def state(self, stamp: int, inputs: TickInputs) -> TimedState:
         """Return the model terms of a complete tick (computed already, or now)."""
-        return self._states.pop(stamp, None) or self.timed_state(
+        return self._states.pop(stamp, None) or self._timed_state(
             inputs.joint_states, inputs.odometry
         )
 
@@ -221,6 +203,21 @@ class TickAssembler:
         if self.last_tick_ns is not None:
             stamp = max(stamp, self.last_tick_ns)
         return stamp
+
+    def fallback_stamp(self, now: float) -> int:
+        """Stamp of the input watchdog's fallback, ns: :meth:`clock_stamp`, past a pending tick.
+
+        A tick of the clock's stamp under way (a lockstep simulator waits for its command
+        while the nominal controller is slow) must not be answered by the fallback in its
+        place: the fallback goes 1 ns later, and the tick still gets its own u* when its
+        inputs are complete.
+        """
+        stamp = self.clock_stamp(now)
+        return stamp + 1 if self.has_pending(stamp) else stamp
+
+    def dropped(self, topic: str, error: MessageError) -> bool:
+        """Whether an input refused by :meth:`parse` or :meth:`check` goes unanswered: never."""
+        return False
 
     def current_stamp(self, msg: Any, now: float) -> int | None:
         """Return the message's stamp if readable, not before the last tick, not in the future.

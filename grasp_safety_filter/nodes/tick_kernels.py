@@ -43,6 +43,7 @@ from grasp_safety_filter.model.compiled import load_compiled_runtime
 from grasp_safety_filter.model.grasp_check import hand_findings
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
+from grasp_safety_filter.nodes.tick_state import model_state
 
 #: What a made-up state may be refused with (its errors are not the user's).
 _REFUSALS = (ValueError, ArithmeticError, np.linalg.LinAlgError)
@@ -85,14 +86,7 @@ def _made_up_tick(
     names = tuple(model.joint_names)
     joints = joint_state_from_msg(joint_states_msg, names)
     odometry = odometry_from_msg(odometry_msg, model.palm_frame, model.object_frame)
-    state = model.state(
-        joints.t,
-        joints.position,
-        joints.velocity,
-        odometry.p_object_in_palm,
-        odometry.R_object_to_palm,
-        odometry.twist_object,
-    )
+    state = model_state(model, joints, odometry)
     # The start-up grasp check evaluates the contacts' geometry, then the hand at the
     # state's own read-only arrays (another specialisation of the model's kernel); a
     # made-up state never gets that far in grasp_findings, so both are called directly.
