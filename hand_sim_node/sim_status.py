@@ -33,18 +33,6 @@ DIAGNOSTIC_NAME = SIM_DIAGNOSTIC
 DURATION = 'duration'
 
 
-def run_finished(plant: Any) -> bool:
-    """Whether a run over ``plant`` is over: ``duration``'s steps taken, or a plant stop."""
-    return plant.stop_reason is not None or plant.step_index >= plant.config.n_steps
-
-
-def run_stop_reason(plant: Any) -> str | None:
-    """Return :data:`DURATION`, the plant's stop reason, or None while the run goes on."""
-    if plant.stop_reason is not None:
-        return plant.stop_reason
-    return DURATION if run_finished(plant) else None
-
-
 def command_warning(text: str, msg: Any, t: float) -> DiagnosticReport:
     """WARN about a command that is not applied, with its stamp if readable.
 
