@@ -55,26 +55,14 @@ import numpy as np
 
 from grasp_safety_filter.io.messages import (
     clock_to_msg,
-    ContactData,
-    contacts_to_msg,
     DiagnosticReport,
     diagnostics_to_msg,
     effort_from_msg,
-    joint_state_to_msg,
     MessageError,
     MessageNamespace,
-    odometry_to_msg,
     seconds_to_nanoseconds,
 )
-from grasp_safety_filter.io.topics import (
-    CLOCK,
-    CONTACTS,
-    DIAGNOSTICS,
-    EFFORT_COMMAND,
-    JOINT_STATES,
-    OBJECT_ODOM,
-    SCENARIO,
-)
+from grasp_safety_filter.io.topics import CLOCK, DIAGNOSTICS, EFFORT_COMMAND, OBJECT_ODOM, SCENARIO
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
 from hand_sim_node.command_delay import CommandDelay
@@ -83,6 +71,7 @@ from hand_sim_node.plant import PlantConfig
 from hand_sim_node.plant_endpoint import PlantEndpoint
 from hand_sim_node.sim_status import clip_to_limits, command_timeout_report, command_warning
 from hand_sim_node.simulator import Simulator
+from hand_sim_node.state_messages import StateMessages
 
 
 class HandSimEndpoint(PlantEndpoint):
@@ -111,6 +100,7 @@ class HandSimEndpoint(PlantEndpoint):
     ) -> None:
         super().__init__(model, sim_config, msgs, scenario_text, plant_config)
         self._joint_names = list(model.joint_names)
+        self.messages = StateMessages(model, msgs, OBJECT_ODOM)
         self._delay = CommandDelay(sim_config.command_delay_steps)
         self._waiting_since: float | None = None
 
@@ -182,7 +172,7 @@ class HandSimEndpoint(PlantEndpoint):
                 msg,
             )
         self._waiting_since = float(now)
-        return self._step(command.effort)
+        return self._step(stamp_ns, command.effort)
 
     def timeout(self, now: float) -> list[Outgoing]:
         """Lockstep watchdog: report a missing command and publish the state again.
@@ -207,14 +197,12 @@ class HandSimEndpoint(PlantEndpoint):
         return [self._diagnostics(report), *self._state_messages()]
 
     # ------------------------------------------------------------------------- internals
-    def _step(self, effort: np.ndarray) -> list[Outgoing]:
+    def _step(self, stamp_ns: int, effort: np.ndarray) -> list[Outgoing]:
+        """Apply the command stamped ``stamp_ns`` (the current state's), ``effort`` in N·m."""
         applied, clipped = self._clip_to_limits(effort)
         report = self._step_plant(self._delay(applied))
-        contacts = ContactData.from_grasp_state(report.grasp_state, report.contact_force)
         outgoing = [] if clipped is None else [clipped]
-        outgoing.append(
-            stamped(CONTACTS, contacts_to_msg(self.msgs, contacts, self.model.contact_names))
-        )
+        outgoing.append(self.messages.contacts(stamp_ns, report))
         if report.state is not report.start:  # integrated (a rigid stop is not)
             outgoing += self._state_messages()
         event = self._contact_event_report()
@@ -231,32 +219,12 @@ class HandSimEndpoint(PlantEndpoint):
         return applied, None if report is None else self._diagnostics(report)
 
     def _state_messages(self) -> list[Outgoing]:
+        """Return ``/clock`` (with ``publish_clock``), then the current state's messages."""
         state = self.plant.observe()
-        messages = []
+        stamp_ns = seconds_to_nanoseconds(state.t)
+        messages = self.messages.state(stamp_ns, state, self._applied_effort)
         if self.config.publish_clock:
-            messages.append(stamped(CLOCK, clock_to_msg(self.msgs, state.t)))
-        messages.append(
-            stamped(
-                JOINT_STATES,
-                joint_state_to_msg(
-                    self.msgs, state.t, self._joint_names, state.q, state.dq, self._applied_effort
-                ),
-            )
-        )
-        messages.append(
-            stamped(
-                OBJECT_ODOM,
-                odometry_to_msg(
-                    self.msgs,
-                    state.t,
-                    state.p_object_in_palm,
-                    state.R_object_to_palm,
-                    state.twist_object,
-                    frame_id=self.model.palm_frame,
-                    child_frame_id=self.model.object_frame,
-                ),
-            )
-        )
+            messages.insert(0, stamped(CLOCK, clock_to_msg(self.msgs, state.t)))
         return messages
 
     def _warn(self, text: str, msg: Any) -> list[Outgoing]:

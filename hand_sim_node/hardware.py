@@ -19,7 +19,7 @@ before the real hand. Pure Python, as the lockstep endpoint
 - **Published every period**, whether or not a command came, each stamped with the node's
   clock (system time, integer ns, read once per state; strictly increasing): the tracker's
   samples due (:mod:`hand_sim_node.tracker`), ``/hand/joint_states`` and
-  ``/object/true_odom`` (:mod:`hand_sim_node.hardware_messages`); once released,
+  ``/object/true_odom`` (:mod:`hand_sim_node.state_messages`); once released,
   ``/hand/contacts`` with the contact data of the call's last integration step. No ``/clock``.
 - **Release.** Until the first valid command the plant stands still: the object is held
   where it is and the hand too (a real grasp starts with its forces built up); the state is
@@ -65,7 +65,6 @@ from grasp_safety_filter.nodes.outgoing import Outgoing
 from hand_sim_node.config import SimConfig
 from hand_sim_node.hardware_commands import CommandReader, SafeTorque
 from hand_sim_node.hardware_config import HardwareConfig
-from hand_sim_node.hardware_messages import StateMessages
 from hand_sim_node.hardware_status import (
     driver_report,
     driver_values,
@@ -77,6 +76,7 @@ from hand_sim_node.hardware_status import (
 from hand_sim_node.plant import PlantConfig
 from hand_sim_node.plant_endpoint import PlantEndpoint
 from hand_sim_node.sim_status import clip_to_limits
+from hand_sim_node.state_messages import StateMessages
 from hand_sim_node.tracker import TrackerEmulator
 
 #: Most driver periods one timer call integrates; a later call skips the rest.
@@ -120,7 +120,9 @@ class HardwareEndpoint(PlantEndpoint):
             hardware.tracker, msgs, model.palm_frame, model.object_frame
         )
         self._safe_torque = SafeTorque(model, hardware.timeout_torque)
-        self.messages = StateMessages(model, msgs, hardware.extra_joint_names())
+        self.messages = StateMessages(
+            model, msgs, OBJECT_TRUE_ODOM, hardware.extra_joint_names()
+        )
         super().__init__(model, sim_config, msgs, scenario_text, plant_config)
 
     def _reset_run(self) -> None:
