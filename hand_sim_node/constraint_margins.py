@@ -43,13 +43,6 @@ WORKSPACE_SIDES: tuple[str, ...] = ('a_min', 'a_max', 'b_min', 'b_max')
 JOINT_SIDES: tuple[str, ...] = ('lower', 'upper')
 
 
-#: Bound of each margin column of the two-sided families (slip and separation have none).
-_SIDES: dict[str, tuple[str, ...]] = {
-    FINGERTIP_WORKSPACE: WORKSPACE_SIDES,
-    JOINT_LIMITS: JOINT_SIDES,
-}
-
-
 @dataclass(frozen=True)
 class Event:
     """One constraint violated at one instant.
