@@ -77,17 +77,7 @@ from hand_sim_node.state_messages import StateMessages
 class HandSimEndpoint(PlantEndpoint):
     """The hand–object simulator behind ``/hand/effort_command`` (module docstring).
 
-    Args:
-        model: The ``GraspModel`` of the hand and object.
-        sim_config: Initial state, integrator, step, duration, stop rules, lockstep.
-        msgs: Message classes to build (rclpy or rosbags).
-        scenario_text: The ``/grasp/scenario`` JSON; default: built from ``model`` and
-            ``sim_config`` (:func:`grasp_safety_filter.nodes.scenario.scenario_document`).
-        plant_config: The plant to simulate (default: the rigid one).
-
-    Attributes:
-        plant: The plant.
-
+    Arguments and attributes: :class:`~hand_sim_node.plant_endpoint.PlantEndpoint`'s.
     """
 
     def __init__(

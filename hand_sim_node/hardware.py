@@ -89,14 +89,8 @@ class HardwareEndpoint(PlantEndpoint):
     Times: ``now_ns`` is the steady clock (periods, timeouts; integer ns, any origin),
     ``stamp_ns`` the node's clock the messages are stamped with (default: ``now_ns``).
 
-    Args:
-        model: The grasp model of the hand and object.
-        sim_config: Initial state, integrator, ``time_step``, ``duration``, stop rules.
-        hardware: The driver's and the tracker's configuration.
-        msgs: Message classes to build (rclpy or rosbags).
-        scenario_text: The ``/grasp/scenario`` JSON (default: from ``model`` and
-            ``sim_config``).
-        plant_config: The plant to simulate (default: the rigid one).
+    Args: :class:`~hand_sim_node.plant_endpoint.PlantEndpoint`'s, and ``hardware``, the
+    driver's and the tracker's configuration.
 
     Raises:
         ParameterError: ``1 / hardware.rate`` is not a whole number of ``time_step``.
