@@ -42,7 +42,6 @@ import numpy as np
 
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.quaternion import (
-    from_rotation_matrix,
     normalized,
     rotation_matrix,
 )
@@ -230,10 +229,6 @@ class Simulator(RunRecord):
         return self._state.t
 
     # -------------------------------------------------------------------------- dynamics
-    def contact_force(self, state: GraspState, effort: np.ndarray) -> np.ndarray:
-        """Stabilised contact forces ``f_c(u) + B_ho^-1 (K_v e + K_p [0, 0, δ_i])``, (k,), N."""
-        return self.derivative(state, effort, from_rotation_matrix(state.R_object_to_palm))[1]
-
     def derivative(
         self, state: GraspState, effort: np.ndarray, quaternion_xyzw: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
