@@ -66,7 +66,6 @@ from hand_sim_node.config import SimConfig
 from hand_sim_node.hardware_commands import CommandReader, SafeTorque
 from hand_sim_node.hardware_config import HardwareConfig
 from hand_sim_node.hardware_status import (
-    driver_report,
     driver_values,
     DriverCounts,
     regular_text,
@@ -75,7 +74,7 @@ from hand_sim_node.hardware_status import (
 )
 from hand_sim_node.plant import PlantConfig
 from hand_sim_node.plant_endpoint import PlantEndpoint
-from hand_sim_node.sim_status import clip_to_limits
+from hand_sim_node.sim_status import clip_to_limits, sim_report
 from hand_sim_node.state_messages import StateMessages
 from hand_sim_node.tracker import TrackerEmulator
 
@@ -312,7 +311,7 @@ class HardwareEndpoint(PlantEndpoint):
         )
 
     def _status(self, stamp: int, level: DiagnosticLevel, text: str) -> Outgoing:
-        return self._diagnostics(stamp, driver_report(level, text, self._values()))
+        return self._diagnostics(stamp, sim_report(level, text, self._values()))
 
     def _diagnostics(self, stamp: int, report: DiagnosticReport) -> Outgoing:
         return Outgoing(DIAGNOSTICS, stamp, diagnostics_to_msg(self.msgs, stamp, report))
