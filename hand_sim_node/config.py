@@ -8,7 +8,7 @@ there); the ROS-free runner builds a :class:`SimConfig` from the same parameter 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -19,8 +19,8 @@ from grasp_safety_filter.io.schemas import command_delay_steps as whole_steps
 from grasp_safety_filter.io.schemas import HAND_SIM_PARAMETERS
 from grasp_safety_filter.nodes.scenario import MAX_STEPS
 
-_SPECS = {spec.name: spec for spec in HAND_SIM_PARAMETERS}
-
+#: ``hand_sim_node``'s parameter specifications, by name.
+PARAMETER_SPECS = {spec.name: spec for spec in HAND_SIM_PARAMETERS}
 
 _ARRAY_FIELDS: dict[str, str] = {
     'initial_joint_positions': 'initial.joint_positions',
@@ -43,8 +43,41 @@ _SCALAR_FIELDS: dict[str, str] = {
 """SimConfig field -> ROS parameter name."""
 
 
-def _default(field_name: str) -> Any:
-    return _SPECS[_SCALAR_FIELDS[field_name]].default
+def parameter_default(name: str) -> Any:
+    """Return the default of the ``hand_sim_node`` parameter ``name``."""
+    return PARAMETER_SPECS[name].default
+
+
+def parameter_values(params: Mapping[str, Any], names: Iterable[str]) -> dict[str, Any]:
+    """Return the parameters ``names`` of ``params`` (dotted or nested), each validated.
+
+    A parameter missing from ``params`` takes its default.
+
+    Raises:
+        ParameterError: A parameter is of the wrong type or out of range.
+    """
+    flat = flatten_parameters(params)
+    return {
+        name: (
+            PARAMETER_SPECS[name].validate(flat[name]) if name in flat else parameter_default(name)
+        )
+        for name in names
+    }
+
+
+def validate_fields(config: Any, parameters: Mapping[str, str]) -> None:
+    """Replace each field of a frozen dataclass ``config`` by its parameter's validated value.
+
+    Args:
+        config: The dataclass instance (in its ``__post_init__``).
+        parameters: Field name -> the ``hand_sim_node`` parameter it holds.
+
+    Raises:
+        ParameterError: Naming the parameter, what was expected and what was received.
+    """
+    for field_name, name in parameters.items():
+        value = PARAMETER_SPECS[name].validate(getattr(config, field_name))
+        object.__setattr__(config, field_name, value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,27 +113,27 @@ class SimConfig:
     initial_joint_positions: np.ndarray | tuple[float, ...]
     initial_object_position: np.ndarray | tuple[float, ...]
     initial_object_orientation: np.ndarray | tuple[float, ...] = (0.0, 0.0, 0.0, 1.0)
-    integrator: str = _default('integrator')
-    time_step: float = _default('time_step')
-    duration: float = _default('duration')
-    stop_on_slip: bool = _default('stop_on_slip')
-    stop_on_workspace_exit: bool = _default('stop_on_workspace_exit')
-    position_gain: float = _default('position_gain')
-    velocity_gain: float = _default('velocity_gain')
-    lockstep: bool = _default('lockstep')
-    command_timeout: float = _default('command_timeout')
-    command_delay: float = _default('command_delay')
-    publish_clock: bool = _default('publish_clock')
+    integrator: str = parameter_default('integrator')
+    time_step: float = parameter_default('time_step')
+    duration: float = parameter_default('duration')
+    stop_on_slip: bool = parameter_default('stop_on_slip')
+    stop_on_workspace_exit: bool = parameter_default('stop_on_workspace_exit')
+    position_gain: float = parameter_default('stabilization.position_gain')
+    velocity_gain: float = parameter_default('stabilization.velocity_gain')
+    lockstep: bool = parameter_default('lockstep')
+    command_timeout: float = parameter_default('command_timeout')
+    command_delay: float = parameter_default('command_delay')
+    publish_clock: bool = parameter_default('publish_clock')
 
     def __post_init__(self) -> None:
+        validate_fields(self, _ARRAY_FIELDS)
         for field_name, name in _ARRAY_FIELDS.items():
-            value = np.array(_SPECS[name].validate(getattr(self, field_name)), dtype=float)
+            value = np.array(getattr(self, field_name), dtype=float)
             if value.size == 0:
                 raise ParameterError(f"parameter '{name}': expected a non-empty list, got []")
             value.setflags(write=False)
             object.__setattr__(self, field_name, value)
-        for field_name, name in _SCALAR_FIELDS.items():
-            object.__setattr__(self, field_name, _SPECS[name].validate(getattr(self, field_name)))
+        validate_fields(self, _SCALAR_FIELDS)
         quaternion = self.initial_object_orientation
         norm = float(np.linalg.norm(quaternion))
         if abs(norm - 1.0) > 1e-6:
@@ -150,11 +183,6 @@ class SimConfig:
             ParameterError: A parameter is of the wrong type or out of range.
 
         """
-        flat = flatten_parameters(params)
         names = {**_ARRAY_FIELDS, **_SCALAR_FIELDS}
-        return cls(
-            **{
-                field_name: flat[name] if name in flat else _SPECS[name].default
-                for field_name, name in names.items()
-            }
-        )
+        values = parameter_values(params, names.values())
+        return cls(**{field_name: values[name] for field_name, name in names.items()})

@@ -43,13 +43,6 @@ WORKSPACE_SIDES: tuple[str, ...] = ('a_min', 'a_max', 'b_min', 'b_max')
 JOINT_SIDES: tuple[str, ...] = ('lower', 'upper')
 
 
-#: Bound of each margin column of the two-sided families (slip and separation have none).
-_SIDES: dict[str, tuple[str, ...]] = {
-    FINGERTIP_WORKSPACE: WORKSPACE_SIDES,
-    JOINT_LIMITS: JOINT_SIDES,
-}
-
-
 @dataclass(frozen=True)
 class Event:
     """One constraint violated at one instant.
@@ -87,12 +80,11 @@ class ConstraintMargins:
             module docstring).
         normal_force: ``f_n,i``, shape (n,), N.
         object_face: ``min(h_u - |u|, h_v - |v|)`` per contact, shape (n,), m (NaN where
-            unknown; all NaN if not given).
+            unknown).
         values: Every margin, family after family in :data:`FAMILIES` order (the five
-            arrays above but ``required_friction``, flattened), shape (7n + 2m,); built
-            from them if not given.
+            arrays above but ``required_friction``, flattened), shape (7n + 2m,).
         violated_mask: ``values`` violated (``<= 0`` for workspace and separation, ``< 0``
-            for the others), shape (7n + 2m,); built from ``values`` if not given.
+            for the others; NaN: not violated), shape (7n + 2m,).
 
     """
 
@@ -102,21 +94,9 @@ class ConstraintMargins:
     required_friction: np.ndarray
     friction: np.ndarray
     normal_force: np.ndarray
-    object_face: np.ndarray | None = None
-    values: np.ndarray | None = field(default=None, repr=False)
-    violated_mask: np.ndarray | None = field(default=None, repr=False)
-
-    def __post_init__(self) -> None:
-        if self.object_face is None:
-            object.__setattr__(self, 'object_face', np.full(self.normal_force.shape, np.nan))
-        if self.values is None:
-            flat = np.concatenate([np.ravel(v) for v in self.by_family().values()])
-            object.__setattr__(self, 'values', flat)
-        if self.violated_mask is None:
-            closed = closed_mask(
-                self.fingertip_workspace.size, self.joint_limits.size, self.friction.size
-            )
-            object.__setattr__(self, 'violated_mask', _violated(self.values, closed))
+    object_face: np.ndarray
+    values: np.ndarray = field(repr=False)
+    violated_mask: np.ndarray = field(repr=False)
 
     @property
     def family_starts(self) -> np.ndarray:
@@ -158,8 +138,3 @@ def closed_mask(n_workspace: int, n_joint: int, n_contacts: int) -> np.ndarray:
             np.zeros(n_contacts, dtype=bool),
         )
     )
-
-
-def _violated(values: np.ndarray, closed: np.ndarray) -> np.ndarray:
-    """``values <= 0`` where ``closed``, ``values < 0`` elsewhere (NaN: not violated)."""
-    return (values < 0.0) | (closed & (values == 0.0))

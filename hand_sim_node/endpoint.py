@@ -42,131 +42,56 @@ This endpoint is the lockstep mode's (``lockstep: true``; the runner's, whatever
 parameter says). With ``lockstep: false`` the node runs the hardware mode instead, a hand's
 driver and an object tracker on the wall clock (:mod:`hand_sim_node.hardware`).
 
-The ``hand_sim`` statuses themselves are built in :mod:`hand_sim_node.sim_status`.
+What it shares with the hardware mode (the plant's run, its end, the contact events, the
+live parameters) is :class:`~hand_sim_node.plant_endpoint.PlantEndpoint`; the ``hand_sim``
+statuses themselves are built in :mod:`hand_sim_node.sim_status`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import numpy as np
 
 from grasp_safety_filter.io.messages import (
     clock_to_msg,
-    ContactData,
-    contacts_to_msg,
     DiagnosticReport,
     diagnostics_to_msg,
     effort_from_msg,
-    joint_state_to_msg,
     MessageError,
     MessageNamespace,
-    odometry_to_msg,
     seconds_to_nanoseconds,
 )
-from grasp_safety_filter.io.topics import (
-    CLOCK,
-    CONTACTS,
-    DIAGNOSTICS,
-    EFFORT_COMMAND,
-    JOINT_STATES,
-    OBJECT_ODOM,
-    SCENARIO,
-)
+from grasp_safety_filter.io.topics import CLOCK, DIAGNOSTICS, EFFORT_COMMAND, OBJECT_ODOM, SCENARIO
+from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.outgoing import Outgoing, stamped
-from grasp_safety_filter.nodes.scenario import (
-    scenario_document,
-    scenario_to_text,
-)
 from hand_sim_node.command_delay import CommandDelay
 from hand_sim_node.config import SimConfig
-from hand_sim_node.contact_events import ContactEventTracker
-from hand_sim_node.plant import Plant, PlantConfig
-from hand_sim_node.sim_status import (
-    clip_to_limits,
-    command_timeout_report,
-    command_warning,
-    contact_event_report,
-    DIAGNOSTIC_NAME,
-    DURATION,
-    end_of_run_report,
-    run_finished,
-    run_stop_reason,
-)
+from hand_sim_node.plant import PlantConfig
+from hand_sim_node.plant_endpoint import PlantEndpoint
+from hand_sim_node.sim_status import clip_to_limits, command_timeout_report, command_warning
 from hand_sim_node.simulator import Simulator
-
-__all__ = ['DIAGNOSTIC_NAME', 'DURATION', 'LIVE_FIELDS', 'HandSimEndpoint']
-
-#: SimConfig fields that may change while the simulator runs (the others are read-only).
-LIVE_FIELDS = (
-    'stop_on_slip',
-    'stop_on_workspace_exit',
-    'position_gain',
-    'velocity_gain',
-    'command_timeout',
-)
+from hand_sim_node.state_messages import StateMessages
 
 
-def check_live_update(current: SimConfig, new: SimConfig, where: str) -> None:
-    """Refuse a new configuration that changes more than :data:`LIVE_FIELDS`.
-
-    Raises:
-        ValueError: Naming the read-only fields that differ (``where``: the caller).
-    """
-    changed = [
-        f.name
-        for f in dataclasses.fields(SimConfig)
-        if f.name not in LIVE_FIELDS
-        and not np.array_equal(getattr(new, f.name), getattr(current, f.name))
-    ]
-    if changed:
-        raise ValueError(f'{where}: {changed} are read-only while the simulator runs')
-
-
-class HandSimEndpoint:
+class HandSimEndpoint(PlantEndpoint):
     """The hand–object simulator behind ``/hand/effort_command`` (module docstring).
 
-    Args:
-        model: The ``GraspModel`` of the hand and object.
-        sim_config: Initial state, integrator, step, duration, stop rules, lockstep.
-        msgs: Message classes to build (rclpy or rosbags).
-        scenario_text: The ``/grasp/scenario`` JSON; default: built from ``model`` and
-            ``sim_config`` (:func:`grasp_safety_filter.nodes.scenario.scenario_document`).
-        plant_config: The plant to simulate (default: the rigid one).
-
-    Attributes:
-        plant: The plant.
-
+    Arguments and attributes: :class:`~hand_sim_node.plant_endpoint.PlantEndpoint`'s.
     """
 
     def __init__(
         self,
-        model: Any,
+        model: GraspModel,
         sim_config: SimConfig,
         msgs: MessageNamespace,
         scenario_text: str | None = None,
         plant_config: PlantConfig | None = None,
     ) -> None:
-        self.model = model
-        self.msgs = msgs
-        self.plant_config = plant_config or PlantConfig()
-        self.plant: Plant = self.plant_config.build(model, sim_config)
-        self._contact_events = (
-            None
-            if self.plant.contact_report() is None
-            else ContactEventTracker(self.plant_config.kind, model.contact_names)
-        )
-        self.scenario_text = (
-            scenario_text
-            if scenario_text is not None
-            else scenario_to_text(scenario_document(model, sim_config))
-        )
+        super().__init__(model, sim_config, msgs, scenario_text, plant_config)
         self._joint_names = list(model.joint_names)
-        self._applied_effort = np.zeros(model.n_joints)
+        self.messages = StateMessages(model, msgs, OBJECT_ODOM)
         self._delay = CommandDelay(sim_config.command_delay_steps)
-        self._started = False
-        self._reported_end = False
         self._waiting_since: float | None = None
 
     # ------------------------------------------------------------------------ properties
@@ -176,34 +101,9 @@ class HandSimEndpoint:
         return self.plant.simulator  # type: ignore[attr-defined]
 
     @property
-    def config(self) -> SimConfig:
-        """The simulator configuration in force."""
-        return self.plant.config
-
-    @property
     def command_timeout(self) -> float:
         """Lockstep wait for a command before a diagnostic, s (wall time)."""
         return self.config.command_timeout
-
-    @property
-    def started(self) -> bool:
-        """Whether :meth:`start` was called."""
-        return self._started
-
-    @property
-    def finished(self) -> bool:
-        """Whether the run is over (duration reached or stopped on an event)."""
-        return run_finished(self.plant)
-
-    @property
-    def stop_reason(self) -> str | None:
-        """``"duration"``, the plant's stop reason, or None while the run goes on."""
-        return run_stop_reason(self.plant)
-
-    @property
-    def t(self) -> float:
-        """Simulation time of the current state, s."""
-        return self.plant.observe().t
 
     @property
     def stamp_ns(self) -> int:
@@ -226,12 +126,9 @@ class HandSimEndpoint:
 
         """
         self.plant.reset()
-        if self._contact_events is not None:
-            self._contact_events.reset()
-        self._applied_effort = np.zeros(self.model.n_joints)
+        self._reset_run()
         self._delay.reset()
         self._started = True
-        self._reported_end = False
         self._waiting_since = float(now)
         scenario = Outgoing(SCENARIO, self.stamp_ns, self.msgs.String(data=self.scenario_text))
         return [scenario, *self._state_messages()]
@@ -265,7 +162,7 @@ class HandSimEndpoint:
                 msg,
             )
         self._waiting_since = float(now)
-        return self._step(command.effort)
+        return self._step(stamp_ns, command.effort)
 
     def timeout(self, now: float) -> list[Outgoing]:
         """Lockstep watchdog: report a missing command and publish the state again.
@@ -289,44 +186,21 @@ class HandSimEndpoint:
         report = command_timeout_report(self.t, waited, self.command_timeout)
         return [self._diagnostics(report), *self._state_messages()]
 
-    def update_config(self, sim_config: SimConfig) -> None:
-        """Apply new live parameters (:data:`LIVE_FIELDS`) from the next step on.
-
-        Raises:
-            ValueError: A read-only field (initial state, integrator, time step, duration,
-                lockstep, publish_clock) differs from the one in force.
-
-        """
-        check_live_update(self.plant.config, sim_config, 'HandSimEndpoint.update_config')
-        self.plant.config = sim_config
-
     # ------------------------------------------------------------------------- internals
-    def _step(self, effort: np.ndarray) -> list[Outgoing]:
+    def _step(self, stamp_ns: int, effort: np.ndarray) -> list[Outgoing]:
+        """Apply the command stamped ``stamp_ns`` (the current state's), ``effort`` in N·m."""
         applied, clipped = self._clip_to_limits(effort)
-        self.plant.step(self._delay(applied))
-        report = self.plant.last_report
-        contacts = ContactData.from_grasp_state(report.grasp_state, report.contact_force)
+        report = self._step_plant(self._delay(applied))
         outgoing = [] if clipped is None else [clipped]
-        outgoing.append(
-            stamped(CONTACTS, contacts_to_msg(self.msgs, contacts, self.model.contact_names))
-        )
+        outgoing.append(self.messages.contacts(stamp_ns, report))
         if report.state is not report.start:  # integrated (a rigid stop is not)
-            self._applied_effort = np.array(report.effort)
             outgoing += self._state_messages()
-        outgoing += self._contact_event_onsets()
+        event = self._contact_event_report()
+        if event is not None:
+            outgoing.append(self._diagnostics(event))
         if self.finished and not self._reported_end:
-            outgoing.append(self._end_of_run())
+            outgoing.append(self._diagnostics(self._end_of_run_report()))
         return outgoing
-
-    def _contact_event_onsets(self) -> list[Outgoing]:
-        """Return a WARN ``hand_sim`` status if the last step lost a contact or the object."""
-        if self._contact_events is None:
-            return []
-        onsets = self._contact_events.update(self.plant.contact_report())
-        if not onsets:
-            return []
-        report = contact_event_report(onsets, self.t, self._contact_events.events().to_values())
-        return [self._diagnostics(report)]
 
     def _clip_to_limits(self, effort: np.ndarray) -> tuple[np.ndarray, Outgoing | None]:
         """Return the applied torque, N·m, and a WARN if it was clipped: :func:`clip_to_limits`."""
@@ -335,44 +209,13 @@ class HandSimEndpoint:
         return applied, None if report is None else self._diagnostics(report)
 
     def _state_messages(self) -> list[Outgoing]:
+        """Return ``/clock`` (with ``publish_clock``), then the current state's messages."""
         state = self.plant.observe()
-        messages = []
+        stamp_ns = seconds_to_nanoseconds(state.t)
+        messages = self.messages.state(stamp_ns, state, self._applied_effort)
         if self.config.publish_clock:
-            messages.append(stamped(CLOCK, clock_to_msg(self.msgs, state.t)))
-        messages.append(
-            stamped(
-                JOINT_STATES,
-                joint_state_to_msg(
-                    self.msgs, state.t, self._joint_names, state.q, state.dq, self._applied_effort
-                ),
-            )
-        )
-        messages.append(
-            stamped(
-                OBJECT_ODOM,
-                odometry_to_msg(
-                    self.msgs,
-                    state.t,
-                    state.p_object_in_palm,
-                    state.R_object_to_palm,
-                    state.twist_object,
-                    frame_id=self.model.palm_frame,
-                    child_frame_id=self.model.object_frame,
-                ),
-            )
-        )
+            messages.insert(0, stamped(CLOCK, clock_to_msg(self.msgs, state.t)))
         return messages
-
-    def _end_of_run(self) -> Outgoing:
-        self._reported_end = True
-        events = None if self._contact_events is None else self._contact_events.events()
-        report = end_of_run_report(
-            self.stop_reason,
-            self.t,
-            self.plant.step_index,
-            None if events is None else events.to_values(),
-        )
-        return self._diagnostics(report)
 
     def _warn(self, text: str, msg: Any) -> list[Outgoing]:
         return [self._diagnostics(command_warning(text, msg, self.t))]

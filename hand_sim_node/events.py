@@ -3,8 +3,7 @@
 :class:`EventMonitor` holds the joint limits, fingertip workspaces, friction coefficients and
 object faces of a grasp and evaluates, at one instant, every constraint margin (the families
 and their flat layout: :mod:`hand_sim_node.constraint_margins`) and the events of the violated
-ones; :class:`~hand_sim_node.event_log.EventLog` keeps their run-long record. The public names
-of both modules are importable from here as well.
+ones; :class:`~hand_sim_node.event_log.EventLog` keeps their run-long record.
 """
 
 from __future__ import annotations
@@ -20,7 +19,6 @@ from hand_sim_node.constraint_margins import (
     closed_mask,
     ConstraintMargins,
     Event,
-    FAMILIES,
     FINGERTIP_WORKSPACE,
     JOINT_LIMITS,
     JOINT_SIDES,
@@ -29,25 +27,7 @@ from hand_sim_node.constraint_margins import (
     SLIP,
     WORKSPACE_SIDES,
 )
-from hand_sim_node.event_log import EventLog, FamilyRecord
 from hand_sim_node.margin_kernel import flat_margins
-
-__all__ = [
-    'FAMILIES',
-    'FINGERTIP_WORKSPACE',
-    'JOINT_LIMITS',
-    'JOINT_SIDES',
-    'OBJECT_FACE',
-    'SEPARATION',
-    'SLIP',
-    'WORKSPACE_SIDES',
-    'ConstraintMargins',
-    'Event',
-    'EventLog',
-    'EventMonitor',
-    'FamilyRecord',
-    'closed_mask',
-]
 
 
 def _per_contact(value: Any, n: int, name: str, shape: tuple[int, ...]) -> np.ndarray:

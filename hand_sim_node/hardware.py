@@ -19,7 +19,7 @@ before the real hand. Pure Python, as the lockstep endpoint
 - **Published every period**, whether or not a command came, each stamped with the node's
   clock (system time, integer ns, read once per state; strictly increasing): the tracker's
   samples due (:mod:`hand_sim_node.tracker`), ``/hand/joint_states`` and
-  ``/object/true_odom`` (:mod:`hand_sim_node.hardware_messages`); once released,
+  ``/object/true_odom`` (:mod:`hand_sim_node.state_messages`); once released,
   ``/hand/contacts`` with the contact data of the call's last integration step. No ``/clock``.
 - **Release.** Until the first valid command the plant stands still: the object is held
   where it is and the hand too (a real grasp starts with its forces built up); the state is
@@ -62,49 +62,34 @@ from grasp_safety_filter.io.topics import (
 )
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.outgoing import Outgoing
-from grasp_safety_filter.nodes.scenario import scenario_document, scenario_to_text
 from hand_sim_node.config import SimConfig
-from hand_sim_node.contact_events import ContactEventTracker
-from hand_sim_node.endpoint import check_live_update
 from hand_sim_node.hardware_commands import CommandReader, SafeTorque
 from hand_sim_node.hardware_config import HardwareConfig
-from hand_sim_node.hardware_messages import StateMessages
 from hand_sim_node.hardware_status import (
-    driver_report,
     driver_values,
     DriverCounts,
     regular_text,
     STATUS_PERIOD_NS,
     timed_out_text,
 )
-from hand_sim_node.plant import Plant, PlantConfig
-from hand_sim_node.sim_status import (
-    clip_to_limits,
-    contact_event_report,
-    end_of_run_report,
-    run_finished,
-    run_stop_reason,
-)
+from hand_sim_node.plant import PlantConfig
+from hand_sim_node.plant_endpoint import PlantEndpoint
+from hand_sim_node.sim_status import clip_to_limits, sim_report
+from hand_sim_node.state_messages import StateMessages
 from hand_sim_node.tracker import TrackerEmulator
 
 #: Most driver periods one timer call integrates; a later call skips the rest.
 MAX_CATCH_UP_PERIODS = 4
 
 
-class HardwareEndpoint:
+class HardwareEndpoint(PlantEndpoint):
     """The hardware mode's driver and tracker over a :class:`Plant` (module docstring).
 
     Times: ``now_ns`` is the steady clock (periods, timeouts; integer ns, any origin),
     ``stamp_ns`` the node's clock the messages are stamped with (default: ``now_ns``).
 
-    Args:
-        model: The grasp model of the hand and object.
-        sim_config: Initial state, integrator, ``time_step``, ``duration``, stop rules.
-        hardware: The driver's and the tracker's configuration.
-        msgs: Message classes to build (rclpy or rosbags).
-        scenario_text: The ``/grasp/scenario`` JSON (default: from ``model`` and
-            ``sim_config``).
-        plant_config: The plant to simulate (default: the rigid one).
+    Args: :class:`~hand_sim_node.plant_endpoint.PlantEndpoint`'s, and ``hardware``, the
+    driver's and the tracker's configuration.
 
     Raises:
         ParameterError: ``1 / hardware.rate`` is not a whole number of ``time_step``.
@@ -120,65 +105,40 @@ class HardwareEndpoint:
         scenario_text: str | None = None,
         plant_config: PlantConfig | None = None,
     ) -> None:
-        self.model = model
-        self.msgs = msgs
         self.hardware = hardware
         self.substeps = hardware.substeps(sim_config.time_step)
         self.period_ns = seconds_to_nanoseconds(self.substeps * sim_config.time_step)
-        self.plant_config = plant_config or PlantConfig()
-        self.plant: Plant = self.plant_config.build(model, sim_config)
         self.commands = CommandReader(hardware, model.joint_names)
         self.tracker = TrackerEmulator(
             hardware.tracker, msgs, model.palm_frame, model.object_frame
         )
-        self.scenario_text = (
-            scenario_text
-            if scenario_text is not None
-            else scenario_to_text(scenario_document(model, sim_config))
-        )
-        self._contact_events = (
-            None
-            if self.plant.contact_report() is None
-            else ContactEventTracker(self.plant_config.kind, model.contact_names)
-        )
         self._safe_torque = SafeTorque(model, hardware.timeout_torque)
-        self.messages = StateMessages(model, msgs, hardware.extra_joint_names())
-        self._started = False
-        self._reset()
+        self.messages = StateMessages(
+            model, msgs, OBJECT_TRUE_ODOM, hardware.extra_joint_names()
+        )
+        super().__init__(model, sim_config, msgs, scenario_text, plant_config)
 
-    def _reset(self) -> None:
+    def _reset_run(self) -> None:
+        """Forget the run so far: the plant's, the driver's and the tracker's."""
+        super()._reset_run()
         self.counts = DriverCounts()
         self._command: np.ndarray | None = None
         self._last_command_ns: int | None = None
         self._timed_out = False
-        self._applied_effort = np.zeros(self.model.n_joints)
         self._origin_ns = 0
         self._periods_done = 0
         self._last_stamp_ns = -1
         self._status_due_ns = 0
         self._status_counts = (0, 0)
-        self._reported_end = False
         self._now_ns = 0
         self.tracker.reset()
-        if self._contact_events is not None:
-            self._contact_events.reset()
 
     # ------------------------------------------------------------------------ properties
-    @property
-    def config(self) -> SimConfig:
-        """The simulator configuration in force."""
-        return self.plant.config
-
     @property
     def topics(self) -> tuple[str, ...]:
         """The topics this endpoint publishes."""
         tracker = self.hardware.tracker.topic
         return (SCENARIO, JOINT_STATES, tracker, OBJECT_TRUE_ODOM, CONTACTS, DIAGNOSTICS)
-
-    @property
-    def started(self) -> bool:
-        """Whether :meth:`start` was called."""
-        return self._started
 
     @property
     def released(self) -> bool:
@@ -190,26 +150,11 @@ class HardwareEndpoint:
         """Whether the commands are timed out (the timeout torque is applied)."""
         return self._timed_out
 
-    @property
-    def finished(self) -> bool:
-        """Whether the run is over (``duration`` after the release, or a plant stop)."""
-        return run_finished(self.plant)
-
-    @property
-    def stop_reason(self) -> str | None:
-        """``"duration"``, the plant's stop reason, or None while the run goes on."""
-        return run_stop_reason(self.plant)
-
-    @property
-    def t(self) -> float:
-        """Simulated time since the release, s."""
-        return self.plant.observe().t
-
     # ------------------------------------------------------------------------------ run
     def start(self, now_ns: int, stamp_ns: int | None = None) -> list[Outgoing]:
         """Start the driver at ``now_ns``: ``/grasp/scenario``, the first state and status."""
         self.plant.reset()
-        self._reset()
+        self._reset_run()
         self._started = True
         self._origin_ns = self._status_due_ns = self._now_ns = int(now_ns)
         stamp = self._stamp(now_ns if stamp_ns is None else stamp_ns)
@@ -284,15 +229,6 @@ class HardwareEndpoint:
             out.append(self._status(stamp, DiagnosticLevel.OK, text))
         return out
 
-    def update_config(self, sim_config: SimConfig) -> None:
-        """Apply new stop rules or stabilisation gains from the next step on.
-
-        Raises:
-            ValueError: A read-only field differs from the one in force.
-        """
-        check_live_update(self.plant.config, sim_config, 'HardwareEndpoint.update_config')
-        self.plant.config = sim_config
-
     # ------------------------------------------------------------------------- internals
     def _stamp(self, stamp_ns: int) -> int:
         """Return ``stamp_ns`` (ns), or 1 ns past the last stamp if it is not later."""
@@ -321,11 +257,10 @@ class HardwareEndpoint:
         for _ in range(self.substeps):
             if self.finished:
                 break
-            self.plant.step(effort)
-            report = self.plant.last_report
-            if report.state is not report.start:  # integrated (a rigid stop is not)
-                self._applied_effort = np.array(effort)
-            out += self._contact_event_onsets(stamp)
+            self._step_plant(effort)
+            event = self._contact_event_report()
+            if event is not None:
+                out.append(self._diagnostics(stamp, event))
         return out
 
     def _period_messages(self, stamp: int, contacts: Outgoing | None) -> list[Outgoing]:
@@ -368,32 +303,15 @@ class HardwareEndpoint:
         )
         return self._status(stamp, level, text)
 
-    def _contact_event_onsets(self, stamp: int) -> list[Outgoing]:
-        """Return a WARN status if the last step lost a contact or the object (MuJoCo)."""
-        if self._contact_events is None:
-            return []
-        onsets = self._contact_events.update(self.plant.contact_report())
-        if not onsets:
-            return []
-        values = self._contact_events.events().to_values()
-        return [self._diagnostics(stamp, contact_event_report(onsets, self.t, values))]
-
     def _end_of_run(self, stamp: int) -> Outgoing:
-        self._reported_end = True
-        events = None if self._contact_events is None else self._contact_events.events()
-        report = end_of_run_report(
-            self.stop_reason,
-            self.t,
-            self.plant.step_index,
-            None if events is None else events.to_values(),
-        )
+        report = self._end_of_run_report()
         driver = {k: format_diagnostic_value(v) for k, v in self._values().items()}
         return self._diagnostics(
             stamp, dataclasses.replace(report, values={**driver, **report.values})
         )
 
     def _status(self, stamp: int, level: DiagnosticLevel, text: str) -> Outgoing:
-        return self._diagnostics(stamp, driver_report(level, text, self._values()))
+        return self._diagnostics(stamp, sim_report(level, text, self._values()))
 
     def _diagnostics(self, stamp: int, report: DiagnosticReport) -> Outgoing:
         return Outgoing(DIAGNOSTICS, stamp, diagnostics_to_msg(self.msgs, stamp, report))

@@ -17,7 +17,6 @@ from grasp_safety_filter.io.parameters import flatten_parameters, raise_paramete
 from grasp_safety_filter.io.schemas import (
     driver_substeps,
     FLOAT64_MULTI_ARRAY_COMMAND,
-    HAND_SIM_PARAMETERS,
     hardware_parameter_errors,
     MODEL_JOINT_ORDER,
     model_joint_order,
@@ -29,15 +28,29 @@ from grasp_safety_filter.io.topics import (
     OBJECT_ODOM,
     OBJECT_POSE,
 )
-
-_SPECS = {spec.name: spec for spec in HAND_SIM_PARAMETERS}
+from hand_sim_node.config import (
+    parameter_default,
+    PARAMETER_SPECS,
+    parameter_values,
+    validate_fields,
+)
 
 #: Prefix of the names of an arm's joints published before the hand's.
 EXTRA_JOINT_PREFIX = 'arm_joint_'
 
+#: TrackerConfig field -> ROS parameter name.
+_TRACKER_PARAMETERS = {
+    name: f'tracker.{name}'
+    for name in 'rate latency position_noise orientation_noise message seed'.split()
+}
 
-def _default(name: str) -> Any:
-    return _SPECS[name].default
+#: HardwareConfig field (all but ``tracker``) -> ROS parameter name.
+_HARDWARE_PARAMETERS = {
+    name: f'hardware.{name}'
+    for name in (
+        'rate command_timeout timeout_torque command_message command_joints extra_joints'
+    ).split()
+}
 
 
 @dataclass(frozen=True)
@@ -54,16 +67,15 @@ class TrackerConfig:
         seed: Seed of the noise generator.
     """
 
-    rate: float = _default('tracker.rate')
-    latency: float = _default('tracker.latency')
-    position_noise: float = _default('tracker.position_noise')
-    orientation_noise: float = _default('tracker.orientation_noise')
-    message: str = _default('tracker.message')
-    seed: int = _default('tracker.seed')
+    rate: float = parameter_default('tracker.rate')
+    latency: float = parameter_default('tracker.latency')
+    position_noise: float = parameter_default('tracker.position_noise')
+    orientation_noise: float = parameter_default('tracker.orientation_noise')
+    message: str = parameter_default('tracker.message')
+    seed: int = parameter_default('tracker.seed')
 
     def __post_init__(self) -> None:
-        for name in ('rate', 'latency', 'position_noise', 'orientation_noise', 'message', 'seed'):
-            object.__setattr__(self, name, _SPECS[f'tracker.{name}'].validate(getattr(self, name)))
+        validate_fields(self, _TRACKER_PARAMETERS)
 
     @property
     def latency_ns(self) -> int:
@@ -94,22 +106,17 @@ class HardwareConfig:
         ParameterError: A value out of its range.
     """
 
-    rate: float = _default('hardware.rate')
-    command_timeout: float = _default('hardware.command_timeout')
-    timeout_torque: str = _default('hardware.timeout_torque')
-    command_message: str = _default('hardware.command_message')
+    rate: float = parameter_default('hardware.rate')
+    command_timeout: float = parameter_default('hardware.command_timeout')
+    timeout_torque: str = parameter_default('hardware.timeout_torque')
+    command_message: str = parameter_default('hardware.command_message')
     command_joints: tuple[str, ...] = (MODEL_JOINT_ORDER,)
-    extra_joints: int = _default('hardware.extra_joints')
+    extra_joints: int = parameter_default('hardware.extra_joints')
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self) -> None:
-        for name in ('rate', 'command_timeout', 'timeout_torque', 'command_message'):
-            value = _SPECS[f'hardware.{name}'].validate(getattr(self, name))
-            object.__setattr__(self, name, value)
-        joints = tuple(_SPECS['hardware.command_joints'].validate(self.command_joints))
-        object.__setattr__(self, 'command_joints', joints)
-        extra = _SPECS['hardware.extra_joints'].validate(self.extra_joints)
-        object.__setattr__(self, 'extra_joints', extra)
+        validate_fields(self, _HARDWARE_PARAMETERS)
+        object.__setattr__(self, 'command_joints', tuple(self.command_joints))
 
     @property
     def command_topic(self) -> str:
@@ -148,15 +155,14 @@ class HardwareConfig:
                 of ``time_step``).
         """
         flat = flatten_parameters(params)
-
-        def get(name: str) -> Any:
-            return _SPECS[name].validate(flat[name]) if name in flat else _SPECS[name].default
-
-        values = {
-            name: get(name)
-            for name in _SPECS
-            if name.startswith(('hardware.', 'tracker.')) or name == 'time_step'
-        }
+        values = parameter_values(
+            flat,
+            (
+                name
+                for name in PARAMETER_SPECS
+                if name.startswith(('hardware.', 'tracker.')) or name == 'time_step'
+            ),
+        )
         joints = list(values['hardware.command_joints'])
         # Without the model's joints (a caller's partial parameters), the order is checked
         # against itself (duplicates) and later against the model by the endpoint.
@@ -166,14 +172,9 @@ class HardwareConfig:
             'hand_sim_node parameters', hardware_parameter_errors(values), 'inconsistent'
         )
         tracker = TrackerConfig(
-            **{name: values[f'tracker.{name}'] for name in TrackerConfig.__dataclass_fields__}
+            **{name: values[parameter] for name, parameter in _TRACKER_PARAMETERS.items()}
         )
         return cls(
-            rate=values['hardware.rate'],
-            command_timeout=values['hardware.command_timeout'],
-            timeout_torque=values['hardware.timeout_torque'],
-            command_message=values['hardware.command_message'],
-            command_joints=tuple(values['hardware.command_joints']),
-            extra_joints=values['hardware.extra_joints'],
+            **{name: values[parameter] for name, parameter in _HARDWARE_PARAMETERS.items()},
             tracker=tracker,
         )

@@ -16,13 +16,11 @@ Every one carries the driver's counts (:class:`DriverCounts`) under the keys of
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from grasp_safety_filter.io.messages import bounded_text, DiagnosticLevel, DiagnosticReport
+from grasp_safety_filter.io.messages import DiagnosticLevel
 from grasp_safety_filter.io.sim_diagnostic_keys import HardwareKey
-from hand_sim_node.sim_status import DIAGNOSTIC_NAME
 
 #: Wall-clock period of the driver's regular status, ns (diagnostic_updater's 1 s).
 STATUS_PERIOD_NS = 1_000_000_000
@@ -97,13 +95,6 @@ def driver_values(
         }
     )
     return values
-
-
-def driver_report(
-    level: DiagnosticLevel, text: str, values: Mapping[str, Any]
-) -> DiagnosticReport:
-    """Return a ``hand_sim`` status of the hardware mode (text bounded)."""
-    return DiagnosticReport.create(DIAGNOSTIC_NAME, level, bounded_text(text), values)
 
 
 def regular_text(

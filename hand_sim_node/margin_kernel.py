@@ -2,9 +2,8 @@
 
 A step's margins are ~7n + 2m numbers: as numpy calls, nearly all of their cost is the
 calls' own overhead. :func:`flat_margins` computes every margin and its violation flag in
-one pass, :func:`record_margins` folds one instant into the run's record; the formulas are
-those of :class:`~hand_sim_node.events.EventMonitor` and
-:class:`~hand_sim_node.event_log.EventLog` (numpy's ``hypot``, ``fmin``/``fmax`` semantics).
+one pass, for :class:`~hand_sim_node.events.EventMonitor` (numpy's ``hypot``,
+``fmin``/``fmax`` semantics).
 """
 
 from __future__ import annotations

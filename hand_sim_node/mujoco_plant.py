@@ -32,10 +32,9 @@ from typing import Any
 import numpy as np
 
 from grasp_safety_filter.errors import ConfigError
-from grasp_safety_filter.model.grasp_model import GraspModel, state_of
+from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
 from hand_sim_node.config import SimConfig
-from hand_sim_node.event_log import EventLog
 from hand_sim_node.events import EventMonitor
 from hand_sim_node.mjcf import (
     fingertip_geom_name,
@@ -45,6 +44,7 @@ from hand_sim_node.mjcf import (
     OBJECT_BODY,
 )
 from hand_sim_node.plant import ContactReport, Observation
+from hand_sim_node.run_record import RunRecord
 from hand_sim_node.simulator import initial_state, NUMERICAL_FAILURE, SimState, StepReport
 
 __all__ = ['OBJECT_DROPPED', 'ContactReport', 'MuJoCoPlant', 'MuJoCoUnavailableError']
@@ -69,7 +69,7 @@ def import_mujoco() -> ModuleType:
     return mujoco
 
 
-class MuJoCoPlant:
+class MuJoCoPlant(RunRecord):
     """The grasp model's hand and object simulated by MuJoCo.
 
     Args:
@@ -142,16 +142,6 @@ class MuJoCoPlant:
         self.reset()
 
     # ----------------------------------------------------------------------------- state
-    @property
-    def step_index(self) -> int:
-        """Control periods since the last reset."""
-        return self._step_index
-
-    @property
-    def stop_reason(self) -> str | None:
-        """``"object_dropped"`` (with ``stop_on_drop``), ``"numerical_failure"`` or None."""
-        return self._stop_reason
-
     def reset(self, state: Observation | None = None) -> Observation:
         """Set MuJoCo's state to ``state`` (None: the initial grasp, as the rigid plant's)."""
         mujoco = self._mujoco
@@ -169,33 +159,22 @@ class MuJoCoPlant:
         # The free joint's angular velocity is in the body frame.
         data.qvel[d + 3 : d + 6] = state.R_object_to_palm.T @ state.twist_object[3:]
         data.time = state.t
-        self._t0 = state.t
-        self._step_index = 0
+        self._restart(state)
         self._substep_index = 0
-        self._stop_reason: str | None = None
         self._slip_distance = np.zeros(self.model.n_contacts)
         #: The last step's report (None before the first step).
         self.last_report: StepReport | None = None
         #: MuJoCo's object acceleration ``(a_o, alpha_o)`` (palm coordinates, m/s², rad/s²)
         #: at the last step's start state under its torque (NaN before the first step).
         self.last_object_acceleration_in_palm = np.full(6, np.nan)
-        #: Constraint margins and events of every step since the reset.
-        self.log = EventLog()
         mujoco.mj_forward(self.mj_model, data)
-        self._observation = self._read_state()
-        self._grasp_state: GraspState | None = None
+        self._state = self._read_state()
         self._contacts = self._measure_contacts(0.0)
-        return self._observation
+        return self._state
 
     def observe(self) -> Observation:
         """Return the current state (palm frame; object twist at its centre of mass)."""
-        return self._observation
-
-    def grasp_state(self) -> GraspState:
-        """Our model's terms at MuJoCo's current state (computed once per state)."""
-        if self._grasp_state is None:
-            self._grasp_state = state_of(self.model, self._observation)
-        return self._grasp_state
+        return self._state
 
     def contacts(self) -> ContactReport:
         """Return what MuJoCo measures at the contacts at the current state."""
@@ -232,14 +211,9 @@ class MuJoCoPlant:
             RuntimeError: The run has stopped (call :meth:`reset`).
             ValueError: ``effort`` has the wrong shape or is not finite.
         """
-        if self._stop_reason is not None:
-            raise RuntimeError(f'MuJoCoPlant.step: the run stopped ({self._stop_reason}); reset()')
-        u = np.array(effort, dtype=float)
-        m = self.model.n_joints
-        if u.shape != (m,) or not np.all(np.isfinite(u)):
-            raise ValueError(f'MuJoCoPlant.step: expected {m} finite joint torques, got {u}')
+        u = self._checked_effort(effort)
         mujoco, mj, data = self._mujoco, self.mj_model, self.mj_data
-        start, state0 = self._observation, self.grasp_state()
+        start, state0 = self._state, self.grasp_state()
         force = np.full(self.model.wrench_size, np.nan)
         data.ctrl[:] = u
         for substep in range(self.n_substeps):
@@ -258,7 +232,7 @@ class MuJoCoPlant:
             self._contacts = self._measure_contacts(self.options.timestep)
         if self._stop_reason is None:
             self._step_index += 1
-            self._observation = self._read_state()
+            self._state = self._read_state()
             self._grasp_state = None
             if self.stop_on_drop and self._contacts.object_dropped:
                 self._stop_reason = OBJECT_DROPPED
@@ -267,7 +241,7 @@ class MuJoCoPlant:
         self.log.record(margins, events)
         self.last_report = StepReport(
             start=start,
-            state=self._observation,
+            state=self._state,
             grasp_state=state0,
             effort=u,
             contact_force=force,
@@ -275,7 +249,7 @@ class MuJoCoPlant:
             events=events,
             stop_reason=self._stop_reason,
         )
-        return self._observation
+        return self._state
 
     # -------------------------------------------------------------------------- contacts
     def fingertip_contacts(self) -> Iterator[tuple[int, Any, np.ndarray]]:

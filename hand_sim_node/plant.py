@@ -13,8 +13,8 @@ events the simulator node publishes and logs) and, if it measures real contacts,
 - :class:`~hand_sim_node.mujoco_plant.MuJoCoPlant`: MuJoCo (soft contacts, Coulomb
   friction), from the optional ``mujoco`` package.
 
-:func:`make_plant` builds either by name, :class:`PlantConfig` from ``hand_sim_node``'s
-``plant`` and ``mujoco.*`` parameters.
+:class:`PlantConfig` (from ``hand_sim_node``'s ``plant`` and ``mujoco.*`` parameters)
+builds either.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from hand_sim_node.simulator import SimState, Simulator, StepReport
 #: The observation of a plant: time, joint angles and rates, object pose and twist (palm frame).
 Observation = SimState
 
-__all__ = ['PLANTS', 'ContactReport', 'Plant', 'PlantConfig', 'RigidPlant', 'make_plant']
+__all__ = ['PLANTS', 'ContactReport', 'Plant', 'PlantConfig', 'RigidPlant']
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,10 +93,16 @@ class PlantConfig:
         return cls(str(flat.get('plant', RIGID_PLANT)), MjcfOptions.from_parameters(flat))
 
     def build(self, model: GraspModel, config: SimConfig) -> Plant:
-        """Build this plant for ``model`` at ``config``'s initial grasp."""
+        """Build this plant for ``model`` at ``config``'s initial grasp.
+
+        Raises:
+            MuJoCoUnavailableError: The MuJoCo plant without the ``mujoco`` package.
+        """
         if self.kind == MUJOCO_PLANT:
-            return make_plant(self.kind, model, config, options=self.mujoco)
-        return make_plant(self.kind, model, config)
+            from hand_sim_node.mujoco_plant import MuJoCoPlant
+
+            return MuJoCoPlant(model, config, self.mujoco)
+        return RigidPlant(model, config)
 
 
 @runtime_checkable
@@ -205,28 +211,3 @@ class RigidPlant:
     def contact_report(self) -> None:
         """None: rigid contacts cannot be lost or slip (slip is only β > μ, an event)."""
         return None
-
-
-def make_plant(kind: str, model: GraspModel, config: SimConfig, **options: object) -> Plant:
-    """Build the plant ``kind`` (``"rigid"`` or ``"mujoco"``) at its initial grasp.
-
-    Args:
-        kind: One of :data:`PLANTS`.
-        model: The grasp model.
-        config: The simulator's configuration.
-        **options: Keyword arguments of :class:`~hand_sim_node.mujoco_plant.MuJoCoPlant`
-            (none for the rigid plant).
-
-    Raises:
-        ConfigError: An unknown plant, options for the rigid plant, or the MuJoCo plant
-            without the ``mujoco`` package.
-    """
-    if kind == RIGID_PLANT:
-        if options:
-            raise ConfigError(f'plant "rigid": takes no options, got {sorted(options)}')
-        return RigidPlant(model, config)
-    if kind == MUJOCO_PLANT:
-        from hand_sim_node.mujoco_plant import MuJoCoPlant
-
-        return MuJoCoPlant(model, config, **options)
-    raise ConfigError(f'plant: expected one of {list(PLANTS)}, got {kind!r}')

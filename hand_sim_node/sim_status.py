@@ -3,8 +3,9 @@
 :class:`~hand_sim_node.endpoint.HandSimEndpoint` publishes these on ``/diagnostics`` (see its
 module docstring for when): a rejected or early command, a missing command, a command over
 the effort limits (with the clipped torque the plant applies), a contact lost or the object
-dropped, and the end of the run. Each is a :class:`DiagnosticReport` named
-:data:`DIAGNOSTIC_NAME`; none keeps state.
+dropped, and the end of the run. Each is a :func:`sim_report`, a :class:`DiagnosticReport`
+named ``SIM_DIAGNOSTIC`` (the hardware mode's too: :mod:`hand_sim_node.hardware_status`);
+none keeps state.
 """
 
 from __future__ import annotations
@@ -26,23 +27,13 @@ from grasp_safety_filter.io.messages import (
 from grasp_safety_filter.io.sim_diagnostic_keys import SIM_DIAGNOSTIC, SimKey
 from hand_sim_node.simulator import NUMERICAL_FAILURE
 
-#: Name of the simulator's ``DiagnosticStatus``.
-DIAGNOSTIC_NAME = SIM_DIAGNOSTIC
-
 #: ``run.stop_reason`` of a run that reached its duration.
 DURATION = 'duration'
 
 
-def run_finished(plant: Any) -> bool:
-    """Whether a run over ``plant`` is over: ``duration``'s steps taken, or a plant stop."""
-    return plant.stop_reason is not None or plant.step_index >= plant.config.n_steps
-
-
-def run_stop_reason(plant: Any) -> str | None:
-    """Return :data:`DURATION`, the plant's stop reason, or None while the run goes on."""
-    if plant.stop_reason is not None:
-        return plant.stop_reason
-    return DURATION if run_finished(plant) else None
+def sim_report(level: DiagnosticLevel, text: str, values: Mapping[str, Any]) -> DiagnosticReport:
+    """Return a ``hand_sim`` status (its text bounded to a diagnostic's length)."""
+    return DiagnosticReport.create(SIM_DIAGNOSTIC, level, bounded_text(text), values)
 
 
 def command_warning(text: str, msg: Any, t: float) -> DiagnosticReport:
@@ -59,15 +50,12 @@ def command_warning(text: str, msg: Any, t: float) -> DiagnosticReport:
         values['command_stamp'] = nanoseconds_to_seconds(header_stamp_ns(msg))
     except (AttributeError, MessageError):
         values['command_stamp'] = 'unreadable'
-    return DiagnosticReport.create(
-        DIAGNOSTIC_NAME, DiagnosticLevel.WARN, bounded_text(text), values
-    )
+    return sim_report(DiagnosticLevel.WARN, text, values)
 
 
 def command_timeout_report(t: float, waited: float, command_timeout: float) -> DiagnosticReport:
     """WARN that no command stamped ``t`` (s) came within ``command_timeout`` (waited, s)."""
-    return DiagnosticReport.create(
-        DIAGNOSTIC_NAME,
+    return sim_report(
         DiagnosticLevel.WARN,
         f'no command stamped {t:.9f} s after {waited:.3f} s (command_timeout '
         f'{command_timeout} s); publishing the state again',
@@ -82,12 +70,7 @@ def contact_event_report(
 
     ``event_values``: the plant's contact event record so far, as status values.
     """
-    return DiagnosticReport.create(
-        DIAGNOSTIC_NAME,
-        DiagnosticLevel.WARN,
-        bounded_text('; '.join(onsets)),
-        {'t': t, **event_values},
-    )
+    return sim_report(DiagnosticLevel.WARN, '; '.join(onsets), {'t': t, **event_values})
 
 
 def clip_to_limits(
@@ -126,10 +109,7 @@ def clip_to_limits(
         'effort.max_excess': float(excess[worst]),
     }
     values.update({f'effort.excess.{joint_names[i]}': float(excess[i]) for i in over})
-    report = DiagnosticReport.create(
-        DIAGNOSTIC_NAME, DiagnosticLevel.WARN, bounded_text(text), values
-    )
-    return applied, report
+    return applied, sim_report(DiagnosticLevel.WARN, text, values)
 
 
 def end_of_run_report(
@@ -153,4 +133,4 @@ def end_of_run_report(
     }
     if event_values is not None:
         values.update(event_values)
-    return DiagnosticReport.create(DIAGNOSTIC_NAME, level, text, values)
+    return sim_report(level, text, values)

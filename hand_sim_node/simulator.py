@@ -40,10 +40,8 @@ from typing import Any
 
 import numpy as np
 
-from grasp_safety_filter.model.grasp_model import state_of
 from grasp_safety_filter.model.grasp_state import GraspState
 from grasp_safety_filter.model.quaternion import (
-    from_rotation_matrix,
     normalized,
     rotation_matrix,
 )
@@ -54,9 +52,9 @@ from hand_sim_node.constraint_margins import (
     FINGERTIP_WORKSPACE,
     SLIP,
 )
-from hand_sim_node.event_log import EventLog
 from hand_sim_node.events import EventMonitor
 from hand_sim_node.integrators import integrator
+from hand_sim_node.run_record import RunRecord
 from hand_sim_node.stage import PlantRate
 
 NUMERICAL_FAILURE = 'numerical_failure'
@@ -181,7 +179,7 @@ def initial_state(model: Any, config: SimConfig) -> SimState:
     )
 
 
-class Simulator:
+class Simulator(RunRecord):
     """Fixed-step simulator of the grasp model under a joint torque held over each step.
 
     Args:
@@ -217,12 +215,7 @@ class Simulator:
         """
         if state is None:
             state = initial_state(self.model, self.config)
-        self._t0 = state.t
-        self._step_index = 0
-        self._state = state
-        self._grasp_state: GraspState | None = None
-        self._stop_reason: str | None = None
-        self.log = EventLog()
+        self._restart(state)
         return state
 
     @property
@@ -235,27 +228,7 @@ class Simulator:
         """The current time, s."""
         return self._state.t
 
-    @property
-    def step_index(self) -> int:
-        """Number of steps integrated since the last reset."""
-        return self._step_index
-
-    @property
-    def stop_reason(self) -> str | None:
-        """Why the run stopped, or None while it may go on."""
-        return self._stop_reason
-
-    def grasp_state(self) -> GraspState:
-        """Model terms of the current state (computed once per state)."""
-        if self._grasp_state is None:
-            self._grasp_state = state_of(self.model, self._state)
-        return self._grasp_state
-
     # -------------------------------------------------------------------------- dynamics
-    def contact_force(self, state: GraspState, effort: np.ndarray) -> np.ndarray:
-        """Stabilised contact forces ``f_c(u) + B_ho^-1 (K_v e + K_p [0, 0, δ_i])``, (k,), N."""
-        return self.derivative(state, effort, from_rotation_matrix(state.R_object_to_palm))[1]
-
     def derivative(
         self, state: GraspState, effort: np.ndarray, quaternion_xyzw: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -302,13 +275,7 @@ class Simulator:
                 not the current state.
 
         """
-        if self._stop_reason is not None:
-            raise RuntimeError(f'Simulator.step: the run stopped ({self._stop_reason}); reset()')
-        u = np.array(effort, dtype=float)
-        if u.shape != (self._m,) or not np.all(np.isfinite(u)):
-            raise ValueError(
-                f'Simulator.step: expected {self._m} finite joint torques, got {u.tolist()}'
-            )
+        u = self._checked_effort(effort)
         if state is not None and state is not self._grasp_state:
             self._check_current(state)
             self._grasp_state = state

@@ -12,10 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from hand_sim_node.events import (
+from hand_sim_node.constraint_margins import (
     Event,
-    EventLog,
-    EventMonitor,
     FAMILIES,
     FINGERTIP_WORKSPACE,
     JOINT_LIMITS,
@@ -23,6 +21,8 @@ from hand_sim_node.events import (
     SEPARATION,
     SLIP,
 )
+from hand_sim_node.event_log import EventLog
+from hand_sim_node.events import EventMonitor
 
 WORKSPACE = (-0.6, 0.6, -2.5, -0.6)
 MU = 0.9

@@ -24,7 +24,7 @@ from grasp_safety_filter.model.grasp_check import grasp_findings
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_parameters import free_joint_names
 from grasp_safety_filter.model.quaternion import rotation_matrix
-from hand_sim_node.events import FAMILIES
+from hand_sim_node.constraint_margins import FAMILIES
 
 CONFIG = CONFIG_DIR / 'four_finger_three_contacts.yaml'
 FREE = [f'finger4_joint{k}' for k in range(1, 5)]

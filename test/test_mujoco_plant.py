@@ -22,7 +22,7 @@ from grasp_tools.bench.recorded_run import record_filtered_run, Scenario
 from grasp_tools.closed_loop import DURATION, run_closed_loop
 from hand_sim_node.mjcf import mjcf_from_model, MjcfError, MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant, MuJoCoUnavailableError, OBJECT_DROPPED
-from hand_sim_node.plant import make_plant, Plant, RigidPlant
+from hand_sim_node.plant import Plant, PlantConfig, RigidPlant
 from hand_sim_node.simulator import contact_velocity_residual, SimState
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
@@ -38,8 +38,8 @@ def mujoco_plant(scenario, **options):
 
 
 def test_both_plants_are_plants_from_the_same_grasp(scenario):
-    rigid = make_plant('rigid', scenario.model, scenario.sim_config)
-    soft = make_plant('mujoco', scenario.model, scenario.sim_config)
+    rigid = PlantConfig('rigid').build(scenario.model, scenario.sim_config)
+    soft = PlantConfig('mujoco').build(scenario.model, scenario.sim_config)
     assert isinstance(rigid, RigidPlant) and isinstance(soft, MuJoCoPlant)
     for plant in (rigid, soft):
         assert isinstance(plant, Plant)
@@ -52,9 +52,9 @@ def test_both_plants_are_plants_from_the_same_grasp(scenario):
 def test_without_mujoco_the_plant_names_the_extra(scenario, monkeypatch):
     monkeypatch.setitem(sys.modules, 'mujoco', None)  # import mujoco now raises ImportError
     assert '<mujoco' in mjcf_from_model(scenario.model)  # generation needs no mujoco
-    make_plant('rigid', scenario.model, scenario.sim_config)
+    PlantConfig('rigid').build(scenario.model, scenario.sim_config)
     with pytest.raises(MuJoCoUnavailableError, match=r'grasp_safety_filter\[mujoco\]'):
-        make_plant('mujoco', scenario.model, scenario.sim_config)
+        PlantConfig('mujoco').build(scenario.model, scenario.sim_config)
 
 
 @pytest.mark.parametrize(
@@ -82,8 +82,8 @@ def test_step_checks_its_torque_and_the_stop(scenario):
         plant.step(np.zeros(8))
     with pytest.raises(ValueError, match='finite'):
         plant.step(np.full(9, np.nan))
-    with pytest.raises(ValueError):
-        make_plant('soft', scenario.model, scenario.sim_config)
+    with pytest.raises(ValueError, match="parameter 'plant'"):
+        PlantConfig('soft').build(scenario.model, scenario.sim_config)
 
 
 @pytest.mark.parametrize('n_substeps', [1, 4])

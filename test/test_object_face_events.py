@@ -20,8 +20,9 @@ from grasp_safety_filter.io.schemas import HAND_SIM_NODE, load_node_parameters
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.nodes.scenario import OBJECT_FACES_KEY
 from hand_sim_node.config import SimConfig
+from hand_sim_node.constraint_margins import OBJECT_FACE
 from hand_sim_node.endpoint import HandSimEndpoint
-from hand_sim_node.events import EventMonitor, OBJECT_FACE
+from hand_sim_node.events import EventMonitor
 
 HALF_EDGE = 0.2604 / 2
 MSGS = MessageNamespace.from_typestore(get_typestore(Stores.ROS2_JAZZY))

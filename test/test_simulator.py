@@ -17,15 +17,15 @@ from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.quaternion import from_rotation_matrix
 from hand_sim_node.config import flatten_parameters, SimConfig
-from hand_sim_node.events import (
-    EventLog,
-    EventMonitor,
+from hand_sim_node.constraint_margins import (
     FAMILIES,
     FINGERTIP_WORKSPACE,
     JOINT_LIMITS,
     SEPARATION,
     SLIP,
 )
+from hand_sim_node.event_log import EventLog
+from hand_sim_node.events import EventMonitor
 from hand_sim_node.simulator import (
     contact_velocity_residual,
     NUMERICAL_FAILURE,

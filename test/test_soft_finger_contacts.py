@@ -22,7 +22,8 @@ from grasp_safety_filter.io.messages import (
     MessageNamespace,
 )
 from grasp_safety_filter.runner import analyze_bag, run, RunOptions
-from hand_sim_node.events import EventMonitor, SLIP
+from hand_sim_node.constraint_margins import SLIP
+from hand_sim_node.events import EventMonitor
 
 CONTACT_NAMES = ['finger1', 'finger2', 'finger3']
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)

@@ -23,7 +23,8 @@ from grasp_safety_filter.io import messages as m
 from grasp_safety_filter.io import topics
 from grasp_safety_filter.io.bag import BagRecorder, read_bag
 from grasp_safety_filter.runner import analyze_bag, build_endpoints, record_run, run, RunOptions
-from hand_sim_node.events import EventLog, EventMonitor
+from hand_sim_node.event_log import EventLog
+from hand_sim_node.events import EventMonitor
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_scenario.yaml'
 STEPS = 30
