@@ -43,7 +43,7 @@ from hand_sim_node.mjcf import (
     MjcfOptions,
     OBJECT_BODY,
 )
-from hand_sim_node.plant import ContactReport, Observation
+from hand_sim_node.plant import ContactReport
 from hand_sim_node.run_record import RunRecord
 from hand_sim_node.simulator import initial_state, NUMERICAL_FAILURE, SimState, StepReport
 
@@ -142,7 +142,7 @@ class MuJoCoPlant(RunRecord):
         self.reset()
 
     # ----------------------------------------------------------------------------- state
-    def reset(self, state: Observation | None = None) -> Observation:
+    def reset(self, state: SimState | None = None) -> SimState:
         """Set MuJoCo's state to ``state`` (None: the initial grasp, as the rigid plant's)."""
         mujoco = self._mujoco
         if state is None:
@@ -172,13 +172,9 @@ class MuJoCoPlant(RunRecord):
         self._contacts = self._measure_contacts(0.0)
         return self._state
 
-    def observe(self) -> Observation:
+    def observe(self) -> SimState:
         """Return the current state (palm frame; object twist at its centre of mass)."""
         return self._state
-
-    def contacts(self) -> ContactReport:
-        """Return what MuJoCo measures at the contacts at the current state."""
-        return self._contacts
 
     def contact_report(self) -> ContactReport:
         """Return what MuJoCo measures at the contacts at the current state."""
@@ -201,7 +197,7 @@ class MuJoCoPlant(RunRecord):
         )
 
     # ------------------------------------------------------------------------------ step
-    def step(self, effort: np.ndarray) -> Observation:
+    def step(self, effort: np.ndarray) -> SimState:
         """Hold ``effort`` (m,), N·m, over ``n_substeps`` MuJoCo steps.
 
         After each MuJoCo step the contacts are measured at the new state and the slip

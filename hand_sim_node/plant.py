@@ -35,9 +35,6 @@ from hand_sim_node.event_log import EventLog
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.simulator import SimState, Simulator, StepReport
 
-#: The observation of a plant: time, joint angles and rates, object pose and twist (palm frame).
-Observation = SimState
-
 __all__ = ['PLANTS', 'ContactReport', 'Plant', 'PlantConfig', 'RigidPlant']
 
 
@@ -132,13 +129,13 @@ class Plant(Protocol):
     def stop_reason(self) -> str | None:
         """Why the plant cannot be stepped any more, or None."""
 
-    def reset(self, state: Observation | None = None) -> Observation:
+    def reset(self, state: SimState | None = None) -> SimState:
         """Restart from ``state`` (None: the configured initial grasp, at rest)."""
 
-    def step(self, effort: np.ndarray) -> Observation:
+    def step(self, effort: np.ndarray) -> SimState:
         """Advance one control period with the joint torque ``effort`` (m,), N·m, held."""
 
-    def observe(self) -> Observation:
+    def observe(self) -> SimState:
         """Return the current state."""
 
     def grasp_state(self) -> GraspState:
@@ -190,17 +187,17 @@ class RigidPlant:
         """The simulator's stop reason."""
         return self.simulator.stop_reason
 
-    def reset(self, state: Observation | None = None) -> Observation:
+    def reset(self, state: SimState | None = None) -> SimState:
         """Restart the simulator from ``state`` (None: the initial grasp)."""
         self.last_report = None
         return self.simulator.reset(state)
 
-    def step(self, effort: np.ndarray) -> Observation:
+    def step(self, effort: np.ndarray) -> SimState:
         """One simulator step; the model terms already built are its first stage."""
         self.last_report = self.simulator.step(effort)
         return self.simulator.state
 
-    def observe(self) -> Observation:
+    def observe(self) -> SimState:
         """Return the simulator's state."""
         return self.simulator.state
 

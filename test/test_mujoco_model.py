@@ -158,7 +158,7 @@ def test_initial_grasp_touches(plant):
         found = [dist for geoms, dist in pairs if geoms == {int(geom), plant.object_geom}]
         assert len(found) == 1, f'{model.contact_names[i]}: {len(found)} contacts'
         assert abs(found[0] + state.penetration[i]) < 1e-9
-    report = plant.contacts()
+    report = plant.contact_report()
     assert report.present.all()
     np.testing.assert_allclose(report.distance, -state.penetration, rtol=0.0, atol=1e-9)
 

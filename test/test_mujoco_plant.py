@@ -105,7 +105,7 @@ def test_free_fall_is_exact_and_reported_as_a_drop(scenario, n_substeps):
     expected = lifted.p_object_in_palm + g * dt**2 * k * (k + 1) / 2
     np.testing.assert_allclose(state.p_object_in_palm, expected, rtol=0, atol=1e-14)
     assert state.t == pytest.approx(0.02, abs=1e-15)
-    report = plant.contacts()
+    report = plant.contact_report()
     assert report.object_dropped and not report.present.any()
     assert np.all(report.normal_force == 0.0) and np.all(report.slip_distance == 0.0)
     # The distance of each fingertip sphere from the box: |p - clamp(p, -l/2, l/2)| - R.
@@ -130,7 +130,7 @@ def test_contact_measurements_agree_with_our_geometry(scenario):
 
     def check(plant):
         state = plant.grasp_state()
-        report = plant.contacts()
+        report = plant.contact_report()
         np.testing.assert_allclose(report.distance, -state.penetration, rtol=0, atol=1e-9)
         assert report.present.all() and np.all(report.normal_force > 0.0)
         residual = contact_velocity_residual(state).reshape(-1, 3)
@@ -164,7 +164,7 @@ def test_soft_friction_creeps_with_the_load_and_the_noslip_solver_stops_it(scena
             plant, NominalController(scenario.nominal_config),
             scenario.reference(plant.observe()), None, 0.1,
         )
-        return plant.contacts()
+        return plant.contact_report()
 
     soft = slip_after(MjcfOptions())
     # Fingers 1 and 2 carry ~0.7 N of friction, finger 3 ~0.05 N: it creeps far less.
@@ -198,7 +198,7 @@ def test_filtered_paper_run_on_mujoco_keeps_every_contact(scenario):
     reports = []
     run = run_closed_loop(
         plant, NominalController(scenario.nominal_config), scenario.reference(plant.observe()),
-        scenario.safety_filter(), 0.3, after_step=lambda p: reports.append(p.contacts()),
+        scenario.safety_filter(), 0.3, after_step=lambda p: reports.append(p.contact_report()),
     )
     assert run.stop_reason == DURATION and len(run.ticks) == 300
     u = run.array('u')

@@ -133,7 +133,7 @@ def test_an_open_hand_reports_each_contact_lost_and_the_drop(params, model):
             if topic == DIAGNOSTICS:
                 statuses += [(stamp_ns, r) for r in diagnostics_from_msg(msg).reports]
         reference.step(zero)
-        contacts = reference.contacts()
+        contacts = reference.contact_report()
         for name, present in zip(model.contact_names, contacts.present, strict=True):
             if not present:
                 first_lost.setdefault(name, contacts.t)
@@ -154,7 +154,7 @@ def test_an_open_hand_reports_each_contact_lost_and_the_drop(params, model):
     final = PlantEvents.from_values(onsets[-1][1].values, model.contact_names)
     assert final.contact_lost == pytest.approx(first_lost, abs=1e-12)
     assert final.object_dropped == pytest.approx(dropped, abs=1e-12)
-    slip = dict(zip(model.contact_names, reference.contacts().slip_distance, strict=True))
+    slip = dict(zip(model.contact_names, reference.contact_report().slip_distance, strict=True))
     assert final.slip_distance == pytest.approx(slip, rel=1e-12)
     end = [r for _, r in statuses if SimKey.RUN_STOP_REASON in r.values]
     assert len(end) == 1 and end[0].values[SimKey.RUN_STOP_REASON] == OBJECT_DROPPED
@@ -196,7 +196,7 @@ def test_a_short_mujoco_run_is_recorded_and_summarised_with_its_contact_events(
     for u in data.u_command[:steps]:
         plant.step(u)
         forces.append(plant.last_report.contact_force.reshape(-1, 3))
-    slip = dict(zip(model.contact_names, plant.contacts().slip_distance, strict=True))
+    slip = dict(zip(model.contact_names, plant.contact_report().slip_distance, strict=True))
     assert events['slip_distance'] == pytest.approx(slip, rel=1e-12)
     assert all(d > 0.0 for d in slip.values())
     np.testing.assert_allclose(data.force, np.array(forces), rtol=0, atol=1e-12)

@@ -18,8 +18,8 @@ from grasp_safety_filter.control.filter_result import FilterStatus
 from grasp_safety_filter.control.nominal import NominalController
 from grasp_safety_filter.control.reference import ReferenceSource
 from grasp_safety_filter.control.safety_filter import SafetyFilter
-from hand_sim_node.plant import Observation, Plant
-from hand_sim_node.simulator import NUMERICAL_FAILURE
+from hand_sim_node.plant import Plant
+from hand_sim_node.simulator import NUMERICAL_FAILURE, SimState
 
 #: Stop reason of a loop that ran its whole duration.
 DURATION = 'duration'
@@ -36,7 +36,7 @@ class LoopTick:
         status: The filter's status, or None without a filter.
     """
 
-    observation: Observation
+    observation: SimState
     u_nom: np.ndarray
     u: np.ndarray
     status: FilterStatus | None
@@ -55,7 +55,7 @@ class LoopRun:
     """
 
     ticks: list[LoopTick]
-    final: Observation
+    final: SimState
     stop_reason: str
     wall: float
 

@@ -154,7 +154,7 @@ def hold(
         'law_speed_mm_s': 1e3 * np.linalg.norm(law, axis=1),
         'law_error': np.linalg.norm(slip - law, axis=1) / np.maximum(speed, 1e-12),
         'coefficient_mm_s_per_N': 1e3 * coefficient,
-        'slip_distance_mm': 1e3 * plant.contacts().slip_distance,
+        'slip_distance_mm': 1e3 * plant.contact_report().slip_distance,
     }
     out: dict[str, Any] = {
         key: np.round(value, 4).tolist() for key, value in figures.items() if key != 'ended'

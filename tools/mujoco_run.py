@@ -123,7 +123,7 @@ def run_on_mujoco(
         plant,
         mode == 'filtered',
         duration,
-        after_step=lambda _plant: reports.append(plant.contacts()),
+        after_step=lambda _plant: reports.append(plant.contact_report()),
     )
     return measure(run, reports, plant)
 

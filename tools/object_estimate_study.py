@@ -34,7 +34,8 @@ from grasp_tools.bench.recorded_run import Scenario
 from grasp_tools.closed_loop import LoopRun
 from hand_sim_node.mjcf import MjcfOptions
 from hand_sim_node.mujoco_plant import MuJoCoPlant
-from hand_sim_node.plant import Observation, RigidPlant
+from hand_sim_node.plant import RigidPlant
+from hand_sim_node.simulator import SimState
 
 CONFIG = config_path()
 DURATION = 3.0
@@ -102,7 +103,7 @@ def tracker_samples(
 
 
 def errors(
-    model: GraspModel, o: Observation, p: np.ndarray, R: np.ndarray
+    model: GraspModel, o: SimState, p: np.ndarray, R: np.ndarray
 ) -> tuple[float, float, float]:
     """Position error (m), orientation error (rad), max |penetration| (m) of a pose."""
     state = model.state(o.t, o.q, o.dq, p, R, o.twist_object)

@@ -28,7 +28,7 @@ from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_tools.bench.node_callbacks import FilterCallbackTimes
 from grasp_tools.closed_loop import LoopRun, run_closed_loop
 from hand_sim_node.config import SimConfig
-from hand_sim_node.plant import Observation, Plant, RigidPlant
+from hand_sim_node.plant import Plant, RigidPlant
 from hand_sim_node.simulator import SimState, Simulator
 
 
@@ -90,7 +90,7 @@ class Scenario:
         """Build a fresh filter (no warm start)."""
         return SafetyFilter.from_config(self.model, self.filter_config)
 
-    def reference(self, start: Tick | SimState | Observation) -> ReferenceSource:
+    def reference(self, start: Tick | SimState | SimState) -> ReferenceSource:
         """Build the nominal controller's reference, started at ``start``'s pose and time."""
         return self.nominal_config.make_reference(
             Pose(start.p_object_in_palm, start.R_object_to_palm), start.t
