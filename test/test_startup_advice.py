@@ -135,6 +135,20 @@ def test_suggestion_unfreezes_every_family():
     assert again.verdict == 'ok' and not again.suggestion, again.lines()
 
 
+@pytest.mark.parametrize(
+    ('overrides', 'metric'),
+    [
+        ({}, 'acceleration'),  # the example hand's inverse_inertia, frozen: suggested
+        ({'qp.metric': 'identity'}, 'acceleration'),
+        ({'qp.metric': 'acceleration'}, None),  # already chosen: not suggested again
+    ],
+)
+def test_suggestion_names_the_acceleration_metric(overrides, metric):
+    advice = scenario_advice(CONFIG / 'four_finger_box.yaml', overrides)
+    assert advice.verdict == 'frozen'
+    assert advice.suggestion.get('qp.metric') == metric
+
+
 def _hard_qp_status(safety_filter: SafetyFilter, state, u_nom: np.ndarray) -> bool:
     """Return whether daqp finds the hard QP at ``state`` feasible (an independent solver)."""
     rows = safety_filter.constraint_rows(state)

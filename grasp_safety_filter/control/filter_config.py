@@ -81,7 +81,7 @@ class SafetyFilterConfig:
         solver: The QP backend (a key of
             :data:`~grasp_safety_filter.control.qp_solvers.BACKENDS`).
         metric: The QP cost's metric (:data:`~grasp_safety_filter.control.qp.QP_METRICS`):
-            ``"identity"`` (the paper's) or ``"inverse_inertia"``.
+            ``"identity"`` (the paper's), ``"inverse_inertia"`` or ``"acceleration"``.
     """
 
     no_slip_enabled: bool = True

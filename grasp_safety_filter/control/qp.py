@@ -48,6 +48,19 @@ The metric. ``qp.metric`` chooses the cost of the correction ``du = u - u_nom``:
   2-norm finds cheap. The scalar c (the mean joint inertia, kg m^2) makes W dimensionless
   and equal to the identity for a hand of equal, uncoupled joint inertias; it does not move
   the optimum (hard or relaxed, see above).
+- ``acceleration``: ``W = c (S_h^T M_h S_h + S_o^T M_o S_o + eps M_h^-1)`` with
+  ``S_h = d ddq / du`` and ``S_o = d x_o_ddot / du`` of the grasped hand's constrained
+  dynamics (``state.joint_acceleration``, ``state.object_acceleration``): a correction costs
+  the kinetic-energy norm of the acceleration it gives the hand *and the object* (Gauss's
+  least constraint), plus ``eps`` (:data:`ACCELERATION_REGULARISATION`) of the
+  inverse-inertia cost. A change of internal force (``du = J_h^T f``, ``G f = 0``)
+  accelerates nothing, so the filter corrects the squeeze with internal forces before it
+  moves the object: the inverse-inertia metric, blind to the object, pays for a friction
+  fix with accelerations of the object and of the light fingers (measured on a generated
+  three-finger hand at t = 0: 4.4 m/s^2 and 34 rad/s^2 on the object, 115 rad/s^2 on a
+  joint, against 0.004 m/s^2, 0.23 and 0.24 rad/s^2 with this metric, docs/any_hand.md).
+  On the free hand (``S_h = M_h^-1``, no object) it is the inverse-inertia metric scaled by
+  ``1 + eps``.
 
 Every form of the QP reads the metric through one factor: the lower-triangular Cholesky
 factor R of ``W^-1 = M_h / c = R R^T``. With ``x = R^-1 u``, ``du^T W du = ||x - x_nom||^2``:
@@ -62,10 +75,16 @@ import numpy as np
 import scipy.linalg.lapack
 import scipy.sparse as sp
 
-#: ``qp.metric`` values: the paper's 2-norm, and the inverse-inertia metric.
+#: ``qp.metric`` values: the paper's 2-norm, the inverse-inertia metric and the
+#: grasp-acceleration (least-constraint) metric.
 IDENTITY = 'identity'
 INVERSE_INERTIA = 'inverse_inertia'
-QP_METRICS: tuple[str, ...] = (IDENTITY, INVERSE_INERTIA)
+ACCELERATION = 'acceleration'
+QP_METRICS: tuple[str, ...] = (IDENTITY, INVERSE_INERTIA, ACCELERATION)
+
+#: The acceleration metric's share of the inverse-inertia metric, eps: it only ranks the
+#: corrections that excite no acceleration (internal forces), which the rest leaves free.
+ACCELERATION_REGULARISATION = 1e-4
 
 #: Threshold below which a row is treated as independent of u when normalising its slack.
 ROW_NORM_FLOOR = 1e-9
@@ -273,6 +292,56 @@ class SafetyQP:
             self.lower.copy(),
             self.upper.copy(),
         )
+
+
+def write_acceleration_factor(
+    M_h: np.ndarray,
+    joint_acceleration: np.ndarray,
+    object_acceleration: np.ndarray,
+    M_o: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Write R, ``R R^T = W^-1`` of the ``acceleration`` metric (module docstring), into ``out``.
+
+    ``W / c = S_h^T M_h S_h + S_o^T M_o S_o + eps M_h^-1`` with ``c = tr(M_h) / m`` and eps
+    :data:`ACCELERATION_REGULARISATION`; R is lower triangular.
+
+    Args:
+        M_h: Hand joint-space inertia, shape (m, m), symmetric positive definite, kg m^2.
+        joint_acceleration: ``S_h = d ddq / du``, shape (m, m).
+        object_acceleration: ``S_o = d x_o_ddot / du``, shape (6, m).
+        M_o: Object inertia (spatial), shape (6, 6).
+        out: Shape (m, m), overwritten (zeros above the diagonal).
+
+    Raises:
+        ValueError: A term is not finite, or W is not positive definite.
+    """
+    m = M_h.shape[0]
+    scale = float(np.trace(M_h)) / m
+    terms = (M_h, joint_acceleration, object_acceleration, M_o)
+    if not (all(np.isfinite(term).all() for term in terms) and scale > 0.0):
+        raise ValueError(f'acceleration metric: expected finite terms and M_h ({m}, {m}) > 0')
+    M_h_factor, info = scipy.linalg.lapack.dpotrf(M_h, lower=1, clean=1)
+    if info != 0:
+        raise ValueError(f'M_h: expected a positive definite matrix, Cholesky failed ({info})')
+    # By dtrtri, not dpotri (which took milliseconds now and then, :func:`metric_matrix`).
+    M_h_factor_inverse, _ = scipy.linalg.lapack.dtrtri(M_h_factor, lower=1)
+    M_h_inverse = M_h_factor_inverse.T @ M_h_factor_inverse
+    K = (
+        joint_acceleration.T @ M_h @ joint_acceleration
+        + object_acceleration.T @ M_o @ object_acceleration
+        + ACCELERATION_REGULARISATION * M_h_inverse
+    ) * scale
+    # With P the order reversal and P W P = L L^T (lower), W^-1 = (P L^-T P) (P L^-T P)^T
+    # and P L^-T P is lower triangular: R without forming W^-1.
+    flipped = K[::-1, ::-1]
+    factor, info = scipy.linalg.lapack.dpotrf(0.5 * (flipped + flipped.T), lower=1, clean=1)
+    if info != 0:
+        raise ValueError(f'acceleration metric: W not positive definite ({info})')
+    inverse, info = scipy.linalg.lapack.dtrtri(factor, lower=1)
+    if info != 0:
+        raise ValueError(f'acceleration metric: W singular (dtrtri info {info})')
+    out[:] = inverse.T[::-1, ::-1]
 
 
 def write_inertia_factor(M_h: np.ndarray, out: np.ndarray) -> None:

@@ -7,7 +7,8 @@ Every tick (paper eq. 28)::
                u_min <= u <= u_max
 
 (``qp.metric: inverse_inertia`` measures ``u - u_nom`` in ``W = (tr(M_h)/m) M_h^-1``
-instead, :mod:`~grasp_safety_filter.control.qp`; the tick's M_h gives W.)
+instead, ``qp.metric: acceleration`` by the acceleration it gives the hand and the object,
+:mod:`~grasp_safety_filter.control.qp`; the tick's M_h (and constrained dynamics) give W.)
 
 :meth:`SafetyFilter.solve` reads top-down, one module per step: the rows
 (:mod:`~grasp_safety_filter.control.filter_rows`, the families of
@@ -83,7 +84,13 @@ from grasp_safety_filter.control.filter_rows import (
     object_workspace_of,
     raise_if_measured_not_finite,
 )
-from grasp_safety_filter.control.qp import INVERSE_INERTIA, SafetyQP, write_inertia_factor
+from grasp_safety_filter.control.qp import (
+    ACCELERATION,
+    IDENTITY,
+    SafetyQP,
+    write_acceleration_factor,
+    write_inertia_factor,
+)
 from grasp_safety_filter.control.qp_solvers import (
     BACKENDS,
     FEASIBILITY_TOLERANCE,
@@ -182,7 +189,8 @@ class SafetyFilter:
 
         self._u_min = self.actuator_limits.lower
         self._u_max = self.actuator_limits.upper
-        metric = config.metric == INVERSE_INERTIA
+        metric = config.metric != IDENTITY
+        self._acceleration_metric = config.metric == ACCELERATION
         self.hard_qp = SafetyQP(m, k, self._u_min, self._u_max, metric=metric)
         # The problems read the rows (and the metric factor) where _assemble_rows writes
         # them (no copy per tick); g = -u_nom is the hard QP's q only for the identity.
@@ -347,7 +355,16 @@ class SafetyFilter:
         metric_ok = True
         if self.problem.metric_factor is not None:
             try:
-                write_inertia_factor(state.M_h, self.problem.metric_factor)
+                if self._acceleration_metric:
+                    write_acceleration_factor(
+                        state.M_h,
+                        state.joint_acceleration.matrix,
+                        state.object_acceleration.matrix,
+                        state.M_o,
+                        self.problem.metric_factor,
+                    )
+                else:
+                    write_inertia_factor(state.M_h, self.problem.metric_factor)
             except ValueError:
                 metric_ok = False  # an M_h that overflowed: as rows that did
         if metric_ok and all_finite(self.hard_qp.C_data, lower):

@@ -39,6 +39,10 @@ TARGET_TIME = 0.2
 #: barriers let coordinates reach their bounds, which a 1 ms hold overshoots by up to ~1e-2
 #: rad on light fingers (docs/any_hand.md).
 SUGGESTED_MARGIN = 0.02
+#: The suggested QP metric: with the linear functions the filter corrects the squeeze by
+#: internal forces instead of by accelerating the object and the fingers, which shook
+#: generated grasps at up to 7 rad/s, faster than a 1 ms hold follows (docs/any_hand.md).
+SUGGESTED_METRIC = 'acceleration'
 #: The families with a rest margin but no class-K function (their rows are not rates).
 _SKIPPED = ('torque_rate',)
 #: Rows whose |A_r| is below this (N·m^-1 in the row's unit) have no torque to act on.
@@ -88,8 +92,8 @@ class StartupAdvice:
         binding: The rows that limit ``rest_margin`` (barrier rows and actuator limits), or
             why it failed.
         suggestion: ``--set`` values for linear class-K functions of ``TARGET_TIME``, margins
-            of ``SUGGESTED_MARGIN`` and the object workspace barriers, when a
-            family is frozen; empty otherwise.
+            of ``SUGGESTED_MARGIN``, the object workspace barriers and the ``acceleration``
+            QP metric (:data:`SUGGESTED_METRIC`), when a family is frozen; empty otherwise.
     """
 
     families: tuple[FamilyAdvice, ...]
@@ -199,6 +203,8 @@ def startup_advice(
                 suggestion[f'{family}.margin'] = SUGGESTED_MARGIN
         if not config.object_workspace_enabled:
             suggestion['object_workspace.enabled'] = True
+        if config.metric != SUGGESTED_METRIC:
+            suggestion['qp.metric'] = SUGGESTED_METRIC
     return StartupAdvice(allowances, rest_margin, binding, suggestion)
 
 

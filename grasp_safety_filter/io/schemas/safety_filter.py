@@ -185,9 +185,11 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
     ),
     ParameterSpec(
         'qp.metric', STRING, 'identity',
-        "Cost of the correction du = u - u_nom: identity ||du||^2 (the paper's) or "
+        "Cost of the correction du = u - u_nom: identity ||du||^2 (the paper's), "
         'inverse_inertia du^T W du, W = (tr(M_h)/m) M_h^-1 (the kinetic-energy norm of the '
-        'joint acceleration du excites; relaxation slack then in W distance)',
+        'joint acceleration du excites; relaxation slack then in W distance) or '
+        'acceleration (that norm of the acceleration du gives the grasped hand and the '
+        'object: internal forces are nearly free)',
         choices=QP_METRICS,
     ),
 )
