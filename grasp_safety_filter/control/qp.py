@@ -316,22 +316,15 @@ def write_acceleration_factor(
     Raises:
         ValueError: A term is not finite, or W is not positive definite.
     """
-    m = M_h.shape[0]
-    scale = float(np.trace(M_h)) / m
-    terms = (M_h, joint_acceleration, object_acceleration, M_o)
-    if not (all(np.isfinite(term).all() for term in terms) and scale > 0.0):
-        raise ValueError(f'acceleration metric: expected finite terms and M_h ({m}, {m}) > 0')
-    M_h_factor, info = scipy.linalg.lapack.dpotrf(M_h, lower=1, clean=1)
-    if info != 0:
-        raise ValueError(f'M_h: expected a positive definite matrix, Cholesky failed ({info})')
-    # By dtrtri, not dpotri (which took milliseconds now and then, :func:`metric_matrix`).
-    M_h_factor_inverse, _ = scipy.linalg.lapack.dtrtri(M_h_factor, lower=1)
-    M_h_inverse = M_h_factor_inverse.T @ M_h_factor_inverse
+    # R_h R_h^T = M_h / c (M_h checked there), so c M_h^-1 = metric_matrix(R_h).
+    write_inertia_factor(M_h, out)
+    scale = float(np.trace(M_h)) / M_h.shape[0]
+    if not all(np.isfinite(term).all() for term in (joint_acceleration, object_acceleration, M_o)):
+        raise ValueError('acceleration metric: expected finite S_h, S_o and M_o')
     K = (
         joint_acceleration.T @ M_h @ joint_acceleration
         + object_acceleration.T @ M_o @ object_acceleration
-        + ACCELERATION_REGULARISATION * M_h_inverse
-    ) * scale
+    ) * scale + ACCELERATION_REGULARISATION * metric_matrix(out)
     # With P the order reversal and P W P = L L^T (lower), W^-1 = (P L^-T P) (P L^-T P)^T
     # and P L^-T P is lower triangular: R without forming W^-1.
     flipped = K[::-1, ::-1]
