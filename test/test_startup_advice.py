@@ -14,10 +14,16 @@ from pathlib import Path
 
 import daqp
 import numpy as np
+import osqp
 import pytest
+from scipy import sparse
 
 from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
-from grasp_safety_filter.control.startup_advice import rest_state, startup_advice
+from grasp_safety_filter.control.startup_advice import (
+    rest_state,
+    startup_advice,
+    STILL_ACCELERATION,
+)
 from grasp_safety_filter.io.messages import DiagnosticLevel
 from grasp_safety_filter.io.paths import config_path
 from grasp_safety_filter.io.schemas import (
@@ -235,3 +241,86 @@ def test_rest_margin_on_generated_hands_with_light_fingers(tmp_path, index):
     assert advice.binding and all('/' in name for name in advice.binding)
     feasible = _hard_qp_status(safety_filter, state, np.zeros(safety_filter.n_joints))
     assert feasible == (advice.rest_margin > 0.0), advice.lines()
+
+
+def _grasp_acceleration_norm(state, u: np.ndarray) -> float:
+    """``|a(u)|`` in the kinetic-energy norm of hand and object, ``sqrt(a^T M a)``."""
+    a_h = state.joint_acceleration.matrix @ u + state.joint_acceleration.offset
+    a_o = state.object_acceleration.matrix @ u + state.object_acceleration.offset
+    return float(np.sqrt(a_h @ state.M_h @ a_h + a_o @ state.M_o @ a_o))
+
+
+def _least_acceleration_by_osqp(safety_filter: SafetyFilter, state) -> np.ndarray:
+    """u_still from the acceleration's own quadratic, by OSQP (an independent solver).
+
+    ``c (|a_h|^2_M_h + |a_o|^2_M_o + 1e-4 |u|^2_M_h^-1)`` with ``a = S u + s``: the cost
+    the advice writes as a metric around an unconstrained minimiser, here expanded.
+    """
+    S_h, s_h = state.joint_acceleration.matrix, state.joint_acceleration.offset
+    S_o, s_o = state.object_acceleration.matrix, state.object_acceleration.offset
+    M_h, M_o = state.M_h, state.M_o
+    P = S_h.T @ M_h @ S_h + S_o.T @ M_o @ S_o + 1e-4 * np.linalg.inv(M_h)
+    q = S_h.T @ M_h @ s_h + S_o.T @ M_o @ s_o
+    rows = [f.rows(state) for f in safety_filter.families if f.family != 'torque_rate']
+    A = np.vstack([r.A for r in rows])
+    scale = np.linalg.norm(A, axis=1)[:, np.newaxis]  # rows of norm 1 to ~1e6: scaled
+    m = safety_filter.n_joints
+    limits = safety_filter.actuator_limits
+    solver = osqp.OSQP()
+    solver.setup(
+        sparse.csc_matrix(np.triu(0.5 * (P + P.T))), q,
+        sparse.csc_matrix(np.vstack((A / scale, np.eye(m)))),
+        np.concatenate((np.concatenate([r.lower for r in rows]) / scale[:, 0], limits.lower)),
+        np.concatenate((np.full(A.shape[0], np.inf), limits.upper)),
+        eps_abs=1e-10, eps_rel=1e-10, max_iter=200000, polishing=True, verbose=False,
+    )  # fmt: skip
+    result = solver.solve(raise_error=False)
+    assert result.info.status == 'solved', result.info.status
+    return result.x
+
+
+# scenario (a config file, or a generated hand of seed 0), overrides, held still
+STILL_CASES = [
+    ('four_finger_box.yaml', LINEAR, True),
+    ('paper_scenario.yaml', LINEAR, True),
+    (0, LINEAR, True),
+    # finger2's friction cone at its apex and thumb_joint2 at its effort limit: no squeeze
+    # holds this cube still.
+    (426, LINEAR, False),
+]
+
+
+def _still_case(scenario, overrides, tmp_path):
+    if isinstance(scenario, int):
+        scenario = generate_hand(0, scenario, tmp_path / f'hand_{scenario:03d}').scenario
+    return _filter_and_state(scenario, overrides)
+
+
+@pytest.mark.parametrize(('scenario', 'overrides', 'still'), STILL_CASES)
+def test_still_acceleration_agrees_with_an_independent_solver(
+    scenario, overrides, still, tmp_path
+):
+    _, safety_filter, state = _still_case(scenario, overrides, tmp_path)
+    advice = startup_advice(safety_filter, state)
+    u = _least_acceleration_by_osqp(safety_filter, state)
+    a_h = state.joint_acceleration.matrix @ u + state.joint_acceleration.offset
+    assert advice.still_acceleration == pytest.approx(np.abs(a_h).max(), rel=1e-2, abs=1e-3)
+    assert (advice.still_acceleration <= STILL_ACCELERATION) == still, advice.lines()
+    assert (advice.verdict == 'moving') == (not still), advice.lines()
+    answer = 'yes' if still else 'no'
+    assert any(line.startswith(f'held still: {answer}') for line in advice.lines())
+
+
+@pytest.mark.parametrize('scenario', [s[0] for s in STILL_CASES])
+def test_no_filtered_torque_at_rest_accelerates_the_grasp_less(scenario, tmp_path):
+    """Whatever u_nom, the filter's answer at rest moves the grasp at least as u_still does."""
+    overrides = {**LINEAR, 'qp.metric': 'acceleration'}
+    _, safety_filter, state = _still_case(scenario, overrides, tmp_path)
+    least = _grasp_acceleration_norm(state, _least_acceleration_by_osqp(safety_filter, state))
+    rng = np.random.default_rng(3)
+    limits = safety_filter.actuator_limits
+    for _ in range(10):
+        u_nom = rng.uniform(limits.lower, limits.upper) * 0.3
+        result = safety_filter.solve(state, u_nom)
+        assert not result.relaxed
+        assert _grasp_acceleration_norm(state, result.u) >= least * (1.0 - 1e-6)

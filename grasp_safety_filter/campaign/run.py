@@ -46,6 +46,7 @@ OUTCOME_COLUMNS = (
     'advice',
     'advice_frozen',
     'advice_rest_margin',
+    'advice_still_acceleration',
     'error',
 )
 #: Where and how long it ran: not part of the outcome (differ between machines and runs).
@@ -142,14 +143,17 @@ def outcome_of(summary: dict[str, Any]) -> dict[str, Any]:
 def advice_columns(advice: StartupAdvice) -> dict[str, Any]:
     """Return the filter's start-up advice at the run's initial grasp as row columns.
 
-    ``advice``: its verdict (``ok``, ``frozen``, ``infeasible`` or ``undetermined``);
-    ``advice_frozen``: the frozen families; ``advice_rest_margin``: the QP's torque margin at
-    rest, N·m (None when not finite: infeasible whatever the torque, or undetermined).
+    ``advice``: its verdict (``ok``, ``frozen``, ``moving``, ``infeasible`` or
+    ``undetermined``); ``advice_frozen``: the frozen families; ``advice_rest_margin``: the QP's
+    torque margin at rest, N·m; ``advice_still_acceleration``: the largest joint
+    acceleration of the torque that accelerates the grasp least at rest, rad/s^2 (each None
+    when not finite).
     """
     return {
         'advice': advice.verdict,
         'advice_frozen': ' '.join(advice.frozen),
         'advice_rest_margin': _finite(advice.rest_margin),
+        'advice_still_acceleration': _finite(advice.still_acceleration),
     }
 
 

@@ -17,6 +17,18 @@ The QP at rest: the largest ball of torques (radius ``rest_margin``, N·m) insid
 ``A_r u >= lower_r`` (rows normalised by ``|A_r|``) and the actuator box, a linear program
 (scipy's HiGHS). ``rest_margin < 0``: no torque holds the grasp at rest within the actuator
 limits; the rows that bind at the optimum name the conflict.
+
+Held still: of the torques that satisfy every row and the actuator box at rest, the one that
+accelerates the grasp least, in the kinetic-energy norm of hand and object together (Gauss's
+least constraint; the ``acceleration`` QP metric of :mod:`~grasp_safety_filter.control.qp`)::
+
+    u_still = argmin |a(u)|_W   subject to   A u >= lower,  u_min <= u <= u_max
+
+Its largest joint acceleration ``still_acceleration`` is near zero when a squeeze inside the
+friction cones and the actuator limits holds the grasp. Above :data:`STILL_ACCELERATION` no
+admissible torque holds it still: it moves from the first tick, whatever the nominal
+controller asks, and the rows binding at ``u_still`` say why (a friction cone at its apex, a
+saturated actuator).
 """
 
 from __future__ import annotations
@@ -29,12 +41,17 @@ import numpy as np
 from scipy.optimize import linprog
 
 from grasp_safety_filter.control.constraints.box_barrier import BoxBarrier
+from grasp_safety_filter.control.qp import write_acceleration_factor
+from grasp_safety_filter.control.qp_solvers import DAQPBackend, Problem, SolutionStatus
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: A family that needs longer than this to use its margins from rest is frozen, s.
 FROZEN_TIME = 1.0
-#: tau of the suggested linear class-K functions, s (gain 2 / TARGET_TIME each).
-TARGET_TIME = 0.2
+#: tau of the suggested linear class-K functions, s (gain 2 / TARGET_TIME each). A 1 ms hold
+#: misses a row's acceleration by delta (a few rad/s^2 on light fingers, docs/any_hand.md); the
+#: barrier then settles delta / (k1 k2) past its margin: 9e-3 rad at delta = 3.5 with gains 20,
+#: inside SUGGESTED_MARGIN, where gains 10 left 3.5e-2.
+TARGET_TIME = 0.1
 #: The suggested margins from the joint limits and fingertip workspace bounds, rad: linear
 #: barriers let coordinates reach their bounds, which a 1 ms hold overshoots by up to ~1e-2
 #: rad on light fingers (docs/any_hand.md).
@@ -43,6 +60,11 @@ SUGGESTED_MARGIN = 0.02
 #: internal forces instead of by accelerating the object and the fingers, which shook
 #: generated grasps at up to 7 rad/s, faster than a 1 ms hold follows (docs/any_hand.md).
 SUGGESTED_METRIC = 'acceleration'
+#: A grasp whose least joint acceleration at rest is above this cannot be held still, rad/s^2:
+#: from rest a joint moves 0.5 rad in the first second.
+STILL_ACCELERATION = 1.0
+#: Rows binding at u_still: within this of their bound (the row's unit, per |A_r|).
+_BINDING_GAP = 1e-9
 #: The families with a rest margin but no class-K function (their rows are not rates).
 _SKIPPED = ('torque_rate',)
 #: Rows whose |A_r| is below this (N·m^-1 in the row's unit) have no torque to act on.
@@ -94,12 +116,20 @@ class StartupAdvice:
         suggestion: ``--set`` values for linear class-K functions of ``TARGET_TIME``, margins
             of ``SUGGESTED_MARGIN``, the object workspace barriers and the ``acceleration``
             QP metric (:data:`SUGGESTED_METRIC`), when a family is frozen; empty otherwise.
+        still_acceleration: u_still's largest joint acceleration at rest, rad/s^2 (NaN when
+            the QP at rest is infeasible or not solved).
+        still_object_acceleration: u_still's object acceleration, (linear m/s^2, angular
+            rad/s^2) norms.
+        still_binding: The rows binding at u_still (barrier rows and actuator limits).
     """
 
     families: tuple[FamilyAdvice, ...]
     rest_margin: float
     binding: tuple[str, ...]
     suggestion: dict[str, Any]
+    still_acceleration: float = math.nan
+    still_object_acceleration: tuple[float, float] = (math.nan, math.nan)
+    still_binding: tuple[str, ...] = ()
 
     @property
     def frozen(self) -> tuple[str, ...]:
@@ -108,11 +138,17 @@ class StartupAdvice:
 
     @property
     def verdict(self) -> str:
-        """``undetermined``, ``infeasible``, ``frozen`` or ``ok`` (the first that applies)."""
+        """``undetermined``, ``infeasible``, ``moving``, ``frozen`` or ``ok`` (the first to apply).
+
+        ``moving``: no admissible torque holds the grasp still (``still_acceleration`` above
+        :data:`STILL_ACCELERATION`).
+        """
         if math.isnan(self.rest_margin):
             return 'undetermined'
         if not self.rest_margin >= 0.0:
             return 'infeasible'
+        if self.still_acceleration > STILL_ACCELERATION:
+            return 'moving'
         if self.frozen:
             return 'frozen'
         return 'ok'
@@ -148,6 +184,24 @@ class StartupAdvice:
                 f'QP at rest: feasible with a margin of {self.rest_margin:.3g} N·m (limited '
                 f'by {limiting})'
             )
+        if math.isfinite(self.still_acceleration):
+            linear, angular = self.still_object_acceleration
+            held = (
+                'the least acceleration any admissible torque gives the grasp is '
+                f'{self.still_acceleration:.2g} rad/s^2 on a joint, {linear:.2g} m/s^2 and '
+                f'{angular:.2g} rad/s^2 on the object'
+            )
+            if self.verdict == 'moving':
+                binding = ', '.join(self.still_binding[:6]) + (
+                    ' ...' if len(self.still_binding) > 6 else ''
+                )
+                lines.append(
+                    f'held still: no: {held} (bound by {binding}); the grasp moves from the '
+                    'first tick whatever the nominal torque: choose another grasp, or raise the '
+                    'effort limits if an actuator limit binds'
+                )
+            else:
+                lines.append(f'held still: yes: {held}')
         if self.suggestion:
             settings = ' '.join(f'{k}={_text(v)}' for k, v in self.suggestion.items())
             lines.append(
@@ -190,6 +244,10 @@ def startup_advice(
         _family_advice(f, state, frozen_time) for f in families if isinstance(f, BoxBarrier)
     )
     rest_margin, binding = _rest_margin(A, lower, names, m)
+    still: tuple[float, tuple[float, float], tuple[str, ...]] = (math.nan, (math.nan,) * 2, ())
+    if rest_margin >= 0.0:
+        k = len(names) - len(limits.names)
+        still = _least_acceleration(state, A[:k], lower[:k], names[:k], limits)
     frozen = any(f.frozen for f in allowances)
     gain = 2.0 / TARGET_TIME
     suggestion: dict[str, Any] = {}
@@ -205,7 +263,7 @@ def startup_advice(
             suggestion['object_workspace.enabled'] = True
         if config.metric != SUGGESTED_METRIC:
             suggestion['qp.metric'] = SUGGESTED_METRIC
-    return StartupAdvice(allowances, rest_margin, binding, suggestion)
+    return StartupAdvice(allowances, rest_margin, binding, suggestion, *still)
 
 
 def _family_advice(family: BoxBarrier, state: GraspState, frozen_time: float) -> FamilyAdvice:
@@ -257,6 +315,37 @@ def _rest_margin(
     duals = np.asarray(result.ineqlin.marginals)
     binding = tuple(n for n, d in zip(live_names, duals, strict=True) if abs(d) > _BINDING_DUAL)
     return float(-result.fun), binding
+
+
+def _least_acceleration(
+    state: GraspState, A: np.ndarray, lower: np.ndarray, names: tuple[str, ...], limits: Any
+) -> tuple[float, tuple[float, float], tuple[str, ...]]:
+    """Return u_still's largest joint acceleration, its object's, and the rows binding there.
+
+    The cost ``|a(u)|_W^2`` is the acceleration metric ``(u - u_0)^T W (u - u_0)`` around
+    ``u_0 = -W^-1 c (S_h^T M_h s_h + S_o^T M_o s_o)``, its unconstrained minimiser: the QP
+    of one tick with u_0 for the nominal torque, solved by daqp.
+    """
+    joint, obj = state.joint_acceleration, state.object_acceleration
+    m = joint.matrix.shape[1]
+    R = np.zeros((m, m))
+    write_acceleration_factor(state.M_h, joint.matrix, obj.matrix, state.M_o, R)
+    scale = float(np.trace(state.M_h)) / m
+    pull = scale * (
+        joint.matrix.T @ state.M_h @ joint.offset + obj.matrix.T @ state.M_o @ obj.offset
+    )
+    problem = Problem(R @ (R.T @ pull), A, lower, limits.lower, limits.upper, metric_factor=R)
+    solution = DAQPBackend(problem, np.ones(len(names)), {}).solve(problem)
+    if solution.status != SolutionStatus.OPTIMAL:
+        return math.nan, (math.nan, math.nan), (f'daqp: {solution.status.value}',)
+    u = solution.u
+    gap = (A @ u - lower) / np.maximum(np.linalg.norm(A, axis=1), _ZERO_ROW)
+    at_box = np.column_stack((u - limits.lower, limits.upper - u)).ravel() <= _BINDING_GAP
+    binding = tuple(n for n, g in zip(names, gap, strict=True) if g <= _BINDING_GAP)
+    binding += tuple(n for n, hit in zip(limits.names, at_box, strict=True) if hit)
+    a_object = obj.matrix @ u + obj.offset
+    linear, angular = float(np.linalg.norm(a_object[:3])), float(np.linalg.norm(a_object[3:]))
+    return float(np.abs(joint.matrix @ u + joint.offset).max()), (linear, angular), binding
 
 
 def _unit(row: str) -> str:
