@@ -9,10 +9,13 @@ squeeze that leaves the friction cones is an internal force, where the inverse-i
 metric moves the object.
 """
 
+from dataclasses import replace
+
 from grasp_states import CONFIG_DIR, paper_model, random_configuration
 import numpy as np
 import pytest
 
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.filter_result import FilterStatus
 from grasp_safety_filter.control.qp import (
     ACCELERATION_REGULARISATION,
@@ -136,7 +139,8 @@ def test_bad_terms_raise(terms, message):
 
 def filter_with(model, metric):
     """Return a filter with the suggested linear class-K functions and the given metric."""
-    config = SafetyFilterConfig(
+    config = replace(
+        PAPER_CONFIG,
         metric=metric,
         alpha1_kind='linear',
         alpha1_gain=10.0,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections import Counter
 import dataclasses
+from dataclasses import replace
 import math
 from xml.etree import ElementTree
 
@@ -36,11 +37,11 @@ from grasp_safety_filter.control.constraints import (
     FrictionPyramid,
     JointLimitBarrier,
 )
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
-    SafetyFilterConfig,
 )
 from grasp_safety_filter.io.paths import config_path
 from grasp_tools.bench import record_filtered_run, Scenario
@@ -52,8 +53,9 @@ RTOL = 1e-5
 CERTIFIED = {FilterStatus.NOMINAL, FilterStatus.SOLVED}
 
 CONFIGS = {
-    'cubic': SafetyFilterConfig(),
-    'linear': SafetyFilterConfig(
+    'cubic': PAPER_CONFIG,
+    'linear': replace(
+        PAPER_CONFIG,
         alpha1_kind='linear', alpha1_gain=3.0, alpha2_kind='linear', alpha2_gain=8.0
     ),
 }
@@ -281,7 +283,8 @@ def test_barrier_rates_match_finite_differences_along_the_constrained_dynamics(
 def test_pyramid_rows_match_the_pyramid_at_the_contact_forces(model, configurations):
     """The no-slip rows against the pyramid evaluated at ``f_c(u)``, in the filter and alone."""
     rng = np.random.default_rng(29)
-    for config in (CONFIGS['cubic'], SafetyFilterConfig(pyramid_faces=5, normal_force_margin=0.3)):
+    coarse = replace(PAPER_CONFIG, pyramid_faces=5, normal_force_margin=0.3)
+    for config in (CONFIGS['cubic'], coarse):
         filter_ = SafetyFilter.from_config(model, config)
         pyramid = FrictionPyramid(
             model.contact_names,
@@ -332,7 +335,7 @@ def test_joint_limit_barrier_is_positive_inside_and_negative_outside(model, join
     reaches the row of that joint and side. The barrier reads only q, so the moved joint
     need not keep its fingertip on the cube.
     """
-    filter_ = SafetyFilter.from_config(model)
+    filter_ = SafetyFilter.from_config(model, PAPER_CONFIG)
     lower, upper = urdf_joint_limits()[joint]
     bound, outward = (upper, 1.0) if side == 'upper' else (lower, -1.0)
     index = model.joint_names.index(joint)
@@ -396,14 +399,14 @@ def test_workspace_barrier_sign_matches_the_contact_point_on_the_fingertip(model
     configurations = [
         random_configuration(model, rng, *SPREAD_SPEED[i % len(SPREAD_SPEED)]) for i in range(60)
     ]
-    paper_filter = SafetyFilter.from_config(model)
+    paper_filter = SafetyFilter.from_config(model, PAPER_CONFIG)
     xi = np.concatenate([c.state(model).xi_cf for c in configurations])
     (a_low, a_high), (b_low, b_high) = np.quantile(xi, [0.3, 0.7], axis=0).T
     box = {'a_min': a_low, 'a_max': a_high, 'b_min': b_low, 'b_max': b_high}
     narrowed = paper_model(
         **{f'model.fingertip_workspace.{name}': float(value) for name, value in box.items()}
     )
-    narrowed_filter = SafetyFilter.from_config(narrowed)
+    narrowed_filter = SafetyFilter.from_config(narrowed, PAPER_CONFIG)
     rows = [f'fingertip_workspace/{contact}/{row}' for contact in model.contact_names]
     u = np.zeros(model.n_joints)
     signs = Counter()
@@ -429,7 +432,7 @@ def test_pyramid_margins_are_positive_inside_and_negative_outside(model, configu
     Inside the inner cone every face margin is > 0; outside the friction cone some face
     margin is < 0 (the pyramid lies between the two).
     """
-    config = SafetyFilterConfig(pyramid_faces=6, normal_force_margin=0.0)
+    config = replace(PAPER_CONFIG, pyramid_faces=6, normal_force_margin=0.0)
     pyramid = FrictionPyramid(model.contact_names, model.friction_coefficient, 6, 0.0)
     mu = model.friction_coefficient
     rng = np.random.default_rng(41)
@@ -466,7 +469,7 @@ def test_joint_and_workspace_rows_act_through_the_objects_six_dofs(model, config
     the thirty rows have rank 6 and vanish on that null space; the no-slip rows see it.
     This is why too many nearly active barriers can leave no feasible torque (docs/paper_runs.md).
     """
-    config = SafetyFilterConfig()
+    config = PAPER_CONFIG
     for c in configurations:
         state = c.state(model)
         names, A, _ = independent_rows(model, config, state)
@@ -601,7 +604,8 @@ def rolling(model, c, rate_of, rate):
 
 
 def only(*families):
-    return SafetyFilterConfig(
+    return replace(
+        PAPER_CONFIG,
         no_slip_enabled='no_slip' in families,
         joint_limits_enabled='joint_limits' in families,
         fingertip_workspace_enabled='fingertip_workspace' in families,
@@ -656,7 +660,7 @@ INFEASIBLE_CASES = {
     # The paper's configuration: every family, the joint moving at 1 rad/s.
     'joint at its limit, every family': (
         joint_at_its_limit(1.0),
-        SafetyFilterConfig(),
+        PAPER_CONFIG,
         None,
     ),
 }
@@ -708,7 +712,7 @@ def test_a_run_of_infeasible_ticks_gives_each_ticks_own_relaxed_optimum(model):
     """
     model, c = joint_at_its_limit(1.0)(model)
     state = c.state(model)
-    config = SafetyFilterConfig()
+    config = PAPER_CONFIG
     names, A, lower = independent_rows(model, config, state)
     effort = np.asarray(model.effort_limits, dtype=float)
     weights = row_weights(config, names)

@@ -4,10 +4,10 @@ from grasp_states import P_OBJECT_PAPER, paper_model, Q_PAPER
 import numpy as np
 import pytest
 
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
-    SafetyFilterConfig,
 )
 
 MODEL = paper_model()
@@ -49,7 +49,7 @@ def huge_state(change: dict):
 @pytest.mark.parametrize('u_scale', [0.0, 1e3])
 @pytest.mark.parametrize('name', list(HUGE))
 def test_a_huge_finite_state_gives_a_finite_torque_in_the_box_and_a_fallback(name, u_scale):
-    filter_ = SafetyFilter.from_config(MODEL, SafetyFilterConfig())
+    filter_ = SafetyFilter.from_config(MODEL, PAPER_CONFIG)
     u_nom = np.random.default_rng(1).normal(scale=u_scale, size=M)
     with np.errstate(all='raise'):  # no warning escapes the filter either
         result = filter_.solve(huge_state(HUGE[name]), u_nom)
@@ -63,7 +63,7 @@ def test_a_huge_finite_state_gives_a_finite_torque_in_the_box_and_a_fallback(nam
 
 @pytest.mark.parametrize('name', list(HUGE))
 def test_after_a_good_tick_a_huge_state_holds_the_last_torque(name):
-    filter_ = SafetyFilter.from_config(MODEL, SafetyFilterConfig())
+    filter_ = SafetyFilter.from_config(MODEL, PAPER_CONFIG)
     good = filter_.solve(huge_state({}), np.zeros(M))
     assert good.status not in FALLBACKS
     result = filter_.solve(huge_state(HUGE[name]), np.full(M, 1e3))

@@ -17,6 +17,7 @@ import pytest
 
 from grasp_safety_filter import runner
 from grasp_safety_filter.analysis.run_data import load_run
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.nominal import NominalConfig, NominalController
 from grasp_safety_filter.control.reference import ReferenceSample
 from grasp_safety_filter.control.safety_filter import SafetyFilter
@@ -75,7 +76,7 @@ def test_the_free_columns_of_J_h_are_zero_and_the_grasp_is_valid(scenario):
 def test_the_filter_rows_of_the_grasp_ignore_the_free_joints(scenario):
     model, q0, p_o, R_o = scenario
     free = free_mask(model)
-    safety_filter = SafetyFilter.from_config(model)
+    safety_filter = SafetyFilter.from_config(model, PAPER_CONFIG)
     for state in states(model, q0, p_o, R_o):
         rows = safety_filter.constraint_rows(state)
         scale = np.abs(rows.A).max()

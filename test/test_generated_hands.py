@@ -24,11 +24,14 @@ import yaml
 
 from grasp_safety_filter.campaign.spec import load_campaign
 from grasp_safety_filter.campaign.store import read_table
+from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.io.parameters.spec import ParameterType
-from grasp_safety_filter.io.schemas import load_node_parameters, NODE_SCHEMAS
+from grasp_safety_filter.io.paths import config_path
+from grasp_safety_filter.io.schemas import load_node_parameters, NODE_SCHEMAS, SAFETY_FILTER_NODE
 from grasp_safety_filter.model.grasp_check import load_initial_grasp
 from grasp_tools.hands.__main__ import main as generate
 from grasp_tools.hands.grasp import generate_hand
+from grasp_tools.hands.scenario import DEFAULTED, TEMPLATE
 from hand_sim_node.mjcf import mjcf_from_model
 
 #: seed -> hands generated.
@@ -189,6 +192,25 @@ def test_the_scenario_passes_the_start_up_check_and_every_node_schema(hands, han
                 assert all(isinstance(v, float) for v in values), (name, value)
                 checked += 1
     assert checked > 50
+
+
+@pytest.mark.parametrize('hand_id', HANDS[:1])
+def test_the_filter_runs_its_defaults_where_the_template_pins_the_papers(hands, hand_id):
+    """The class-K functions, margins, object workspace and metric are left to the defaults."""
+    path = hands[hand_id].directory / 'scenario.yaml'
+    written = dict(flatten(hands[hand_id].document['safety_filter_node']['ros__parameters']))
+    config = SafetyFilterConfig.from_parameters(load_node_parameters(path, SAFETY_FILTER_NODE))
+    template = SafetyFilterConfig.from_parameters(
+        load_node_parameters(config_path(TEMPLATE), SAFETY_FILTER_NODE)
+    )
+    defaulted = {'.'.join(keys) for keys in DEFAULTED}
+    for name, value in SafetyFilterConfig().to_parameters().items():
+        left_out = any(name == key or name.startswith(f'{key}.') for key in defaulted)
+        assert (name not in written) == left_out, name
+        assert config.to_parameters()[name] == (
+            value if left_out else template.to_parameters()[name]
+        ), name
+    assert config.to_parameters() != template.to_parameters()
 
 
 def flatten(section: dict, prefix: str = '') -> list[tuple[str, object]]:

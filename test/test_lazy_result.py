@@ -1,25 +1,26 @@
 """A filter step's margins and active rows: computed only when read, equal to the eager values."""
 
 import dataclasses
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from synthetic_state import synthetic_state, SyntheticHand
 
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.filter_result import ResultAssembler
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import (
     ACTIVE_TOLERANCE,
     SafetyFilter,
-    SafetyFilterConfig,
 )
 
 HAND = SyntheticHand()
 M = HAND.n_joints
 TICKS = 25
 CONFIGS = {
-    'paper': SafetyFilterConfig(),
-    'torque_rate': SafetyFilterConfig(torque_rate_enabled=True, torque_rate_max_step=0.5),
+    'paper': PAPER_CONFIG,
+    'torque_rate': replace(PAPER_CONFIG, torque_rate_enabled=True, torque_rate_max_step=0.5),
 }
 
 

@@ -485,7 +485,8 @@ def test_the_filter_node_logs_its_start_up_advice_once_at_its_first_tick():
         node.wait_for_line(r'start-up advice \(frozen\): to let .* barrier\.alpha1\.kind=linear')
         time.sleep(0.5)  # more ticks: no second advice
         advice = [line for line in node.lines if 'start-up advice' in line]
-        assert len(advice) == 4, node.report()  # joint limits, fingertip workspace, QP, gains
+        # joint limits, fingertip workspace, QP, held still, gains
+        assert len(advice) == 5, node.report()
         for process in nodes:
             process.process.send_signal(signal.SIGINT)
         assert_quiet_exits(nodes)

@@ -9,6 +9,7 @@ references of :mod:`qp_reference`, and the validation of its parameters.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import replace
 import math
 
 from grasp_states import moved, P_OBJECT_PAPER, paper_model, Q_PAPER, random_configuration
@@ -18,6 +19,7 @@ from qp_reference import hard_optimum, relaxed_optimum
 
 from grasp_safety_filter.control.class_k import ClassKFunction
 from grasp_safety_filter.control.constraints import ObjectWorkspaceBarrier
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.safety_filter import (
     FilterStatus,
     SafetyFilter,
@@ -179,7 +181,7 @@ BAD_MARGINS = [
 @pytest.mark.parametrize('shape,margin,words', BAD_MARGINS)
 def test_a_margin_that_leaves_no_face_is_refused_naming_contact_and_face(shape, margin, words):
     model = bound_model(shape)
-    config = SafetyFilterConfig(object_workspace_enabled=True, object_workspace_margin=margin)
+    config = replace(PAPER_CONFIG, object_workspace_enabled=True, object_workspace_margin=margin)
     with pytest.raises(GraspConfigError) as error:
         SafetyFilter.from_config(model, config)
     for word in words:
@@ -193,11 +195,10 @@ def test_faces_chosen_at_the_first_state_give_the_bounds_then():
     model = paper_model(**MODELS['box'])
     assert not model.contacts_bound
     with pytest.raises(GraspConfigError, match=r"margin'.*smallest 0\.1302 m, got 0\.14 m"):
-        SafetyFilter.from_config(
-            model, SafetyFilterConfig(object_workspace_enabled=True, object_workspace_margin=0.14)
-        )
+        wide = replace(PAPER_CONFIG, object_workspace_enabled=True, object_workspace_margin=0.14)
+        SafetyFilter.from_config(model, wide)
     filter_ = SafetyFilter.from_config(
-        model, SafetyFilterConfig(object_workspace_enabled=True, object_workspace_margin=0.02)
+        model, replace(PAPER_CONFIG, object_workspace_enabled=True, object_workspace_margin=0.02)
     )
     state = model.state(
         0.0, Q_PAPER, np.zeros(Q_PAPER.size), P_OBJECT_PAPER, np.eye(3), np.zeros(6)
@@ -239,7 +240,8 @@ def test_filter_with_the_family_on_matches_the_exact_reference(shape):
     rows restrict u on many of the random grasps, and leaves some without a safe torque.
     """
     model = bound_model(shape)
-    config = SafetyFilterConfig(
+    config = replace(
+        PAPER_CONFIG,
         object_workspace_enabled=True,
         object_workspace_margin=0.05,
         object_workspace_sphere_a_half_width=0.7,

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from random_hands import random_hand
 
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.safety_filter import SafetyFilter
 from grasp_safety_filter.model.grasp_model import GraspModel
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -160,7 +161,7 @@ def test_rows_into_refuses_a_block_that_does_not_fit(packed):
     if not packed:
         state = dataclasses.replace(state)  # every field given: no buffer
         assert state.packed_terms is None
-    for family in SafetyFilter.from_config(model).families:
+    for family in SafetyFilter.from_config(model, PAPER_CONFIG).families:
         k, m = family.rows(state).A.shape
         for A, lower, start in (
             (np.zeros((k, m)), np.zeros(k), 1),  # past the end
@@ -186,7 +187,7 @@ def test_a_field_is_made_once_and_a_replaced_copy_keeps_its_changes():
 def test_rows_read_from_the_buffer_equal_the_rows_of_the_fields():
     """Each family's rows_into on a packed state (read in its buffer) against rows()."""
     model = paper_model()
-    families = SafetyFilter.from_config(model).families
+    families = SafetyFilter.from_config(model, PAPER_CONFIG).families
     assert all(hasattr(family, 'rows_into') for family in families)
     rng = np.random.default_rng(12)
     for _ in range(3):

@@ -20,6 +20,7 @@ from synthetic_state import synthetic_state, with_fields
 from grasp_safety_filter.analysis.run_data import RunData
 from grasp_safety_filter.analysis.summary import constraint_log
 from grasp_safety_filter.control.constraints import FingertipWorkspaceBarrier, FrictionPyramid
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.errors import ConfigError
 from grasp_safety_filter.io.parameters import NodeSchema, ParameterError, validate_parameters
 from grasp_safety_filter.io.schemas import check_model_parameters, MODEL_PARAMETERS
@@ -361,7 +362,7 @@ def test_the_filter_of_a_model_takes_each_contacts_values():
             'model.fingertip_workspace.a_max': [1.4, 1.0, 1.2],
         }
     )
-    no_slip, _, workspace = SafetyFilter.from_config(model).families
+    no_slip, _, workspace = SafetyFilter.from_config(model, PAPER_CONFIG).families
     np.testing.assert_array_equal(no_slip.mu, [0.9, 0.3, 0.7])
     np.testing.assert_array_equal(workspace.a_max, [1.4, 1.0, 1.2])
     np.testing.assert_array_equal(workspace.a_min, [model.fingertip_workspace.a_min] * 3)

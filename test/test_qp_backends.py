@@ -13,6 +13,7 @@ formed here from the state's M_h with numpy's inverse; and the tables include gr
 """
 
 from collections import Counter
+from dataclasses import replace
 
 from grasp_states import (
     CONFIG_DIR,
@@ -26,6 +27,7 @@ import pinocchio as pin
 import pytest
 from qp_reference import chebyshev_radius, hard_optimum, relaxed_optimum
 
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.qp import write_inertia_factor
 from grasp_safety_filter.control.qp_solvers import (
     BACKENDS,
@@ -79,7 +81,7 @@ class Table:
     """The problems (A, lower, u_nom, W), the box, the weights and the reference answers."""
 
     def __init__(self, n, seed, smooth, metric, hand='paper'):
-        configs = [SafetyFilterConfig(metric=metric)]
+        configs = [replace(PAPER_CONFIG, metric=metric)]
         if hand == 'paper':
             model, offset = paper_model(), 0.3  # N·m
 
@@ -92,7 +94,7 @@ class Table:
             # are mostly infeasible (or slabs ~1e-7 N·m thin); with gains 10 they are
             # feasible, ~5 mN·m wide. Every other problem has the gains 10.
             configs.insert(
-                0, SafetyFilterConfig(metric=metric, alpha1_gain=10.0, alpha2_gain=10.0)
+                0, replace(PAPER_CONFIG, metric=metric, alpha1_gain=10.0, alpha2_gain=10.0)
             )
             offset = 0.002  # N·m
         self.metric = metric
@@ -232,7 +234,7 @@ def test_a_backend_without_an_answer_gives_the_fallback_never_nan():
     """A daqp held to one iteration answers nothing: the filter falls back, finite, in the box."""
     model = paper_model()
     effort = np.asarray(model.effort_limits, dtype=float)
-    filter_ = SafetyFilter.from_config(model, SafetyFilterConfig(solver='daqp'))
+    filter_ = SafetyFilter.from_config(model, replace(PAPER_CONFIG, solver='daqp'))
     weights = filter_.relaxed_problem.slack_weights
     filter_.backend = BACKENDS['daqp'](filter_.problem, weights, {'iter_limit': 1})
     rng = np.random.default_rng(6)
@@ -256,7 +258,7 @@ def test_the_filter_on_the_example_hand_gives_the_reference_optimum(name, metric
     """
     example = ExampleHand()
     model = example.model
-    config = SafetyFilterConfig(solver=name, metric=metric, alpha1_gain=10.0, alpha2_gain=10.0)
+    config = replace(PAPER_CONFIG, solver=name, metric=metric, alpha1_gain=10.0, alpha2_gain=10.0)
     filter_ = SafetyFilter.from_config(model, config)
     effort = np.asarray(model.effort_limits, dtype=float)
     weights = filter_.relaxed_problem.slack_weights
@@ -294,7 +296,7 @@ def test_the_metric_changes_the_optimum_where_rows_are_active():
     rng = np.random.default_rng(12)
     gains = {'alpha1_gain': 10.0, 'alpha2_gain': 10.0}
     filters = {
-        metric: SafetyFilter.from_config(model, SafetyFilterConfig(metric=metric, **gains))
+        metric: SafetyFilter.from_config(model, replace(PAPER_CONFIG, metric=metric, **gains))
         for metric in METRICS
     }
     differences = []

@@ -6,6 +6,7 @@ the closed loop on our plant for the step bound per tick.
 """
 
 import dataclasses
+from dataclasses import replace
 import json
 from pathlib import Path
 
@@ -18,9 +19,10 @@ from test_safety_filter import independent_rows
 
 from grasp_safety_filter.control.constraints import FrictionPyramid, TorqueRateBound
 from grasp_safety_filter.control.constraints.friction_cone import DIAMOND, INSCRIBED
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.filter_result import FilterStatus
 from grasp_safety_filter.control.nominal import NominalController
-from grasp_safety_filter.control.safety_filter import SafetyFilter, SafetyFilterConfig
+from grasp_safety_filter.control.safety_filter import SafetyFilter
 from grasp_safety_filter.io.parameters import ParameterError
 from grasp_safety_filter.model.affine import AffineMap
 from grasp_tools import mujoco_compare, mujoco_run
@@ -114,14 +116,14 @@ def test_torque_rate_refuses_a_bad_bound(kwargs, match):
 
 def test_torque_rate_weight_above_a_safety_weight_is_refused():
     with pytest.raises(ParameterError, match=r'relaxation\.torque_rate_weight.*fingertip'):
-        SafetyFilterConfig(torque_rate_enabled=True, torque_rate_weight=2e3)
-    SafetyFilterConfig(torque_rate_enabled=False, torque_rate_weight=2e3)  # unused: accepted
+        replace(PAPER_CONFIG, torque_rate_enabled=True, torque_rate_weight=2e3)
+    replace(PAPER_CONFIG, torque_rate_enabled=False, torque_rate_weight=2e3)  # unused: accepted
 
 
 @pytest.mark.parametrize('max_step', [0.05, 0.3])
 def test_filter_with_torque_rate_is_the_exact_optimum_with_the_previous_u(max_step):
     """A sequence of random states and nominal torques: each tick against the reference."""
-    config = SafetyFilterConfig(torque_rate_enabled=True, torque_rate_max_step=max_step)
+    config = replace(PAPER_CONFIG, torque_rate_enabled=True, torque_rate_max_step=max_step)
     filter_ = SafetyFilter.from_config(HAND, config)
     rng = np.random.default_rng(int(1000 * max_step))
     u_prev = None
@@ -278,7 +280,8 @@ def test_friction_options_refuse_bad_values(kwargs, match):
 
 
 def test_filter_options_reach_the_rows():
-    config = SafetyFilterConfig(
+    config = replace(
+        PAPER_CONFIG,
         cone='diamond',
         friction_margin=0.2,
         fingertip_workspace_enabled=False,

@@ -1,6 +1,7 @@
 """The safety filter: optimality against an independent solver, relaxation, errors, config."""
 
 import dataclasses
+from dataclasses import replace
 import math
 import re
 
@@ -18,6 +19,7 @@ from grasp_safety_filter.control.constraints import (
     JointLimitBarrier,
     stack_constraints,
 )
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.qp import SafetyQP
 from grasp_safety_filter.control.qp_solvers import BACKENDS
 from grasp_safety_filter.control.safety_filter import (
@@ -36,11 +38,12 @@ CERTIFIED = {FilterStatus.NOMINAL, FilterStatus.SOLVED}
 SOLVERS = sorted(BACKENDS)
 
 CONFIGS = {
-    'paper': SafetyFilterConfig(),
-    'linear': SafetyFilterConfig(
+    'paper': PAPER_CONFIG,
+    'linear': replace(
+        PAPER_CONFIG,
         alpha1_kind='linear', alpha1_gain=4.0, alpha2_kind='linear', alpha2_gain=10.0
     ),
-    'coarse_pyramid': SafetyFilterConfig(pyramid_faces=4, normal_force_margin=0.2),
+    'coarse_pyramid': replace(PAPER_CONFIG, pyramid_faces=4, normal_force_margin=0.2),
 }
 
 
@@ -501,8 +504,8 @@ def test_reset_keeps_results_unchanged(solver):
 
 
 def test_from_config_reads_the_grasp_model():
-    filter_ = SafetyFilter.from_config(HAND)
-    assert filter_.config == SafetyFilterConfig()
+    filter_ = SafetyFilter.from_config(HAND, PAPER_CONFIG)
+    assert filter_.config == PAPER_CONFIG
     assert filter_.joint_names == HAND.joint_names
     assert filter_.contact_names == HAND.contact_names
     assert np.array_equal(filter_.actuator_limits.lower, -HAND.effort_limits)
@@ -527,7 +530,7 @@ def test_from_config_reads_the_grasp_model():
 )
 def test_constructor_errors_name_the_argument(kwargs, message):
     arguments = {
-        'config': SafetyFilterConfig(),
+        'config': PAPER_CONFIG,
         'joint_names': HAND.joint_names,
         'contact_names': HAND.contact_names,
         'q_min': HAND.joint_lower_limits,

@@ -8,13 +8,15 @@ wrench ``f_c(u*)`` must then lie in the soft-finger cone: ``|f_t| <= mu f_n`` an
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from grasp_states import paper_model, random_configuration
 import numpy as np
 import pytest
 
 from grasp_safety_filter.control.constraints import FrictionPyramid
 from grasp_safety_filter.control.constraints.friction_cone import DIAMOND, INSCRIBED
-from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG
 from grasp_safety_filter.control.filter_result import FilterStatus
 from grasp_safety_filter.control.safety_filter import SafetyFilter
 
@@ -65,7 +67,7 @@ def test_packed_rows_are_the_contact_force_maps_rows_to_the_bit(soft_model, cone
 @pytest.mark.parametrize('metric', ['identity', 'inverse_inertia'])
 def test_a_solved_step_keeps_every_contact_wrench_in_the_soft_finger_cone(soft_model, metric):
     model, n = soft_model, len(soft_model.contact_names)
-    settings = SafetyFilterConfig(metric=metric)
+    settings = replace(PAPER_CONFIG, metric=metric)
     safety_filter = SafetyFilter.from_config(model, settings)
     point = SafetyFilter.from_config(paper_model(), settings)
     assert len(safety_filter.row_names) - len(point.row_names) == 8 * n

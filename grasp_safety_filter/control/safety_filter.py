@@ -67,7 +67,7 @@ from grasp_safety_filter.control.constraints import (
     ConstraintRows,
     ObjectWorkspaceBarrier,
 )
-from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+from grasp_safety_filter.control.filter_config import PAPER_CONFIG, SafetyFilterConfig
 from grasp_safety_filter.control.filter_result import (
     ACTIVE_TOLERANCE,
     FilterResult,
@@ -104,6 +104,7 @@ __all__ = [
     'ACTIVE_TOLERANCE',
     'FEASIBILITY_TOLERANCE',
     'MEASURED_STATE_FIELDS',
+    'PAPER_CONFIG',
     'FilterResult',
     'FilterStatus',
     'Margins',

@@ -41,25 +41,17 @@ import numpy as np
 from scipy.optimize import linprog
 
 from grasp_safety_filter.control.constraints.box_barrier import BoxBarrier
+from grasp_safety_filter.control.filter_config import SafetyFilterConfig
 from grasp_safety_filter.control.qp import write_acceleration_factor
 from grasp_safety_filter.control.qp_solvers import DAQPBackend, Problem, SolutionStatus
 from grasp_safety_filter.model.grasp_state import GraspState
 
 #: A family that needs longer than this to use its margins from rest is frozen, s.
 FROZEN_TIME = 1.0
-#: tau of the suggested linear class-K functions, s (gain 2 / TARGET_TIME each). A 1 ms hold
-#: misses a row's acceleration by delta (a few rad/s^2 on light fingers, docs/any_hand.md); the
-#: barrier then settles delta / (k1 k2) past its margin: 9e-3 rad at delta = 3.5 with gains 20,
-#: inside SUGGESTED_MARGIN, where gains 10 left 3.5e-2.
-TARGET_TIME = 0.1
-#: The suggested margins from the joint limits and fingertip workspace bounds, rad: linear
-#: barriers let coordinates reach their bounds, which a 1 ms hold overshoots by up to ~1e-2
-#: rad on light fingers (docs/any_hand.md).
-SUGGESTED_MARGIN = 0.02
-#: The suggested QP metric: with the linear functions the filter corrects the squeeze by
-#: internal forces instead of by accelerating the object and the fingers, which shook
-#: generated grasps at up to 7 rad/s, faster than a 1 ms hold follows (docs/any_hand.md).
-SUGGESTED_METRIC = 'acceleration'
+#: The filter's defaults, which the advice suggests to a frozen configuration, and their tau, s
+#: (linear functions: 1/k1 + 1/k2).
+_DEFAULTS = SafetyFilterConfig()
+_DEFAULT_TAU = 1.0 / _DEFAULTS.alpha1_gain + 1.0 / _DEFAULTS.alpha2_gain
 #: A grasp whose least joint acceleration at rest is above this cannot be held still, rad/s^2:
 #: from rest a joint moves 0.5 rad in the first second.
 STILL_ACCELERATION = 1.0
@@ -113,9 +105,9 @@ class StartupAdvice:
             infeasible at rest; NaN: the linear program failed).
         binding: The rows that limit ``rest_margin`` (barrier rows and actuator limits), or
             why it failed.
-        suggestion: ``--set`` values for linear class-K functions of ``TARGET_TIME``, margins
-            of ``SUGGESTED_MARGIN``, the object workspace barriers and the ``acceleration``
-            QP metric (:data:`SUGGESTED_METRIC`), when a family is frozen; empty otherwise.
+        suggestion: ``--set`` values of the filter's defaults where the configuration is
+            the paper's (class-K functions, margins, object workspace, QP metric), when a
+            family is frozen; empty otherwise.
         still_acceleration: u_still's largest joint acceleration at rest, rad/s^2 (NaN when
             the QP at rest is infeasible or not solved).
         still_object_acceleration: u_still's object acceleration, (linear m/s^2, angular
@@ -206,7 +198,7 @@ class StartupAdvice:
             settings = ' '.join(f'{k}={_text(v)}' for k, v in self.suggestion.items())
             lines.append(
                 f'to let the frozen families move: {settings} (every family may then use its '
-                f'margin in about {TARGET_TIME:g} s, whatever its unit; the margins absorb what '
+                f'margin in about {_DEFAULT_TAU:g} s, whatever its unit; the margins absorb what '
                 'a control period overshoots; the contacts kept on their object faces)'
             )
         return lines
@@ -249,20 +241,7 @@ def startup_advice(
         k = len(names) - len(limits.names)
         still = _least_acceleration(state, A[:k], lower[:k], names[:k], limits)
     frozen = any(f.frozen for f in allowances)
-    gain = 2.0 / TARGET_TIME
-    suggestion: dict[str, Any] = {}
-    if frozen:
-        for alpha in ('alpha1', 'alpha2'):
-            suggestion[f'barrier.{alpha}.kind'] = 'linear'
-            suggestion[f'barrier.{alpha}.gain'] = gain
-        config = safety_filter.config
-        for family in ('joint_limits', 'fingertip_workspace'):
-            if getattr(config, f'{family}_margin') < SUGGESTED_MARGIN:
-                suggestion[f'{family}.margin'] = SUGGESTED_MARGIN
-        if not config.object_workspace_enabled:
-            suggestion['object_workspace.enabled'] = True
-        if config.metric != SUGGESTED_METRIC:
-            suggestion['qp.metric'] = SUGGESTED_METRIC
+    suggestion = _suggestion(safety_filter.config) if frozen else {}
     return StartupAdvice(allowances, rest_margin, binding, suggestion, *still)
 
 
@@ -315,6 +294,27 @@ def _rest_margin(
     duals = np.asarray(result.ineqlin.marginals)
     binding = tuple(n for n, d in zip(live_names, duals, strict=True) if abs(d) > _BINDING_DUAL)
     return float(-result.fun), binding
+
+
+def _suggestion(config: SafetyFilterConfig) -> dict[str, Any]:
+    """Return the ``--set`` values of the defaults where ``config`` differs from them.
+
+    The class-K functions always (they are frozen), the margins where smaller, the object
+    workspace where off, the QP metric where another.
+    """
+    suggestion: dict[str, Any] = {}
+    for alpha in ('alpha1', 'alpha2'):
+        suggestion[f'barrier.{alpha}.kind'] = getattr(_DEFAULTS, f'{alpha}_kind')
+        suggestion[f'barrier.{alpha}.gain'] = getattr(_DEFAULTS, f'{alpha}_gain')
+    for family in ('joint_limits', 'fingertip_workspace'):
+        default = getattr(_DEFAULTS, f'{family}_margin')
+        if getattr(config, f'{family}_margin') < default:
+            suggestion[f'{family}.margin'] = default
+    if not config.object_workspace_enabled:
+        suggestion['object_workspace.enabled'] = True
+    if config.metric != _DEFAULTS.metric:
+        suggestion['qp.metric'] = _DEFAULTS.metric
+    return suggestion
 
 
 def _least_acceleration(

@@ -1,12 +1,14 @@
 """A generated hand's scenario parameter file, from config/four_finger_box.yaml.
 
 The template's ``/**`` model section is replaced by the generated hand's and object's, and
-``hand_sim_node``'s ``initial`` by the generated grasp; everything else (the rigid plant,
-its time step, ``stop_on_workspace_exit``, the controllers' gains and the filter's settings)
-is the template's. The file is written with PyYAML as a ROS 2 parameter file: every double
-is a Python float, which PyYAML writes with a decimal point or an exponent, as ROS 2
-requires of a double (the package's own loader accepts an integer for a double, ROS 2 does
-not).
+``hand_sim_node``'s ``initial`` by the generated grasp; the filter's class-K functions,
+barrier margins, object-workspace switch and QP metric, which the template pins to the
+paper's, are left out, so a generated hand runs the filter's defaults (:data:`DEFAULTED`);
+everything else (the rigid plant, its time step, ``stop_on_workspace_exit``, the controllers'
+gains and the filter's other settings) is the template's. The file is written with PyYAML
+as a ROS 2 parameter file: every double is a Python float, which PyYAML writes with a
+decimal point or an exponent, as ROS 2 requires of a double (the package's own loader
+accepts an integer for a double, ROS 2 does not).
 """
 
 from __future__ import annotations
@@ -27,6 +29,14 @@ from grasp_tools.hands.objects import ObjectDesign
 TEMPLATE = 'four_finger_box.yaml'
 URDF_NAME = 'hand.urdf'
 SCENARIO_NAME = 'scenario.yaml'
+#: The filter's parameters a generated scenario leaves to their defaults, as nested keys.
+DEFAULTED = (
+    ('joint_limits', 'margin'),
+    ('fingertip_workspace', 'margin'),
+    ('object_workspace', 'enabled'),
+    ('barrier',),
+    ('qp', 'metric'),
+)
 #: The fingertip workspace of every generated hand: the template's (0.15 rad off a = ±π/2,
 #: the hemisphere z > 0 of each fingertip frame).
 WORKSPACE = {
@@ -86,6 +96,12 @@ def scenario_document(
         'object_position': [float(x) for x in obj.p_object_in_palm],
         'object_orientation': [float(x) for x in obj.quaternion_xyzw],
     }
+    safety_filter = document['safety_filter_node']['ros__parameters']
+    for *section, name in DEFAULTED:
+        parent = safety_filter
+        for key in section:
+            parent = parent[key]
+        del parent[name]
     return document
 
 

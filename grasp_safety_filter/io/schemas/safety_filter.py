@@ -73,7 +73,7 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'Keep every joint inside its URDF limits (relative-degree-2 barrier)',
     ),
     ParameterSpec(
-        'joint_limits.margin', DOUBLE, 0.0,
+        'joint_limits.margin', DOUBLE, 0.02,
         'Distance the barrier keeps from every joint limit, so that what a control period '
         'overshoots stays inside the limits (0: the limits themselves, as in the paper) [rad]',
         min_value=0.0,
@@ -83,13 +83,13 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         'Keep every contact point inside the fingertip workspace (relative-degree-2 barrier)',
     ),
     ParameterSpec(
-        'fingertip_workspace.margin', DOUBLE, 0.0,
+        'fingertip_workspace.margin', DOUBLE, 0.02,
         'Distance the barrier keeps from every fingertip workspace bound (0: the bounds '
         'themselves, as in the paper) [rad]',
         min_value=0.0,
     ),
     ParameterSpec(
-        'object_workspace.enabled', BOOL, False,
+        'object_workspace.enabled', BOOL, True,
         'Keep every contact point on its object surface, a margin inside a box face '
         '(relative-degree-2 barrier; off in the paper)',
     ),
@@ -112,22 +112,22 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         min_value=0.0, max_value=HALF_PI - FINGERTIP_WORKSPACE_A_MARGIN, exclusive_min=True,
     ),
     ParameterSpec(
-        'barrier.alpha1.kind', STRING, 'cubic',
+        'barrier.alpha1.kind', STRING, 'linear',
         "Class-K function alpha1: cubic g h^3 (the paper's) or linear g h",
         choices=('cubic', 'linear'),
     ),
     ParameterSpec(
-        'barrier.alpha1.gain', DOUBLE, 1.0,
+        'barrier.alpha1.gain', DOUBLE, 20.0,
         'Gain g of alpha1, h in rad [1/(s rad^2) if cubic, 1/s if linear]',
         min_value=0.0, exclusive_min=True,
     ),
     ParameterSpec(
-        'barrier.alpha2.kind', STRING, 'cubic',
+        'barrier.alpha2.kind', STRING, 'linear',
         "Class-K function alpha2: cubic g B^3 (the paper's) or linear g B",
         choices=('cubic', 'linear'),
     ),
     ParameterSpec(
-        'barrier.alpha2.gain', DOUBLE, 1.0,
+        'barrier.alpha2.gain', DOUBLE, 20.0,
         'Gain g of alpha2, B in rad/s [s/rad^2 if cubic, 1/s if linear]',
         min_value=0.0, exclusive_min=True,
     ),
@@ -184,7 +184,7 @@ SAFETY_FILTER_QP_PARAMETERS: tuple[ParameterSpec, ...] = (
         choices=('osqp', 'daqp'),
     ),
     ParameterSpec(
-        'qp.metric', STRING, 'identity',
+        'qp.metric', STRING, 'acceleration',
         "Cost of the correction du = u - u_nom: identity ||du||^2 (the paper's), "
         'inverse_inertia du^T W du, W = (tr(M_h)/m) M_h^-1 (the kinetic-energy norm of the '
         'joint acceleration du excites; relaxation slack then in W distance) or '
