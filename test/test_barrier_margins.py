@@ -101,12 +101,17 @@ def test_margins_keep_a_generated_hand_inside_its_limits(tmp_path):
     """Generated hand 1 of seed 0: linear barriers overshoot its joint limits without them.
 
     With the margins (and its contacts kept on their object faces) it holds 2 s with every
-    QP solved, as judged by the simulator's event monitor against the real limits.
+    QP solved, as judged by the simulator's event monitor against the real limits. Both runs
+    use the inverse-inertia metric, so that the margins alone make the difference.
     """
     scenario = generate_hand(0, 1, tmp_path / 'hand').scenario
     reference = {'reference.source': 'paper', 'reference.frequency': 1.1,
-                 'reference.amplitude': [0.003, 0.0, -0.008, 0.0, 0.0, -0.18]}  # fmt: skip
-    bare = run(scenario, 'filtered', 2.0, {**LINEAR, **reference})
+                 'reference.amplitude': [0.003, 0.0, -0.008, 0.0, 0.0, -0.18],
+                 'qp.metric': 'inverse_inertia'}  # fmt: skip
+    bare = run(scenario, 'filtered', 2.0, {
+        **LINEAR, **reference, 'joint_limits.margin': 0.0,
+        'fingertip_workspace.margin': 0.0, 'object_workspace.enabled': False,
+    })  # fmt: skip
     assert not bare['held'] and bare['violations']['joint_limits'] > 0, bare
     kept = run(scenario, 'filtered', 2.0, {
         **LINEAR, **reference, 'joint_limits.margin': 0.02,
