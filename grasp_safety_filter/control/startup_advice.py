@@ -42,6 +42,7 @@ from scipy.optimize import linprog
 
 from grasp_safety_filter.control.constraints.box_barrier import BoxBarrier
 from grasp_safety_filter.control.filter_config import SafetyFilterConfig
+from grasp_safety_filter.control.filter_result import ACTIVE_TOLERANCE
 from grasp_safety_filter.control.qp import write_acceleration_factor
 from grasp_safety_filter.control.qp_solvers import DAQPBackend, Problem, SolutionStatus
 from grasp_safety_filter.model.grasp_state import GraspState
@@ -55,8 +56,6 @@ _DEFAULT_TAU = 1.0 / _DEFAULTS.alpha1_gain + 1.0 / _DEFAULTS.alpha2_gain
 #: A grasp whose least joint acceleration at rest is above this cannot be held still, rad/s^2:
 #: from rest a joint moves 0.5 rad in the first second.
 STILL_ACCELERATION = 1.0
-#: Rows binding at u_still: within this of their bound (the row's unit, per |A_r|).
-_BINDING_GAP = 1e-9
 #: The families with a rest margin but no class-K function (their rows are not rates).
 _SKIPPED = ('torque_rate',)
 #: Rows whose |A_r| is below this (N·m^-1 in the row's unit) have no torque to act on.
@@ -238,8 +237,7 @@ def startup_advice(
     rest_margin, binding = _rest_margin(A, lower, names, m)
     still: tuple[float, tuple[float, float], tuple[str, ...]] = (math.nan, (math.nan,) * 2, ())
     if rest_margin >= 0.0:
-        k = len(names) - len(limits.names)
-        still = _least_acceleration(state, A[:k], lower[:k], names[:k], limits)
+        still = _least_acceleration(state, A, lower, names, limits)
     frozen = any(f.frozen for f in allowances)
     suggestion = _suggestion(safety_filter.config) if frozen else {}
     return StartupAdvice(allowances, rest_margin, binding, suggestion, *still)
@@ -320,11 +318,13 @@ def _suggestion(config: SafetyFilterConfig) -> dict[str, Any]:
 def _least_acceleration(
     state: GraspState, A: np.ndarray, lower: np.ndarray, names: tuple[str, ...], limits: Any
 ) -> tuple[float, tuple[float, float], tuple[str, ...]]:
-    """Return u_still's largest joint acceleration, its object's, and the rows binding there.
+    """Return u_still's largest joint acceleration, its object's, and the rows active there.
 
-    The cost ``|a(u)|_W^2`` is the acceleration metric ``(u - u_0)^T W (u - u_0)`` around
+    ``A``, ``lower`` and ``names`` are the rows at rest, the actuator limits' last. The cost
+    ``|a(u)|_W^2`` is the acceleration metric ``(u - u_0)^T W (u - u_0)`` around
     ``u_0 = -W^-1 c (S_h^T M_h s_h + S_o^T M_o s_o)``, its unconstrained minimiser: the QP
-    of one tick with u_0 for the nominal torque, solved by daqp.
+    of one tick with u_0 for the nominal torque, solved by daqp. Active as in the filter's
+    result: ``A_r u - lower_r <= ACTIVE_TOLERANCE``.
     """
     joint, obj = state.joint_acceleration, state.object_acceleration
     m = joint.matrix.shape[1]
@@ -334,18 +334,22 @@ def _least_acceleration(
     pull = scale * (
         joint.matrix.T @ state.M_h @ joint.offset + obj.matrix.T @ state.M_o @ obj.offset
     )
-    problem = Problem(R @ (R.T @ pull), A, lower, limits.lower, limits.upper, metric_factor=R)
-    solution = DAQPBackend(problem, np.ones(len(names)), {}).solve(problem)
+    k = len(names) - len(limits.names)  # the box goes to the QP as bounds
+    problem = Problem(
+        R @ (R.T @ pull), A[:k], lower[:k], limits.lower, limits.upper, metric_factor=R
+    )
+    solution = DAQPBackend(problem, np.ones(k), {}).solve(problem)
     if solution.status != SolutionStatus.OPTIMAL:
         return math.nan, (math.nan, math.nan), (f'daqp: {solution.status.value}',)
     u = solution.u
-    gap = (A @ u - lower) / np.maximum(np.linalg.norm(A, axis=1), _ZERO_ROW)
-    at_box = np.column_stack((u - limits.lower, limits.upper - u)).ravel() <= _BINDING_GAP
-    binding = tuple(n for n, g in zip(names, gap, strict=True) if g <= _BINDING_GAP)
-    binding += tuple(n for n, hit in zip(limits.names, at_box, strict=True) if hit)
+    active = A @ u - lower <= ACTIVE_TOLERANCE
     a_object = obj.matrix @ u + obj.offset
     linear, angular = float(np.linalg.norm(a_object[:3])), float(np.linalg.norm(a_object[3:]))
-    return float(np.abs(joint.matrix @ u + joint.offset).max()), (linear, angular), binding
+    return (
+        float(np.abs(joint.matrix @ u + joint.offset).max()),
+        (linear, angular),
+        tuple(n for n, hit in zip(names, active, strict=True) if hit),
+    )
 
 
 def _unit(row: str) -> str:
